@@ -1,0 +1,38 @@
+"""clothsr's USD bridge: reads and writes USD stages for the clothsr binary (and DCC scripts).
+
+Arrays cross as whole numpy buffers; no pxr object leaves this package. Importing it registers
+clothsr's codeless schema (``schemas/``) through ``PXR_PLUGINPATH_NAME`` before ``pxr`` loads.
+"""
+import os
+import pathlib
+
+_SCHEMAS = os.environ.get("CLOTHSR_SCHEMAS") or str(
+    pathlib.Path(__file__).resolve().parent.parent.parent / "schemas"
+)
+if "pxr" not in __import__("sys").modules:
+    _prev = os.environ.get("PXR_PLUGINPATH_NAME", "")
+    if _SCHEMAS not in _prev.split(os.pathsep):
+        os.environ["PXR_PLUGINPATH_NAME"] = os.pathsep.join(p for p in (_SCHEMAS, _prev) if p)
+
+try:
+    from pxr import Usd  # noqa: F401
+except ImportError as exc:  # pragma: no cover - the message is the point
+    raise ImportError(
+        "usd-core (the 'pxr' module) is not installed in this Python environment: "
+        "run `bash .ci/setup` in the clothsr repository (it creates .venv with "
+        "usd-core==26.11 and numpy)"
+    ) from exc
+
+from .read import inspect_stage, read_stage  # noqa: E402
+from .validate import validate  # noqa: E402
+from .write import write_stage  # noqa: E402
+
+__all__ = ["inspect_stage", "read_stage", "validate", "write_stage", "schema_registered"]
+
+
+def schema_registered() -> bool:
+    """True when clothsr's schema types are known to USD."""
+    from pxr import Usd as _Usd
+
+    reg = _Usd.SchemaRegistry()
+    return reg.FindConcretePrimDefinition("ClothPanel") is not None

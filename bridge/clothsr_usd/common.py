@@ -1,0 +1,40 @@
+"""Units, axes and prim naming shared by the reader and the writer."""
+import numpy as np
+from pxr import Tf, Usd, UsdGeom
+
+# Z-up stage coordinates -> clothsr's y-up: (x, y, z) -> (x, z, -y).
+Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+class BadInput(ValueError):
+    """A file whose content clothsr cannot use; the message names the file and the element."""
+
+
+def open_stage(path: str) -> Usd.Stage:
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Exception as exc:  # Tf.ErrorException carries the parser's message
+        msg = " ".join(str(exc).split())
+        raise BadInput(f"{path}: cannot open as USD: {msg[:400]}") from None
+    if stage is None:
+        raise BadInput(f"{path}: cannot open as USD")
+    return stage
+
+
+def stage_frame(stage: Usd.Stage, path: str):
+    """(metersPerUnit, axis matrix to y-up) of a stage; unknown units are an error."""
+    if not UsdGeom.StageHasAuthoredMetersPerUnit(stage):
+        raise BadInput(
+            f"{path}: metersPerUnit is not authored, so the units are unknown "
+            "(author it in the stage metadata, e.g. metersPerUnit = 1)"
+        )
+    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    if not (np.isfinite(mpu) and mpu > 0):
+        raise BadInput(f"{path}: metersPerUnit = {mpu} is not a positive number")
+    up = UsdGeom.GetStageUpAxis(stage)
+    axes = Z_TO_Y if up == UsdGeom.Tokens.z else np.eye(3)
+    return mpu, axes
+
+
+def valid_name(name: str) -> str:
+    return Tf.MakeValidIdentifier(str(name)) or "unnamed"

@@ -1,0 +1,365 @@
+"""Reading USD stages into plain numpy arrays, in metres with y up.
+
+* UsdGeom meshes: topology, `primvars:st`, and points at every time sample (point caches), in
+  world space (parent transforms applied at each time).
+* UsdSkel avatars: skinned by pxr itself (``UsdSkel.Cache`` + ``SkinningQuery``) at every time code.
+* clothsr garments (``ClothGarmentAPI``): fabric, panels (``ClothPanel``) and seams (``ClothSeam``).
+"""
+import math
+
+import numpy as np
+from pxr import Gf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
+
+from .common import BadInput, open_stage, stage_frame
+
+FABRIC_ATTRS = {
+    "name": "clothsr:fabric:name",
+    "areal_density_kg_m2": "clothsr:fabric:arealDensity",
+    "stretch_warp_n_m": "clothsr:fabric:stretchWarp",
+    "stretch_weft_n_m": "clothsr:fabric:stretchWeft",
+    "shear_n_m": "clothsr:fabric:shear",
+    "bending_n_m": "clothsr:fabric:bending",
+    "thickness_m": "clothsr:fabric:thickness",
+    "damping_s": "clothsr:fabric:damping",
+}
+
+
+def _matrix(m: Gf.Matrix4d) -> np.ndarray:
+    return np.array(m, dtype=np.float64).reshape(4, 4)
+
+
+def _to_world(points: np.ndarray, xf: np.ndarray, mpu: float, axes: np.ndarray) -> np.ndarray:
+    """Row-vector points through a USD 4x4, then units and axes."""
+    p = points.astype(np.float64) @ xf[:3, :3] + xf[3, :3]
+    return ((p * mpu) @ axes.T).astype(np.float32)
+
+
+def _has_api(prim: Usd.Prim, name: str) -> bool:
+    return name in prim.GetAppliedSchemas()
+
+
+def _time_codes(stage: Usd.Stage):
+    start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+    if end < start:
+        return [start]
+    return [float(t) for t in np.arange(math.floor(start), math.floor(end) + 1)]
+
+
+def _xform_varies(prim: Usd.Prim) -> bool:
+    p = prim
+    while p and not p.IsPseudoRoot():
+        if p.IsA(UsdGeom.Xformable) and UsdGeom.Xformable(p).TransformMightBeTimeVarying():
+            return True
+        p = p.GetParent()
+    return False
+
+
+def _topology(mesh: UsdGeom.Mesh, path: str):
+    prim_path = mesh.GetPath()
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int32)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
+    if counts.size == 0:
+        raise BadInput(f"{path}: mesh {prim_path} has no faces")
+    if counts.min() < 3:
+        raise BadInput(f"{path}: mesh {prim_path} has a face with fewer than 3 vertices")
+    if int(counts.sum()) != indices.size:
+        raise BadInput(
+            f"{path}: mesh {prim_path}: faceVertexCounts sum to {int(counts.sum())} "
+            f"but there are {indices.size} faceVertexIndices"
+        )
+    return counts, indices
+
+
+def _st(mesh: UsdGeom.Mesh, n_points: int, n_corners: int, path: str):
+    pv = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+    if not pv or not pv.HasValue():
+        return None, None
+    interp = pv.GetInterpolation()
+    values = np.asarray(pv.ComputeFlattened(), dtype=np.float64)
+    if values.ndim != 2 or values.shape[1] != 2:
+        raise BadInput(f"{path}: {mesh.GetPath()} primvars:st is not a 2-component array")
+    expect = {"vertex": n_points, "varying": n_points, "faceVarying": n_corners}.get(interp)
+    if expect is None:
+        raise BadInput(f"{path}: {mesh.GetPath()} primvars:st has unsupported interpolation '{interp}'")
+    if values.shape[0] != expect:
+        raise BadInput(
+            f"{path}: {mesh.GetPath()} primvars:st has {values.shape[0]} values, "
+            f"expected {expect} for '{interp}' interpolation"
+        )
+    if not np.isfinite(values).all():
+        raise BadInput(f"{path}: {mesh.GetPath()} primvars:st has non-finite values")
+    return values, ("faceVarying" if interp == "faceVarying" else "vertex")
+
+
+def _skinned_prims(stage: Usd.Stage):
+    """{mesh prim path: (skinning query, skeleton query, skeleton prim)} for every skinned mesh."""
+    out = {}
+    cache = UsdSkel.Cache()
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdSkel.Root):
+            continue
+        root = UsdSkel.Root(prim)
+        cache.Populate(root, Usd.PrimDefaultPredicate)
+        for binding in cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate):
+            skel = binding.GetSkeleton()
+            skel_query = cache.GetSkelQuery(skel)
+            for target in binding.GetSkinningTargets():
+                if target.GetPrim().IsA(UsdGeom.Mesh):
+                    out[target.GetPrim().GetPath()] = (target, skel_query, skel.GetPrim())
+    return out
+
+
+def _mesh_role(prim: Usd.Prim, skinned: bool) -> str:
+    if _has_api(prim, "ClothGarmentAPI"):
+        return "cloth"
+    if skinned or _has_api(prim, "PhysicsCollisionAPI"):
+        return "collider"
+    return "other"
+
+
+def _read_mesh(stage, prim, skin, path, mpu, axes, animation: bool):
+    mesh = UsdGeom.Mesh(prim)
+    counts, indices = _topology(mesh, path)
+    points_attr = mesh.GetPointsAttr()
+    rest = points_attr.Get(Usd.TimeCode.Default())
+    if rest is None and points_attr.GetNumTimeSamples() > 0:
+        rest = points_attr.Get(points_attr.GetTimeSamples()[0])
+    if rest is None or len(rest) == 0:
+        raise BadInput(f"{path}: mesh {prim.GetPath()} has no points")
+    n = len(rest)
+    if indices.max() >= n or indices.min() < 0:
+        raise BadInput(f"{path}: mesh {prim.GetPath()}: a face index is outside the {n} points")
+    if skin is not None:
+        times = _time_codes(stage)
+    elif points_attr.GetNumTimeSamples() > 0:
+        times = [float(t) for t in points_attr.GetTimeSamples()]
+    elif _xform_varies(prim):
+        times = _time_codes(stage)
+    else:
+        times = [Usd.TimeCode.Default()]
+    info = {
+        "path": str(prim.GetPath()),
+        "name": prim.GetName(),
+        "role": _mesh_role(prim, skin is not None),
+        "skinned": skin is not None,
+        "num_points": n,
+        "num_faces": int(counts.size),
+        "num_frames": len(times),
+        "times": np.array(
+            [0.0 if isinstance(t, Usd.TimeCode) else t for t in times], dtype=np.float64
+        ),
+    }
+    if not animation:
+        return info
+    xcache = UsdGeom.XformCache()
+    frames = np.empty((len(times), n, 3), dtype=np.float32)
+    for k, t in enumerate(times):
+        tc = t if isinstance(t, Usd.TimeCode) else Usd.TimeCode(t)
+        xcache.SetTime(tc)
+        if skin is not None:
+            target, skel_query, skel_prim = skin
+            pts = Vt.Vec3fArray(rest)
+            xforms = skel_query.ComputeSkinningTransforms(tc)
+            if not target.ComputeSkinnedPoints(xforms, pts, tc):
+                raise BadInput(f"{path}: cannot skin {prim.GetPath()} at time {t}")
+            xf = _matrix(xcache.GetLocalToWorldTransform(skel_prim))
+        else:
+            pts = points_attr.Get(tc)
+            if pts is None or len(pts) != n:
+                raise BadInput(
+                    f"{path}: mesh {prim.GetPath()} has {0 if pts is None else len(pts)} points "
+                    f"at time {t}, expected {n}"
+                )
+            xf = _matrix(xcache.GetLocalToWorldTransform(prim))
+        arr = np.asarray(pts, dtype=np.float32)
+        if not np.isfinite(arr).all():
+            raise BadInput(f"{path}: mesh {prim.GetPath()} has non-finite points at time {t}")
+        frames[k] = _to_world(arr, xf, mpu, axes)
+    st, st_interp = _st(mesh, n, int(indices.size), path)
+    info.update(counts=counts, indices=indices, frames=frames, st=st, st_interp=st_interp)
+    pid = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("clothsr:panelId")
+    info["panel_ids"] = (
+        np.asarray(pid.ComputeFlattened(), dtype=np.int32) if pid and pid.HasValue() else None
+    )
+    seam_attr = prim.GetAttribute("clothsr:seamPairs")
+    seams = seam_attr.Get() if seam_attr and seam_attr.HasValue() else None
+    info["seam_pairs"] = (
+        np.asarray(seams, dtype=np.int32).reshape(-1, 2) if seams is not None else None
+    )
+    info["fabric"] = _fabric(prim) if info["role"] == "cloth" else None
+    return info
+
+
+def _fabric(prim: Usd.Prim) -> dict:
+    out = {}
+    for key, attr_name in FABRIC_ATTRS.items():
+        attr = prim.GetAttribute(attr_name)
+        value = attr.Get() if attr else None
+        out[key] = value if key == "name" else float(value)
+    edge = prim.GetAttribute("clothsr:edgeLength")
+    out["edge_length_m"] = float(edge.Get()) if edge and edge.Get() is not None else 0.0
+    return out
+
+
+def _euler_xyz_intrinsic(r: np.ndarray):
+    """Angles (deg) with r = Rx(a) Ry(b) Rz(c) (column vectors)."""
+    b = math.asin(max(-1.0, min(1.0, r[0, 2])))
+    if abs(r[0, 2]) < 1.0 - 1e-12:
+        a = math.atan2(-r[1, 2], r[2, 2])
+        c = math.atan2(-r[0, 1], r[0, 0])
+    else:  # gimbal lock: put everything in a
+        a = math.atan2(r[2, 1], r[1, 1])
+        c = 0.0
+    return [math.degrees(a), math.degrees(b), math.degrees(c)]
+
+
+def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
+    xformable = UsdGeom.Xformable(prim)
+    ops = xformable.GetOrderedXformOps()
+    parent_world = _matrix(
+        UsdGeom.XformCache().GetParentToWorldTransform(prim)
+    )
+    simple = (
+        [op.GetOpType() for op in ops]
+        == [UsdGeom.XformOp.TypeTranslate, UsdGeom.XformOp.TypeRotateZYX]
+        and np.allclose(parent_world, np.eye(4))
+        and mpu == 1.0
+        and np.allclose(axes, np.eye(3))
+    )
+    if simple:
+        t = np.array(ops[0].Get(), dtype=np.float64)
+        rot = np.array(ops[1].Get(), dtype=np.float64)
+        return t.tolist(), rot.tolist()
+    world = _matrix(xformable.ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
+    rot = axes @ world[:3, :3].T
+    scale = np.linalg.norm(rot, axis=0)
+    if not np.allclose(scale, 1.0, atol=1e-6):
+        raise BadInput(f"panel {prim.GetPath()} is scaled (scale {scale}); panels must be rigidly placed")
+    t = axes @ (world[3, :3] * mpu)
+    return t.tolist(), _euler_xyz_intrinsic(rot)
+
+
+def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray) -> dict:
+    panels, panel_paths = [], []
+    for child in prim.GetChildren():
+        if child.GetTypeName() != "ClothPanel":
+            continue
+        where = f"{path}: panel {child.GetPath()}"
+
+        def get(name, child=child, where=where):
+            attr = child.GetAttribute(name)
+            value = attr.Get() if attr else None
+            if value is None:
+                raise BadInput(f"{where}: attribute {name} is missing")
+            return value
+
+        vertices = np.asarray(get("clothsr:vertices"), dtype=np.float64).reshape(-1, 2) * mpu
+        ends = np.asarray(get("clothsr:edgeEndpoints"), dtype=np.int32).reshape(-1, 2)
+        types = [str(t) for t in get("clothsr:edgeCurveTypes")]
+        params = np.asarray(get("clothsr:edgeCurveParams"), dtype=np.float64).reshape(-1, 4)
+        if not (len(ends) == len(types) == len(params)):
+            raise BadInput(
+                f"{where}: {len(ends)} edgeEndpoints, {len(types)} edgeCurveTypes and "
+                f"{len(params)} edgeCurveParams must match"
+            )
+        # Lengths scale with units: control points and radii, not flags.
+        params = params.copy()
+        for k, ty in enumerate(types):
+            if ty in ("quadratic", "cubic"):
+                params[k] *= mpu
+            elif ty == "circle":
+                params[k, 0] *= mpu
+        translation, rotation = _panel_placement(child, mpu, axes)
+        panels.append(
+            {
+                "name": child.GetName(),
+                "vertices": vertices,
+                "edge_endpoints": ends,
+                "curve_types": types,
+                "curve_params": params,
+                "translation": np.array(translation, dtype=np.float64),
+                "rotation": np.array(rotation, dtype=np.float64),
+            }
+        )
+        panel_paths.append(child.GetPath())
+    seams = []
+    for child in prim.GetChildren():
+        if child.GetTypeName() != "ClothSeam":
+            continue
+        where = f"{path}: seam {child.GetPath()}"
+        side = []
+        for key in ("A", "B"):
+            rel = child.GetRelationship(f"clothsr:panel{key}")
+            targets = rel.GetTargets() if rel else []
+            if len(targets) != 1 or targets[0] not in panel_paths:
+                raise BadInput(f"{where}: clothsr:panel{key} must target one ClothPanel of the garment")
+            edge = child.GetAttribute(f"clothsr:edge{key}").Get()
+            side.append((panel_paths.index(targets[0]), int(edge)))
+        reversed_attr = child.GetAttribute("clothsr:reversed").Get()
+        seams.append(
+            {
+                "panel_a": side[0][0],
+                "edge_a": side[0][1],
+                "panel_b": side[1][0],
+                "edge_b": side[1][1],
+                "reversed": bool(True if reversed_attr is None else reversed_attr),
+            }
+        )
+    return {
+        "path": str(prim.GetPath()),
+        "name": prim.GetName(),
+        "fabric": _fabric(prim),
+        "panels": panels,
+        "seams": seams,
+    }
+
+
+def _solver(stage: Usd.Stage, mpu: float, axes: np.ndarray):
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdPhysics.Scene):
+            continue
+        scene = UsdPhysics.Scene(prim)
+        direction = np.array(scene.GetGravityDirectionAttr().Get() or (0, 0, 0), dtype=np.float64)
+        magnitude = scene.GetGravityMagnitudeAttr().Get()
+        if np.linalg.norm(direction) == 0:
+            direction = np.array([0.0, -1.0, 0.0]) if np.allclose(axes, np.eye(3)) else np.array([0.0, 0.0, -1.0])
+        direction = axes @ (direction / np.linalg.norm(direction))
+        g = 9.81 if magnitude is None or not math.isfinite(magnitude) or magnitude < 0 else magnitude * mpu
+        dt_attr = prim.GetAttribute("clothsr:timeStep")
+        dt = float(dt_attr.Get()) if dt_attr and dt_attr.Get() is not None else 1.0 / 300.0
+        return {"gravity": direction * g, "dt": dt}
+    return None
+
+
+def _walk(path: str, animation: bool) -> dict:
+    stage = open_stage(path)
+    mpu, axes = stage_frame(stage, path)
+    skinned = _skinned_prims(stage)
+    meshes, garments = [], []
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Mesh):
+            meshes.append(
+                _read_mesh(stage, prim, skinned.get(prim.GetPath()), path, mpu, axes, animation)
+            )
+        elif _has_api(prim, "ClothGarmentAPI"):
+            garments.append(_read_garment(prim, path, mpu, axes))
+    return {
+        "meters_per_unit": mpu,
+        "up_axis": str(UsdGeom.GetStageUpAxis(stage)),
+        "fps": float(stage.GetTimeCodesPerSecond()),
+        "start": float(stage.GetStartTimeCode()),
+        "end": float(stage.GetEndTimeCode()),
+        "meshes": meshes,
+        "garments": garments,
+        "solver": _solver(stage, mpu, axes),
+    }
+
+
+def inspect_stage(path: str) -> dict:
+    """Metadata, meshes (counts, frames, role) and garments, without loading point animation."""
+    return _walk(path, animation=False)
+
+
+def read_stage(path: str) -> dict:
+    """Everything: meshes with all their frames (world space, metres, y up), garments, solver."""
+    return _walk(path, animation=True)

@@ -1,0 +1,187 @@
+"""Writing clothsr scenes and meshes to USD: y up, metres, time-sampled points with extents,
+``primvars:st`` for material coordinates, clothsr's schema for garments.
+
+Every write goes to a temporary file beside the target, is validated with all of usd-core's
+validators, and only then renamed over the target: a failed write leaves no partial file.
+"""
+import os
+import pathlib
+
+import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
+
+from .common import valid_name
+from .read import FABRIC_ATTRS
+from .validate import validate
+
+WORLD = "/World"
+
+
+def _temp_path(path: pathlib.Path) -> pathlib.Path:
+    return path.with_name(f".{path.stem}.clothsr-tmp-{os.getpid()}{path.suffix}")
+
+
+def _format_args(path: pathlib.Path, ascii_: bool):
+    if path.suffix == ".usd":
+        return {"format": "usda" if ascii_ else "usdc"}
+    return {}
+
+
+def _extent(points: np.ndarray):
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    return Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))])
+
+
+def _set_fabric(prim: Usd.Prim, fabric: dict, edge_length: float):
+    prim.AddAppliedSchema("ClothGarmentAPI")
+    for key, attr_name in FABRIC_ATTRS.items():
+        ty = Sdf.ValueTypeNames.String if key == "name" else Sdf.ValueTypeNames.Double
+        value = str(fabric[key]) if key == "name" else float(fabric[key])
+        prim.CreateAttribute(attr_name, ty, custom=False).Set(value)
+    prim.CreateAttribute("clothsr:edgeLength", Sdf.ValueTypeNames.Double, custom=False).Set(
+        float(edge_length)
+    )
+
+
+def _define_garment(stage: Usd.Stage, parent: str, g: dict):
+    root = UsdGeom.Xform.Define(stage, f"{parent}/{valid_name(g['name'])}")
+    prim = root.GetPrim()
+    _set_fabric(prim, g["fabric"], 0.0)
+    panel_paths = []
+    for p in g["panels"]:
+        panel = stage.DefinePrim(f"{prim.GetPath()}/{valid_name(p['name'])}", "ClothPanel")
+        xf = UsdGeom.Xformable(panel)
+        xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(
+            Gf.Vec3d(*map(float, p["translation"]))
+        )
+        xf.AddRotateZYXOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, p["rotation"])))
+        panel.CreateAttribute("clothsr:vertices", Sdf.ValueTypeNames.Double2Array, custom=False).Set(
+            Vt.Vec2dArray.FromNumpy(np.ascontiguousarray(p["vertices"], dtype=np.float64))
+        )
+        panel.CreateAttribute("clothsr:edgeEndpoints", Sdf.ValueTypeNames.Int2Array, custom=False).Set(
+            Vt.Vec2iArray.FromNumpy(np.ascontiguousarray(p["edge_endpoints"], dtype=np.int32))
+        )
+        panel.CreateAttribute("clothsr:edgeCurveTypes", Sdf.ValueTypeNames.TokenArray, custom=False).Set(
+            list(p["curve_types"])
+        )
+        panel.CreateAttribute("clothsr:edgeCurveParams", Sdf.ValueTypeNames.Double4Array, custom=False).Set(
+            Vt.Vec4dArray.FromNumpy(np.ascontiguousarray(p["curve_params"], dtype=np.float64))
+        )
+        panel_paths.append(panel.GetPath())
+    for k, s in enumerate(g["seams"]):
+        seam = stage.DefinePrim(f"{prim.GetPath()}/seam_{k}", "ClothSeam")
+        seam.CreateRelationship("clothsr:panelA", custom=False).SetTargets([panel_paths[s["panel_a"]]])
+        seam.CreateAttribute("clothsr:edgeA", Sdf.ValueTypeNames.Int, custom=False).Set(int(s["edge_a"]))
+        seam.CreateRelationship("clothsr:panelB", custom=False).SetTargets([panel_paths[s["panel_b"]]])
+        seam.CreateAttribute("clothsr:edgeB", Sdf.ValueTypeNames.Int, custom=False).Set(int(s["edge_b"]))
+        seam.CreateAttribute("clothsr:reversed", Sdf.ValueTypeNames.Bool, custom=False).Set(
+            bool(s["reversed"])
+        )
+
+
+def _define_mesh(stage: Usd.Stage, parent: str, m: dict):
+    """A UsdGeom.Mesh; ``frames`` (T, N, 3) with ``times`` become time samples."""
+    mesh = UsdGeom.Mesh.Define(stage, f"{parent}/{valid_name(m['name'])}")
+    prim = mesh.GetPrim()
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(m["counts"], dtype=np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(m["indices"], dtype=np.int32)))
+    frames = np.ascontiguousarray(m["frames"], dtype=np.float32)
+    times = m.get("times")
+    points_attr = mesh.CreatePointsAttr()
+    extent_attr = mesh.CreateExtentAttr()
+    if times is None or len(times) <= 1 and frames.shape[0] == 1 and m.get("static", True):
+        points_attr.Set(Vt.Vec3fArray.FromNumpy(frames[0]))
+        extent_attr.Set(_extent(frames[0]))
+    else:
+        layer = stage.GetEditTarget().GetLayer()
+        pa, ea = points_attr.GetPath(), extent_attr.GetPath()
+        with Sdf.ChangeBlock():
+            for t, pts in zip(times, frames):
+                layer.SetTimeSample(pa, float(t), Vt.Vec3fArray.FromNumpy(pts))
+                layer.SetTimeSample(ea, float(t), _extent(pts))
+    if m.get("st") is not None:
+        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+            "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+        )
+        st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(m["st"], dtype=np.float32)))
+    if m.get("panel_ids") is not None:
+        pid = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+            "clothsr:panelId", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex
+        )
+        pid.Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m["panel_ids"], dtype=np.int32)))
+    if m.get("fabric") is not None:
+        _set_fabric(prim, m["fabric"], m.get("edge_length", 0.0))
+        pairs = m.get("seam_pairs")
+        if pairs is not None:
+            prim.GetAttribute("clothsr:seamPairs").Set(
+                Vt.Vec2iArray.FromNumpy(np.ascontiguousarray(pairs, dtype=np.int32).reshape(-1, 2))
+            )
+    if m.get("collider"):
+        UsdPhysics.CollisionAPI.Apply(prim)
+    if m.get("doc"):
+        prim.SetDocumentation(str(m["doc"]))
+
+
+def write_stage(path: str, spec: dict) -> list:
+    """Writes ``spec`` to ``path`` atomically; returns the validators' warnings.
+
+    ``spec``: ``fps``, ``start``, ``end``, optional ``doc``, ``ascii``; ``garments`` (pattern
+    garments as returned by ``read_stage``), ``meshes`` (dicts with ``name``, ``group``,
+    ``counts``, ``indices``, ``frames`` (T, N, 3), ``times`` or None, optional ``st``,
+    ``panel_ids``, ``seam_pairs``, ``fabric``, ``edge_length``, ``collider``, ``doc``), and
+    ``solver`` (``gravity``, ``dt``) or None. Raises ValueError on validation errors.
+    """
+    target = pathlib.Path(path)
+    tmp = _temp_path(target)
+    if tmp.exists():
+        tmp.unlink()
+    stage = Usd.Stage.CreateNew(str(tmp), _format_args(target, bool(spec.get("ascii"))))
+    try:
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+        stage.SetTimeCodesPerSecond(float(spec.get("fps", 30.0)))
+        stage.SetFramesPerSecond(float(spec.get("fps", 30.0)))
+        stage.SetStartTimeCode(float(spec.get("start", 0.0)))
+        stage.SetEndTimeCode(float(spec.get("end", 0.0)))
+        world = UsdGeom.Xform.Define(stage, WORLD)
+        stage.SetDefaultPrim(world.GetPrim())
+        if spec.get("doc"):
+            stage.GetRootLayer().documentation = str(spec["doc"])
+        groups = set()
+        for g in spec.get("garments", []):
+            if "Garments" not in groups:
+                UsdGeom.Scope.Define(stage, f"{WORLD}/Garments")
+                groups.add("Garments")
+            _define_garment(stage, f"{WORLD}/Garments", g)
+        for m in spec.get("meshes", []):
+            group = valid_name(m.get("group", "Meshes"))
+            if group not in groups:
+                UsdGeom.Scope.Define(stage, f"{WORLD}/{group}")
+                groups.add(group)
+            _define_mesh(stage, f"{WORLD}/{group}", m)
+        solver = spec.get("solver")
+        if solver is not None:
+            scene = UsdPhysics.Scene.Define(stage, f"{WORLD}/PhysicsScene")
+            g = np.asarray(solver["gravity"], dtype=np.float64)
+            mag = float(np.linalg.norm(g))
+            direction = g / mag if mag > 0 else np.array([0.0, -1.0, 0.0])
+            scene.CreateGravityDirectionAttr(Gf.Vec3f(*map(float, direction)))
+            scene.CreateGravityMagnitudeAttr(mag)
+            prim = scene.GetPrim()
+            prim.AddAppliedSchema("ClothSolverAPI")
+            prim.CreateAttribute("clothsr:timeStep", Sdf.ValueTypeNames.Double, custom=False).Set(
+                float(solver["dt"])
+            )
+        stage.GetRootLayer().Save()
+        del stage
+        issues = validate(str(tmp))
+        errors = [i for i in issues if i[0] == "error"]
+        if errors:
+            text = "; ".join(f"{ident}: {msg}" for _, ident, msg in errors[:5])
+            raise ValueError(f"{path}: the written stage fails usd-core validation: {text}")
+        os.replace(tmp, target)
+        return [f"{ident}: {msg}" for sev, ident, msg in issues if sev != "error"]
+    finally:
+        if tmp.exists():
+            tmp.unlink()

@@ -1,0 +1,80 @@
+//! Command-line interface: one module per command; each turns its arguments into library calls.
+
+mod convert;
+mod inspect;
+mod mesh;
+mod samples;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use clap::{Parser, Subcommand};
+use clothsr::garment::{Fabric, PRESET_NAMES};
+
+/// Super-resolution cloth animation: coarse simulation, learned correction, fine wrinkles.
+#[derive(Debug, Parser)]
+#[command(name = "clothsr", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+    /// Log more (-v: debug, -vv: trace); RUST_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// What is in a pattern, mesh, scene or avatar file.
+    Inspect(inspect::Args),
+    /// GarmentCode JSON or OBJ (+ colliders, avatar) to a USD scene using clothsr's schema.
+    Convert(convert::Args),
+    /// Mesh a garment at a target edge length and write it with material coordinates.
+    Mesh(mesh::Args),
+    /// Regenerate the sample scenes shipped in samples/.
+    Samples(samples::Args),
+}
+
+/// Runs the command line; errors are printed by `main` with their causes.
+pub fn run() -> anyhow::Result<ExitCode> {
+    let cli = Cli::parse();
+    let default = match cli.verbose {
+        0 => "info",
+        1 => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    match cli.command {
+        Command::Inspect(a) => inspect::run(a),
+        Command::Convert(a) => convert::run(a),
+        Command::Mesh(a) => mesh::run(a),
+        Command::Samples(a) => samples::run(a),
+    }?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The fabric named on the command line.
+pub(crate) fn fabric(name: &str) -> anyhow::Result<Fabric> {
+    Fabric::preset(name).with_context(|| {
+        format!(
+            "unknown fabric '{name}' (known: {})",
+            PRESET_NAMES.join(", ")
+        )
+    })
+}
+
+/// Refuses to write over an input file.
+pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBuf> {
+    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize()) {
+        if a == b {
+            bail!("{}: the output would overwrite the input", output.display());
+        }
+    }
+    Ok(output.to_path_buf())
+}

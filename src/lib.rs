@@ -1,0 +1,18 @@
+//! # clothsr — super-resolution cloth animation
+//!
+//! An implementation of Yu & Wang, "Super-Resolution Cloth Animation with Spatial and Temporal
+//! Coherence" (SIGGRAPH 2024). Data flows through the stages of the paper's Fig. 2:
+//!
+//! 1. [`io`] reads sewing patterns (GarmentCode JSON), meshes (OBJ, USD) and avatars (UsdSkel);
+//! 2. [`garment`] holds panels, seams and fabric; [`mesh`] meshes them at the coarse (20 mm) and
+//!    fine (2.5 mm) resolutions in one shared material space;
+//! 3. the simulator, corrector and mesh super-resolution stages follow in later modules;
+//! 4. [`io`] writes time-sampled USD.
+
+pub mod error;
+pub mod garment;
+pub mod io;
+pub mod mesh;
+pub mod scene;
+
+pub use error::{Error, Result};
