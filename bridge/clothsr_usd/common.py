@@ -1,4 +1,6 @@
 """Units, axes and prim naming shared by the reader and the writer."""
+import re
+
 import numpy as np
 from pxr import Tf, Usd, UsdGeom
 
@@ -15,7 +17,11 @@ def open_stage(path: str) -> Usd.Stage:
         stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # Tf.ErrorException carries the parser's message
         msg = " ".join(str(exc).split())
-        raise BadInput(f"{path}: cannot open as USD: {msg[:400]}") from None
+        # Keep the parser's "file:line:col: what" part, not pxr's C++ locations.
+        found = re.search(r"'[^']*?:(\d+):(\d+): (.*?)' in", msg)
+        if found:
+            msg = f"line {found.group(1)}, column {found.group(2)}: {found.group(3)}"
+        raise BadInput(f"{path}: cannot open as USD: {msg[:300]}") from None
     if stage is None:
         raise BadInput(f"{path}: cannot open as USD")
     return stage

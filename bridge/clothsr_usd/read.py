@@ -201,14 +201,14 @@ def _fabric(prim: Usd.Prim) -> dict:
     return out
 
 
-def _euler_xyz_intrinsic(r: np.ndarray):
-    """Angles (deg) with r = Rx(a) Ry(b) Rz(c) (column vectors)."""
-    b = math.asin(max(-1.0, min(1.0, r[0, 2])))
-    if abs(r[0, 2]) < 1.0 - 1e-12:
-        a = math.atan2(-r[1, 2], r[2, 2])
-        c = math.atan2(-r[0, 1], r[0, 0])
+def _euler_xyz(r: np.ndarray):
+    """Angles (deg) with r = Rz(c) Ry(b) Rx(a) (column vectors): x applied first, USD rotateXYZ."""
+    b = math.asin(max(-1.0, min(1.0, -r[2, 0])))
+    if abs(r[2, 0]) < 1.0 - 1e-12:
+        a = math.atan2(r[2, 1], r[2, 2])
+        c = math.atan2(r[1, 0], r[0, 0])
     else:  # gimbal lock: put everything in a
-        a = math.atan2(r[2, 1], r[1, 1])
+        a = math.atan2(-r[1, 2], r[1, 1])
         c = 0.0
     return [math.degrees(a), math.degrees(b), math.degrees(c)]
 
@@ -221,7 +221,7 @@ def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
     )
     simple = (
         [op.GetOpType() for op in ops]
-        == [UsdGeom.XformOp.TypeTranslate, UsdGeom.XformOp.TypeRotateZYX]
+        == [UsdGeom.XformOp.TypeTranslate, UsdGeom.XformOp.TypeRotateXYZ]
         and np.allclose(parent_world, np.eye(4))
         and mpu == 1.0
         and np.allclose(axes, np.eye(3))
@@ -236,7 +236,7 @@ def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
     if not np.allclose(scale, 1.0, atol=1e-6):
         raise BadInput(f"panel {prim.GetPath()} is scaled (scale {scale}); panels must be rigidly placed")
     t = axes @ (world[3, :3] * mpu)
-    return t.tolist(), _euler_xyz_intrinsic(rot)
+    return t.tolist(), _euler_xyz(rot)
 
 
 def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray) -> dict:

@@ -54,7 +54,7 @@ def _define_garment(stage: Usd.Stage, parent: str, g: dict):
         xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(
             Gf.Vec3d(*map(float, p["translation"]))
         )
-        xf.AddRotateZYXOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, p["rotation"])))
+        xf.AddRotateXYZOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, p["rotation"])))
         panel.CreateAttribute("clothsr:vertices", Sdf.ValueTypeNames.Double2Array, custom=False).Set(
             Vt.Vec2dArray.FromNumpy(np.ascontiguousarray(p["vertices"], dtype=np.float64))
         )
@@ -136,7 +136,8 @@ def write_stage(path: str, spec: dict) -> list:
     tmp = _temp_path(target)
     if tmp.exists():
         tmp.unlink()
-    stage = Usd.Stage.CreateNew(str(tmp), _format_args(target, bool(spec.get("ascii"))))
+    layer = Sdf.Layer.CreateNew(str(tmp), _format_args(target, bool(spec.get("ascii"))))
+    stage = Usd.Stage.Open(layer)
     try:
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -173,8 +174,8 @@ def write_stage(path: str, spec: dict) -> list:
             prim.CreateAttribute("clothsr:timeStep", Sdf.ValueTypeNames.Double, custom=False).Set(
                 float(solver["dt"])
             )
-        stage.GetRootLayer().Save()
-        del stage
+        layer.Save()
+        del stage, layer
         issues = validate(str(tmp))
         errors = [i for i in issues if i[0] == "error"]
         if errors:

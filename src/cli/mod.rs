@@ -69,8 +69,9 @@ pub(crate) fn fabric(name: &str) -> anyhow::Result<Fabric> {
     })
 }
 
-/// Refuses to write over an input file.
+/// Checks the output before any work: a USD extension, and not the input file itself.
 pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBuf> {
+    clothsr::io::usd::check_extension(output)?;
     if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize()) {
         if a == b {
             bail!("{}: the output would overwrite the input", output.display());

@@ -263,16 +263,32 @@ mod tests {
         let a = Vector2::new(0.0, 0.0);
         let b = Vector2::new(1.0, 0.0);
         let c = Curve::Cubic {
-            control1: Vector2::new(0.1, 0.8),
-            control2: Vector2::new(0.6, -0.5),
+            control1: Vector2::new(0.05, 0.3),
+            control2: Vector2::new(0.9, -0.2),
         };
-        let pts = c.sample_uniform(a, b, 20);
-        let seg: Vec<f64> = pts.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
-        let mean = seg.iter().sum::<f64>() / seg.len() as f64;
-        for s in &seg {
-            assert!((s / mean - 1.0).abs() < 0.01, "{s} vs {mean}");
+        let n = 20;
+        let pts = c.sample_uniform(a, b, n);
+        // Arc length of each sample from a dense polyline of the curve.
+        let dense: Vec<Vector2<f64>> = (0..=20_000)
+            .map(|k| c.eval(a, b, k as f64 / 20_000.0))
+            .collect();
+        let mut cum = vec![0.0];
+        for w in dense.windows(2) {
+            cum.push(cum.last().copied().unwrap_or(0.0) + (w[1] - w[0]).norm());
         }
-        assert!((seg.iter().sum::<f64>() - c.length(a, b)).abs() < 1e-3);
+        let total = cum[cum.len() - 1];
+        assert!((total - c.length(a, b)).abs() < 1e-4 * total);
+        for (i, p) in pts.iter().enumerate() {
+            let k = (0..dense.len())
+                .min_by(|&x, &y| (dense[x] - p).norm().total_cmp(&(dense[y] - p).norm()))
+                .unwrap_or(0);
+            let expect = total * i as f64 / n as f64;
+            assert!(
+                (cum[k] - expect).abs() < 1e-3 * total,
+                "sample {i}: s = {} vs {expect}",
+                cum[k]
+            );
+        }
     }
 
     #[test]

@@ -29,7 +29,8 @@ pub struct PanelEdge {
 pub struct Placement {
     /// Translation, metres.
     pub translation_m: Vector3<f64>,
-    /// Intrinsic X-Y-Z Euler angles in degrees (GarmentCode's / scipy's `'XYZ'`): R = Rx·Ry·Rz.
+    /// Euler angles about x, y, z in degrees, applied x first (Maya's and GarmentCode's `xyz`
+    /// order, USD's `rotateXYZ`): R = Rz·Ry·Rx.
     pub rotation_xyz_deg: Vector3<f64>,
 }
 
@@ -43,13 +44,13 @@ impl Default for Placement {
 }
 
 impl Placement {
-    /// The rotation matrix R = Rx·Ry·Rz.
+    /// The rotation matrix R = Rz·Ry·Rx.
     pub fn rotation(&self) -> Matrix3<f64> {
         let r = self.rotation_xyz_deg.map(f64::to_radians);
         let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), r.x);
         let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), r.y);
         let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), r.z);
-        (rx * ry * rz).into_inner()
+        (rz * ry * rx).into_inner()
     }
 
     /// World position of a material point.
@@ -385,14 +386,16 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn rotation_is_intrinsic_xyz() {
+    fn rotation_applies_x_first() {
         let p = Placement {
             translation_m: Vector3::new(1.0, 2.0, 3.0),
             rotation_xyz_deg: Vector3::new(90.0, 0.0, 90.0),
         };
-        // Rx(90)·Rz(90)·e_x = Rx(90)·e_y = e_z.
+        // Rz(90)·Rx(90)·e_x = Rz(90)·e_x = e_y; Rz(90)·Rx(90)·e_y = Rz(90)·e_z = e_z.
         let x = p.apply(Vector2::new(1.0, 0.0)) - p.translation_m;
-        assert!((x - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-12, "{x}");
+        assert!((x - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-12, "{x}");
+        let y = p.apply(Vector2::new(0.0, 1.0)) - p.translation_m;
+        assert!((y - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-12, "{y}");
     }
 
     #[test]
@@ -402,7 +405,8 @@ pub(crate) mod tests {
         assert!((ok.signed_area() - 0.5).abs() < 1e-12);
 
         let mut bowtie = ok.clone();
-        bowtie.vertices.swap(2, 3);
+        bowtie.vertices[2] = Vector2::new(0.0, 0.5);
+        bowtie.vertices[3] = Vector2::new(1.2, 0.6);
         let err = bowtie.validate().expect_err("bow-tie");
         assert!(err.contains("self-intersects"), "{err}");
 

@@ -106,9 +106,12 @@ pub fn sequence_files(pattern: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Triangles shared by every frame of a sequence, and the points of each frame.
+pub type Sequence = (Vec<[u32; 3]>, Vec<Vec<Vector3<f64>>>);
+
 /// Reads an OBJ sequence: the shared triangles and one frame of positions per file. Every file
 /// must have the same topology.
-pub fn read_obj_sequence(pattern: &Path) -> Result<(Vec<[u32; 3]>, Vec<Vec<Vector3<f64>>>)> {
+pub fn read_obj_sequence(pattern: &Path) -> Result<Sequence> {
     let files = sequence_files(pattern)?;
     let first = read_obj(&files[0])?;
     let mut frames = vec![first.positions];

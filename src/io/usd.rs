@@ -498,7 +498,8 @@ pub struct StageOut<'a> {
     pub solver: Option<SolverSettings>,
 }
 
-fn check_extension(path: &Path) -> Result<()> {
+/// Checks that `path` names a USD file clothsr can write (.usd, .usda, .usdc).
+pub fn check_extension(path: &Path) -> Result<()> {
     match path.extension().and_then(|e| e.to_str()) {
         Some("usd" | "usda" | "usdc") => Ok(()),
         _ => Err(Error::bad_input(

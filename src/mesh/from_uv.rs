@@ -20,7 +20,7 @@ pub fn cloth_from_corners(
     corner_point: &[u32],
     corner_uv: &[Vector2<f64>],
 ) -> Result<(ClothMesh, Option<f64>)> {
-    if corner_point.len() != corner_uv.len() || corner_point.len() % 3 != 0 {
+    if corner_point.len() != corner_uv.len() || !corner_point.len().is_multiple_of(3) {
         return Err(Error::Invalid(
             "texture coordinates do not match the faces".into(),
         ));

@@ -109,11 +109,11 @@ pub fn mesh_garment(garment: &Garment, opts: &MeshOptions) -> Result<ClothMesh> 
         let b = &edge_vertices[&seam.b];
         debug_assert_eq!(a.len(), b.len());
         let n = a.len();
-        for k in 0..n {
-            let j = if seam.reversed { n - 1 - k } else { k };
+        for (k, &va) in a.iter().enumerate() {
+            let vb = b[if seam.reversed { n - 1 - k } else { k }];
             // A dart sews two adjacent edges of one panel: their shared corner pairs with itself.
-            if a[k] != b[j] {
-                mesh.seam_pairs.push([a[k].min(b[j]), a[k].max(b[j])]);
+            if va != vb {
+                mesh.seam_pairs.push([va.min(vb), va.max(vb)]);
             }
         }
     }

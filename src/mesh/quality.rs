@@ -74,7 +74,10 @@ impl MeshStats {
             .map(|(_, a)| *a)
             .fold(180.0f64, f64::min);
         let mean_area = area / mesh.triangles.len().max(1) as f64;
-        let degenerate = areas.iter().filter(|a| !(**a > 1e-3 * mean_area)).count();
+        let degenerate = areas
+            .iter()
+            .filter(|a| a.is_nan() || **a <= 1e-3 * mean_area)
+            .count();
         MeshStats {
             vertices: mesh.num_vertices(),
             triangles: mesh.triangles.len(),

@@ -1,0 +1,116 @@
+//! The command line on real files: `inspect` and `mesh` on every shared pattern, the samples.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn clothsr() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_clothsr"))
+}
+
+fn patterns() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/patterns");
+    let mut out = Vec::new();
+    for dir in [
+        "garmentcode_examples",
+        "legacy_templates",
+        "mh_skirt_circle",
+        "mh_pencil_skirt",
+        "mh_tshirt",
+    ] {
+        for e in std::fs::read_dir(root.join(dir)).expect("dir") {
+            let p = e.expect("entry").path();
+            if p.extension().is_some_and(|x| x == "json") {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn inspect_and_mesh_work_on_every_shared_pattern() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let all = patterns();
+    assert!(all.len() >= 29);
+    for p in &all {
+        let out = clothsr()
+            .arg("inspect")
+            .arg("--no-mesh")
+            .arg(p)
+            .output()
+            .expect("run");
+        assert!(
+            out.status.success(),
+            "inspect {}: {}",
+            p.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("panel") && text.contains("seam"), "{text}");
+        let usd = dir.path().join("m.usdc");
+        let out = clothsr()
+            .arg("mesh")
+            .arg(p)
+            .args(["--edge-mm", "20", "-o"])
+            .arg(&usd)
+            .output()
+            .expect("run");
+        assert!(
+            out.status.success(),
+            "mesh {}: {}",
+            p.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(usd.exists());
+    }
+}
+
+#[test]
+fn inspect_reports_vertex_counts_and_avatar_frames() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = clothsr()
+        .arg("inspect")
+        .arg(root.join("samples/skirt.usda"))
+        .output()
+        .expect("run");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(
+        text.contains("at   20 mm") && text.contains("at  2.5 mm"),
+        "{text}"
+    );
+    let out = clothsr()
+        .arg("inspect")
+        .arg(root.join("../shared/data/avatars/mh_walk_train.usda"))
+        .output()
+        .expect("run");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("UsdSkel skinned") && text.contains("181 frames, time codes 0..180"),
+        "{text}"
+    );
+}
+
+#[test]
+fn committed_samples_are_what_the_generator_writes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let status = clothsr()
+        .args(["samples", "-o"])
+        .arg(dir.path())
+        .status()
+        .expect("run");
+    assert!(status.success());
+    for name in clothsr::scene::samples::SAMPLE_NAMES {
+        let fresh =
+            std::fs::read_to_string(dir.path().join(format!("{name}.usda"))).expect("fresh");
+        let committed = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("samples/{name}.usda")),
+        )
+        .expect("committed sample");
+        assert!(
+            fresh == committed,
+            "samples/{name}.usda is stale: run `clothsr samples -o samples`"
+        );
+    }
+}
