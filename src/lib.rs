@@ -14,5 +14,6 @@ pub mod garment;
 pub mod io;
 pub mod mesh;
 pub mod scene;
+pub mod sim;
 
 pub use error::{Error, Result};

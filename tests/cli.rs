@@ -114,3 +114,16 @@ fn committed_samples_are_what_the_generator_writes() {
         );
     }
 }
+
+#[test]
+fn a_missing_python_environment_says_what_to_run() {
+    let out = clothsr()
+        .env("CLOTHSR_VENV", "/nonexistent/venv")
+        .arg("inspect")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/skirt.usda"))
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bash .ci/setup") && err.contains("/nonexistent/venv"), "{err}");
+}

@@ -1,0 +1,1 @@
+//! Discrete Shells bending (Grinspun et al. 2003). Being written.

@@ -1,0 +1,1 @@
+//! Baraff-Witkin membrane. Being written.

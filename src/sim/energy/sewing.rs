@@ -1,0 +1,1 @@
+//! Sewing springs. Being written.

@@ -1,0 +1,6 @@
+//! The cloth simulator (the paper's §4.4.4): implicit Euler as minimisation of the incremental
+//! potential, Baraff-Witkin membrane, Discrete-Shells bending, sewing springs, BVH collision
+//! detection with quadratic repulsion against bodies and the cloth itself.
+
+pub mod collide;
+pub mod energy;
