@@ -125,5 +125,8 @@ fn a_missing_python_environment_says_what_to_run() {
         .expect("run");
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("bash .ci/setup") && err.contains("/nonexistent/venv"), "{err}");
+    assert!(
+        err.contains("bash .ci/setup") && err.contains("/nonexistent/venv"),
+        "{err}"
+    );
 }

@@ -23,11 +23,13 @@ pub fn project_psd<const N: usize>(m: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N>
     if sym.cholesky().is_some() {
         return sym;
     }
-    let mut eig = nalgebra::SymmetricEigen::new(sym);
+    // Dynamic size keeps the generic bounds simple; this path only runs for indefinite blocks.
+    let mut eig =
+        nalgebra::SymmetricEigen::new(nalgebra::DMatrix::from_column_slice(N, N, sym.as_slice()));
     for v in eig.eigenvalues.iter_mut() {
         *v = v.max(0.0);
     }
-    eig.recompose()
+    SMatrix::<f64, N, N>::from_column_slice(eig.recompose().as_slice())
 }
 
 /// Finite-difference checks shared by the energies' tests.
@@ -53,7 +55,10 @@ pub(crate) mod fd {
         }
         let err = (num - grad).norm();
         let scale = grad.norm().max(num.norm()).max(1e-12);
-        assert!(err <= rel_tol * scale + 1e-9, "gradient mismatch: |num - an| = {err:e}, |an| = {scale:e}\nnum {num}\nan {grad}");
+        assert!(
+            err <= rel_tol * scale + 1e-9,
+            "gradient mismatch: |num - an| = {err:e}, |an| = {scale:e}\nnum {num}\nan {grad}"
+        );
     }
 
     /// Asserts `hess` matches central differences of `grad` at `x`.
@@ -73,14 +78,24 @@ pub(crate) mod fd {
         }
         let err = (num - hess).norm();
         let scale = hess.norm().max(num.norm()).max(1e-12);
-        assert!(err <= rel_tol * scale + 1e-9, "Hessian mismatch: |num - an| = {err:e}, |an| = {scale:e}");
+        assert!(
+            err <= rel_tol * scale + 1e-9,
+            "Hessian mismatch: |num - an| = {err:e}, |an| = {scale:e}"
+        );
     }
 
     /// Asserts `m` is symmetric positive semi-definite (up to round-off).
     pub fn check_psd<const N: usize>(m: &SMatrix<f64, N, N>) {
-        assert!((m - m.transpose()).norm() <= 1e-9 * m.norm().max(1.0), "not symmetric");
-        let eig = nalgebra::SymmetricEigen::new(*m);
+        assert!(
+            (m - m.transpose()).norm() <= 1e-9 * m.norm().max(1.0),
+            "not symmetric"
+        );
+        let eig =
+            nalgebra::SymmetricEigen::new(nalgebra::DMatrix::from_column_slice(N, N, m.as_slice()));
         let min = eig.eigenvalues.min();
-        assert!(min >= -1e-9 * m.norm().max(1.0), "not PSD: smallest eigenvalue {min}");
+        assert!(
+            min >= -1e-9 * m.norm().max(1.0),
+            "not PSD: smallest eigenvalue {min}"
+        );
     }
 }
