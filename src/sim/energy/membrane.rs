@@ -1,1 +1,228 @@
-//! Baraff-Witkin membrane. Being written.
+//! Baraff-Witkin membrane (Baraff & Witkin 1998, "Large Steps in Cloth Simulation"):
+//! anisotropic stretch along the weft (material u) and warp (material v), and in-plane shear.
+//!
+//! With the deformation gradient F = Ds·Dm⁻¹ (3×2) of a triangle with rest material coordinates
+//! Dm = [u₁−u₀, u₂−u₀] and world edges Ds = [x₁−x₀, x₂−x₀], its columns w_u, w_v are how the
+//! weft and warp directions are stretched. Per rest area A (m²):
+//!
+//! E = A · [½ k_weft (|w_u| − 1)² + ½ k_warp (|w_v| − 1)² + ½ k_shear (w_u·w_v)²]  (joules)
+//!
+//! with stiffnesses in N/m. Gradients and Hessians are taken in the 6D space (w_u, w_v), then
+//! mapped to the 9 vertex coordinates by the constant linear map w = B·x. The Hessian is made PSD
+//! in that 6D space: the stretch terms analytically (the eigenvalue k(1 − 1/|w|) across the
+//! stretch direction is clamped at zero under compression) and, when the shear coupling still
+//! leaves it indefinite, by eigenvalue clamping of the 6×6 block.
+
+use nalgebra::{Matrix2, Matrix3, SMatrix, Vector2, Vector3};
+
+use super::{project_psd, Mat9, Vec9};
+
+/// Rest data of one triangle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Membrane {
+    /// Vertex indices.
+    pub v: [u32; 3],
+    /// Rest area in material space, m².
+    pub area_m2: f64,
+    /// Coefficients of x₀, x₁, x₂ in w_u (weft).
+    pub cu: [f64; 3],
+    /// Coefficients of x₀, x₁, x₂ in w_v (warp).
+    pub cv: [f64; 3],
+}
+
+/// Membrane stiffnesses, N/m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MembraneStiffness {
+    /// Stretch along the weft (material u).
+    pub weft_n_m: f64,
+    /// Stretch along the warp (material v).
+    pub warp_n_m: f64,
+    /// Shear.
+    pub shear_n_m: f64,
+}
+
+impl Membrane {
+    /// Rest data of triangle `v` from material coordinates; `None` if it is degenerate.
+    pub fn new(v: [u32; 3], material: &[Vector2<f64>]) -> Option<Membrane> {
+        let [u0, u1, u2] = v.map(|i| material[i as usize]);
+        let dm = Matrix2::from_columns(&[u1 - u0, u2 - u0]);
+        let area_m2 = 0.5 * dm.determinant().abs();
+        let inv = dm.try_inverse().filter(|_| area_m2 > 1e-14)?;
+        Some(Membrane {
+            v,
+            area_m2,
+            cu: [-(inv[(0, 0)] + inv[(1, 0)]), inv[(0, 0)], inv[(1, 0)]],
+            cv: [-(inv[(0, 1)] + inv[(1, 1)]), inv[(0, 1)], inv[(1, 1)]],
+        })
+    }
+
+    /// (w_u, w_v): the columns of the deformation gradient.
+    pub fn stretch_vectors(&self, x: &[Vector3<f64>; 3]) -> (Vector3<f64>, Vector3<f64>) {
+        let wu = x[0] * self.cu[0] + x[1] * self.cu[1] + x[2] * self.cu[2];
+        let wv = x[0] * self.cv[0] + x[1] * self.cv[1] + x[2] * self.cv[2];
+        (wu, wv)
+    }
+
+    /// Energy, joules.
+    pub fn energy(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> f64 {
+        let (wu, wv) = self.stretch_vectors(x);
+        let (su, sv, s) = (wu.norm() - 1.0, wv.norm() - 1.0, wu.dot(&wv));
+        self.area_m2 * 0.5 * (k.weft_n_m * su * su + k.warp_n_m * sv * sv + k.shear_n_m * s * s)
+    }
+
+    /// Energy, gradient in (w_u, w_v) and the 6×6 Hessian there; `psd` clamps the stretch
+    /// terms' negative eigenvalues.
+    fn w_space(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3], psd: bool) -> (f64, [Vector3<f64>; 2], SMatrix<f64, 6, 6>) {
+        let a = self.area_m2;
+        let (wu, wv) = self.stretch_vectors(x);
+        let (lu, lv) = (wu.norm().max(1e-12), wv.norm().max(1e-12));
+        let (nu, nv) = (wu / lu, wv / lv);
+        let s = wu.dot(&wv);
+        let e = a * 0.5 * (k.weft_n_m * (lu - 1.0).powi(2) + k.warp_n_m * (lv - 1.0).powi(2) + k.shear_n_m * s * s);
+        let gu = (nu * (k.weft_n_m * (lu - 1.0)) + wv * (k.shear_n_m * s)) * a;
+        let gv = (nv * (k.warp_n_m * (lv - 1.0)) + wu * (k.shear_n_m * s)) * a;
+        let stretch = |kk: f64, n: &Vector3<f64>, l: f64| {
+            let nn = n * n.transpose();
+            let perp = 1.0 - 1.0 / l;
+            let perp = if psd { perp.max(0.0) } else { perp };
+            (nn + (Matrix3::identity() - nn) * perp) * kk
+        };
+        let huu = (stretch(k.weft_n_m, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
+        let hvv = (stretch(k.warp_n_m, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
+        let huv = (wv * wu.transpose() + Matrix3::identity() * s) * (k.shear_n_m * a);
+        let mut h = SMatrix::<f64, 6, 6>::zeros();
+        h.fixed_view_mut::<3, 3>(0, 0).copy_from(&huu);
+        h.fixed_view_mut::<3, 3>(3, 3).copy_from(&hvv);
+        h.fixed_view_mut::<3, 3>(0, 3).copy_from(&huv);
+        h.fixed_view_mut::<3, 3>(3, 0).copy_from(&huv.transpose());
+        (e, [gu, gv], h)
+    }
+
+    fn to_vertices(&self, g: [Vector3<f64>; 2], h: &SMatrix<f64, 6, 6>) -> (Vec9, Mat9) {
+        let mut grad = Vec9::zeros();
+        let mut hess = Mat9::zeros();
+        let c = [self.cu, self.cv];
+        for i in 0..3 {
+            grad.fixed_rows_mut::<3>(3 * i).copy_from(&(g[0] * c[0][i] + g[1] * c[1][i]));
+            for j in 0..3 {
+                let mut block = Matrix3::zeros();
+                for (p, cp) in c.iter().enumerate() {
+                    for (q, cq) in c.iter().enumerate() {
+                        block += h.fixed_view::<3, 3>(3 * p, 3 * q) * (cp[i] * cq[j]);
+                    }
+                }
+                hess.fixed_view_mut::<3, 3>(3 * i, 3 * j).copy_from(&block);
+            }
+        }
+        (grad, hess)
+    }
+
+    /// Energy, gradient (9) and PSD Hessian (9×9).
+    pub fn energy_gradient_hessian(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> (f64, Vec9, Mat9) {
+        let (e, g, mut h) = self.w_space(k, x, true);
+        if h.cholesky().is_none() {
+            h = project_psd(&h);
+        }
+        let (grad, hess) = self.to_vertices(g, &h);
+        (e, grad, hess)
+    }
+
+    /// Gradient (9) only.
+    pub fn gradient(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> Vec9 {
+        let (_, g, h) = self.w_space(k, x, false);
+        self.to_vertices(g, &h).0
+    }
+
+    /// The exact (unfiltered) Hessian, for tests and analysis.
+    pub fn hessian_exact(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> Mat9 {
+        let (_, g, h) = self.w_space(k, x, false);
+        self.to_vertices(g, &h).1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::energy::fd;
+
+    /// A small deterministic generator (no rand dependency in the library).
+    pub(crate) struct Lcg(u64);
+    impl Lcg {
+        pub(crate) fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((self.0 >> 11) as f64) / ((1u64 << 53) as f64)
+        }
+    }
+
+    fn setup(r: &mut Lcg) -> (Membrane, MembraneStiffness, Vec9) {
+        let material = [
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.02 + 0.01 * r.next(), 0.003 * r.next()),
+            Vector2::new(0.005 * r.next(), 0.02 + 0.01 * r.next()),
+        ];
+        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        let k = MembraneStiffness { weft_n_m: 1800.0, warp_n_m: 2500.0, shear_n_m: 100.0 };
+        // World: rotated, stretched or compressed, and sheared copy of the material triangle.
+        let mut x = Vec9::zeros();
+        let scale = 0.6 + 0.8 * r.next();
+        for i in 0..3 {
+            let p = Vector3::new(material[i].x * scale, material[i].y, 0.0);
+            let q = Vector3::new(p.x + 0.3 * p.y * r.next(), p.y * (0.7 + 0.6 * r.next()), 0.01 * r.next());
+            x.fixed_rows_mut::<3>(3 * i).copy_from(&q);
+        }
+        (m, k, x)
+    }
+
+    fn pts(x: &Vec9) -> [Vector3<f64>; 3] {
+        [0, 1, 2].map(|i| Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]))
+    }
+
+    #[test]
+    fn gradient_and_hessian_match_finite_differences() {
+        let mut r = Lcg(7);
+        for _ in 0..30 {
+            let (m, k, x) = setup(&mut r);
+            let g = m.gradient(&k, &pts(&x));
+            fd::check_gradient(|y| m.energy(&k, &pts(y)), &g, &x, 1e-7, 1e-5);
+            let h = m.hessian_exact(&k, &pts(&x));
+            fd::check_hessian(|y| m.gradient(&k, &pts(y)), &h, &x, 1e-7, 1e-5);
+        }
+    }
+
+    #[test]
+    fn filtered_hessian_is_psd_and_exact_when_stretched() {
+        let mut r = Lcg(11);
+        for _ in 0..30 {
+            let (m, k, x) = setup(&mut r);
+            let (e, g, h) = m.energy_gradient_hessian(&k, &pts(&x));
+            fd::check_psd(&h);
+            assert!((e - m.energy(&k, &pts(&x))).abs() < 1e-15);
+            assert!((g - m.gradient(&k, &pts(&x))).norm() < 1e-9 * g.norm().max(1.0));
+        }
+        // Pure stretch along both axes, no shear: the exact Hessian is already PSD.
+        let material = [Vector2::new(0.0, 0.0), Vector2::new(0.02, 0.0), Vector2::new(0.0, 0.02)];
+        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        let k = MembraneStiffness { weft_n_m: 1000.0, warp_n_m: 1500.0, shear_n_m: 50.0 };
+        let x = [Vector3::zeros(), Vector3::new(0.022, 0.0, 0.0), Vector3::new(0.0, 0.021, 0.0)];
+        let (_, _, h) = m.energy_gradient_hessian(&k, &x);
+        assert!((h - m.hessian_exact(&k, &x)).norm() < 1e-9 * h.norm());
+    }
+
+    #[test]
+    fn rest_state_is_free_and_rigid_motion_costs_nothing() {
+        let material = [Vector2::new(0.0, 0.0), Vector2::new(0.02, 0.001), Vector2::new(0.004, 0.018)];
+        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        let k = MembraneStiffness { weft_n_m: 1000.0, warp_n_m: 1500.0, shear_n_m: 50.0 };
+        let rot = nalgebra::Rotation3::from_euler_angles(0.3, -1.1, 0.7);
+        let x = material.map(|u| rot * Vector3::new(u.x, u.y, 0.0) + Vector3::new(1.0, 2.0, 3.0));
+        assert!(m.energy(&k, &x) < 1e-20);
+        assert!(m.gradient(&k, &x).norm() < 1e-9);
+        // Weft stretch costs k_weft, warp stretch k_warp.
+        let stretch_u = material.map(|u| Vector3::new(1.1 * u.x, u.y, 0.0));
+        let e_u = m.energy(&k, &stretch_u);
+        let stretch_v = material.map(|u| Vector3::new(u.x, 1.1 * u.y, 0.0));
+        let e_v = m.energy(&k, &stretch_v);
+        assert!(e_v > e_u, "warp is stiffer: {e_v} vs {e_u}");
+        assert!(Membrane::new([0, 1, 2], &[Vector2::zeros(), Vector2::new(1.0, 0.0), Vector2::new(2.0, 0.0)]).is_none());
+    }
+}
