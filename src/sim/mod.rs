@@ -4,3 +4,4 @@
 
 pub mod collide;
 pub mod energy;
+pub mod sparse;
