@@ -25,6 +25,9 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+    /// The simulation could not continue (NaN, no progress, penetration) even with smaller steps.
+    #[error("simulation failed: {0}")]
+    Simulation(String),
     /// The embedded Python / usd-core bridge failed.
     #[error("{0}")]
     Bridge(String),

@@ -25,9 +25,9 @@ except ImportError as exc:  # pragma: no cover - the message is the point
 
 from .read import inspect_stage, read_stage  # noqa: E402
 from .validate import validate  # noqa: E402
-from .write import write_stage  # noqa: E402
+from .write import AnimationWriter, write_stage  # noqa: E402
 
-__all__ = ["inspect_stage", "read_stage", "validate", "write_stage", "schema_registered"]
+__all__ = ["inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "schema_registered"]
 
 
 def schema_registered() -> bool:

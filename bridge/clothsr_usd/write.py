@@ -6,6 +6,7 @@ validators, and only then renamed over the target: a failed write leaves no part
 """
 import os
 import pathlib
+import shutil
 
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
@@ -123,6 +124,58 @@ def _define_mesh(stage: Usd.Stage, parent: str, m: dict):
         prim.SetDocumentation(str(m["doc"]))
 
 
+def _build(stage: Usd.Stage, spec: dict) -> dict:
+    """Defines everything of ``spec`` on an empty stage; returns {mesh name: prim path}."""
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    stage.SetTimeCodesPerSecond(float(spec.get("fps", 30.0)))
+    stage.SetFramesPerSecond(float(spec.get("fps", 30.0)))
+    stage.SetStartTimeCode(float(spec.get("start", 0.0)))
+    stage.SetEndTimeCode(float(spec.get("end", 0.0)))
+    world = UsdGeom.Xform.Define(stage, WORLD)
+    stage.SetDefaultPrim(world.GetPrim())
+    if spec.get("doc"):
+        stage.GetRootLayer().documentation = str(spec["doc"])
+    groups = set()
+    paths = {}
+    for g in spec.get("garments", []):
+        if "Garments" not in groups:
+            UsdGeom.Scope.Define(stage, f"{WORLD}/Garments")
+            groups.add("Garments")
+        _define_garment(stage, f"{WORLD}/Garments", g)
+    for m in spec.get("meshes", []):
+        group = valid_name(m.get("group", "Meshes"))
+        if group not in groups:
+            UsdGeom.Scope.Define(stage, f"{WORLD}/{group}")
+            groups.add(group)
+        _define_mesh(stage, f"{WORLD}/{group}", m)
+        paths[m["name"]] = f"{WORLD}/{group}/{valid_name(m['name'])}"
+    solver = spec.get("solver")
+    if solver is not None:
+        scene = UsdPhysics.Scene.Define(stage, f"{WORLD}/PhysicsScene")
+        g = np.asarray(solver["gravity"], dtype=np.float64)
+        mag = float(np.linalg.norm(g))
+        direction = g / mag if mag > 0 else np.array([0.0, -1.0, 0.0])
+        scene.CreateGravityDirectionAttr(Gf.Vec3f(*map(float, direction)))
+        scene.CreateGravityMagnitudeAttr(mag)
+        prim = scene.GetPrim()
+        prim.AddAppliedSchema("ClothSolverAPI")
+        prim.CreateAttribute("clothsr:timeStep", Sdf.ValueTypeNames.Double, custom=False).Set(
+            float(solver["dt"])
+        )
+    return paths
+
+
+def _finish(tmp: pathlib.Path, target: pathlib.Path, path: str) -> list:
+    issues = validate(str(tmp))
+    errors = [i for i in issues if i[0] == "error"]
+    if errors:
+        text = "; ".join(f"{ident}: {msg}" for _, ident, msg in errors[:5])
+        raise ValueError(f"{path}: the written stage fails usd-core validation: {text}")
+    os.replace(tmp, target)
+    return [f"{ident}: {msg}" for sev, ident, msg in issues if sev != "error"]
+
+
 def write_stage(path: str, spec: dict) -> list:
     """Writes ``spec`` to ``path`` atomically; returns the validators' warnings.
 
@@ -139,50 +192,66 @@ def write_stage(path: str, spec: dict) -> list:
     layer = Sdf.Layer.CreateNew(str(tmp), _format_args(target, bool(spec.get("ascii"))))
     stage = Usd.Stage.Open(layer)
     try:
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
-        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-        stage.SetTimeCodesPerSecond(float(spec.get("fps", 30.0)))
-        stage.SetFramesPerSecond(float(spec.get("fps", 30.0)))
-        stage.SetStartTimeCode(float(spec.get("start", 0.0)))
-        stage.SetEndTimeCode(float(spec.get("end", 0.0)))
-        world = UsdGeom.Xform.Define(stage, WORLD)
-        stage.SetDefaultPrim(world.GetPrim())
-        if spec.get("doc"):
-            stage.GetRootLayer().documentation = str(spec["doc"])
-        groups = set()
-        for g in spec.get("garments", []):
-            if "Garments" not in groups:
-                UsdGeom.Scope.Define(stage, f"{WORLD}/Garments")
-                groups.add("Garments")
-            _define_garment(stage, f"{WORLD}/Garments", g)
-        for m in spec.get("meshes", []):
-            group = valid_name(m.get("group", "Meshes"))
-            if group not in groups:
-                UsdGeom.Scope.Define(stage, f"{WORLD}/{group}")
-                groups.add(group)
-            _define_mesh(stage, f"{WORLD}/{group}", m)
-        solver = spec.get("solver")
-        if solver is not None:
-            scene = UsdPhysics.Scene.Define(stage, f"{WORLD}/PhysicsScene")
-            g = np.asarray(solver["gravity"], dtype=np.float64)
-            mag = float(np.linalg.norm(g))
-            direction = g / mag if mag > 0 else np.array([0.0, -1.0, 0.0])
-            scene.CreateGravityDirectionAttr(Gf.Vec3f(*map(float, direction)))
-            scene.CreateGravityMagnitudeAttr(mag)
-            prim = scene.GetPrim()
-            prim.AddAppliedSchema("ClothSolverAPI")
-            prim.CreateAttribute("clothsr:timeStep", Sdf.ValueTypeNames.Double, custom=False).Set(
-                float(solver["dt"])
-            )
+        _build(stage, spec)
         layer.Save()
         del stage, layer
-        issues = validate(str(tmp))
-        errors = [i for i in issues if i[0] == "error"]
-        if errors:
-            text = "; ".join(f"{ident}: {msg}" for _, ident, msg in errors[:5])
-            raise ValueError(f"{path}: the written stage fails usd-core validation: {text}")
-        os.replace(tmp, target)
-        return [f"{ident}: {msg}" for sev, ident, msg in issues if sev != "error"]
+        return _finish(tmp, target, path)
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+class AnimationWriter:
+    """Writes an animation frame by frame: static content first (``spec`` as for
+    ``write_stage``), then ``write_frame`` adds a time sample of points (and extent) to named
+    meshes. ``checkpoint`` publishes what is written so far at the target path (a consistent
+    file, replaced atomically); ``close`` validates and publishes the final file."""
+
+    def __init__(self, path: str, spec: dict):
+        self.path = path
+        self.target = pathlib.Path(path)
+        self.tmp = _temp_path(self.target)
+        if self.tmp.exists():
+            self.tmp.unlink()
+        self.layer = Sdf.Layer.CreateNew(str(self.tmp), _format_args(self.target, bool(spec.get("ascii"))))
+        self.stage = Usd.Stage.Open(self.layer)
+        self.paths = _build(self.stage, spec)
+        self.start = float(spec.get("start", 0.0))
+        self.last = None
+
+    def write_frame(self, time: float, points: dict):
+        with Sdf.ChangeBlock():
+            for name, pts in points.items():
+                prim = self.paths[name]
+                arr = np.ascontiguousarray(pts, dtype=np.float32)
+                self.layer.SetTimeSample(Sdf.Path(f"{prim}.points"), float(time), Vt.Vec3fArray.FromNumpy(arr))
+                self.layer.SetTimeSample(Sdf.Path(f"{prim}.extent"), float(time), _extent(arr))
+        self.last = float(time)
+
+    def _publish(self, validate_it: bool) -> list:
+        if self.last is not None:
+            self.stage.SetEndTimeCode(max(self.last, self.start))
+        self.layer.Save()
+        copy = self.target.with_name(f".{self.target.stem}.clothsr-pub-{os.getpid()}{self.target.suffix}")
+        shutil.copyfile(self.tmp, copy)
+        try:
+            if validate_it:
+                return _finish(copy, self.target, self.path)
+            os.replace(copy, self.target)
+            return []
+        finally:
+            if copy.exists():
+                copy.unlink()
+
+    def checkpoint(self):
+        """Publishes the frames written so far (no validation: fast)."""
+        self._publish(False)
+
+    def close(self) -> list:
+        """Validates and publishes the final file; returns the validators' warnings."""
+        try:
+            return self._publish(True)
+        finally:
+            del self.stage, self.layer
+            if self.tmp.exists():
+                self.tmp.unlink()

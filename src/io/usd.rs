@@ -473,6 +473,8 @@ pub struct MeshOut {
     pub fabric: Option<(Fabric, f64)>,
     /// Apply `PhysicsCollisionAPI`.
     pub collider: bool,
+    /// Points are time-sampled later by an [`AnimationWriter`].
+    pub animated: bool,
     /// Prim documentation.
     pub doc: Option<String>,
 }
@@ -509,6 +511,75 @@ pub fn check_extension(path: &Path) -> Result<()> {
     }
 }
 
+fn stage_spec<'py>(py: Python<'py>, out: &StageOut<'_>) -> PyResult<Bound<'py, PyDict>> {
+    let spec = PyDict::new(py);
+    spec.set_item("fps", out.fps)?;
+    spec.set_item("start", out.start)?;
+    spec.set_item("end", out.end)?;
+    spec.set_item("ascii", out.ascii)?;
+    if let Some(doc) = &out.doc {
+        spec.set_item("doc", doc)?;
+    }
+    let garments = PyList::empty(py);
+    for g in &out.garments {
+        garments.append(garment_to(py, g)?)?;
+    }
+    spec.set_item("garments", garments)?;
+    let meshes = PyList::empty(py);
+    for m in &out.meshes {
+        let md = PyDict::new(py);
+        md.set_item("name", &m.name)?;
+        md.set_item("group", &m.group)?;
+        md.set_item(
+            "counts",
+            to_np(py, vec![3i32; m.triangles.len()], &[m.triangles.len()])?,
+        )?;
+        let idx: Vec<i32> = m.triangles.iter().flatten().map(|&v| v as i32).collect();
+        md.set_item("indices", to_np(py, idx, &[3 * m.triangles.len()])?)?;
+        let n = m.frames.first().map_or(0, Vec::len);
+        let flat: Vec<f32> = m
+            .frames
+            .iter()
+            .flatten()
+            .flat_map(|p| [p.x, p.y, p.z])
+            .collect();
+        md.set_item("frames", to_np(py, flat, &[m.frames.len(), n, 3])?)?;
+        md.set_item("static", m.time_codes.is_none() && !m.animated)?;
+        if let Some(t) = &m.time_codes {
+            md.set_item("times", to_np(py, t.clone(), &[t.len()])?)?;
+        }
+        if let Some(uv) = &m.uv {
+            let flat: Vec<f64> = uv.iter().flat_map(|p| [p.x, p.y]).collect();
+            md.set_item("st", to_np(py, flat, &[uv.len(), 2])?)?;
+        }
+        if let Some(ids) = &m.panel_ids {
+            let v: Vec<i32> = ids.iter().map(|&x| x as i32).collect();
+            md.set_item("panel_ids", to_np(py, v, &[ids.len()])?)?;
+        }
+        if let Some(pairs) = &m.seam_pairs {
+            let v: Vec<i32> = pairs.iter().flatten().map(|&x| x as i32).collect();
+            md.set_item("seam_pairs", to_np(py, v, &[pairs.len(), 2])?)?;
+        }
+        if let Some((fabric, edge)) = &m.fabric {
+            md.set_item("fabric", fabric_to(py, fabric, *edge)?)?;
+            md.set_item("edge_length", *edge)?;
+        }
+        md.set_item("collider", m.collider)?;
+        if let Some(doc) = &m.doc {
+            md.set_item("doc", doc)?;
+        }
+        meshes.append(md)?;
+    }
+    spec.set_item("meshes", meshes)?;
+    if let Some(s) = &out.solver {
+        let sd = PyDict::new(py);
+        sd.set_item("gravity", s.gravity_m_s2.as_slice().to_vec())?;
+        sd.set_item("dt", s.dt_s)?;
+        spec.set_item("solver", sd)?;
+    }
+    Ok(spec)
+}
+
 /// Writes a stage atomically (temporary file, usd-core validation, rename); returns the
 /// validators' warnings.
 pub fn write_usd(path: &Path, out: &StageOut<'_>) -> Result<Vec<String>> {
@@ -527,71 +598,7 @@ pub fn write_usd(path: &Path, out: &StageOut<'_>) -> Result<Vec<String>> {
     }
     let p = path.to_string_lossy().into_owned();
     with_bridge(|py, module| {
-        let spec = PyDict::new(py);
-        spec.set_item("fps", out.fps)?;
-        spec.set_item("start", out.start)?;
-        spec.set_item("end", out.end)?;
-        spec.set_item("ascii", out.ascii)?;
-        if let Some(doc) = &out.doc {
-            spec.set_item("doc", doc)?;
-        }
-        let garments = PyList::empty(py);
-        for g in &out.garments {
-            garments.append(garment_to(py, g)?)?;
-        }
-        spec.set_item("garments", garments)?;
-        let meshes = PyList::empty(py);
-        for m in &out.meshes {
-            let md = PyDict::new(py);
-            md.set_item("name", &m.name)?;
-            md.set_item("group", &m.group)?;
-            md.set_item(
-                "counts",
-                to_np(py, vec![3i32; m.triangles.len()], &[m.triangles.len()])?,
-            )?;
-            let idx: Vec<i32> = m.triangles.iter().flatten().map(|&v| v as i32).collect();
-            md.set_item("indices", to_np(py, idx, &[3 * m.triangles.len()])?)?;
-            let n = m.frames.first().map_or(0, Vec::len);
-            let flat: Vec<f32> = m
-                .frames
-                .iter()
-                .flatten()
-                .flat_map(|p| [p.x, p.y, p.z])
-                .collect();
-            md.set_item("frames", to_np(py, flat, &[m.frames.len(), n, 3])?)?;
-            md.set_item("static", m.time_codes.is_none())?;
-            if let Some(t) = &m.time_codes {
-                md.set_item("times", to_np(py, t.clone(), &[t.len()])?)?;
-            }
-            if let Some(uv) = &m.uv {
-                let flat: Vec<f64> = uv.iter().flat_map(|p| [p.x, p.y]).collect();
-                md.set_item("st", to_np(py, flat, &[uv.len(), 2])?)?;
-            }
-            if let Some(ids) = &m.panel_ids {
-                let v: Vec<i32> = ids.iter().map(|&x| x as i32).collect();
-                md.set_item("panel_ids", to_np(py, v, &[ids.len()])?)?;
-            }
-            if let Some(pairs) = &m.seam_pairs {
-                let v: Vec<i32> = pairs.iter().flatten().map(|&x| x as i32).collect();
-                md.set_item("seam_pairs", to_np(py, v, &[pairs.len(), 2])?)?;
-            }
-            if let Some((fabric, edge)) = &m.fabric {
-                md.set_item("fabric", fabric_to(py, fabric, *edge)?)?;
-                md.set_item("edge_length", *edge)?;
-            }
-            md.set_item("collider", m.collider)?;
-            if let Some(doc) = &m.doc {
-                md.set_item("doc", doc)?;
-            }
-            meshes.append(md)?;
-        }
-        spec.set_item("meshes", meshes)?;
-        if let Some(s) = &out.solver {
-            let sd = PyDict::new(py);
-            sd.set_item("gravity", s.gravity_m_s2.as_slice().to_vec())?;
-            sd.set_item("dt", s.dt_s)?;
-            spec.set_item("solver", sd)?;
-        }
+        let spec = stage_spec(py, out)?;
         module
             .call_method1("write_stage", (p.as_str(), spec))?
             .extract::<Vec<String>>()
@@ -623,6 +630,7 @@ impl MeshOut {
             seam_pairs: Some(mesh.seam_pairs.clone()),
             fabric: Some((fabric.clone(), edge_m)),
             collider: false,
+            animated: false,
             doc: None,
         }
     }
@@ -671,5 +679,72 @@ impl crate::scene::Scene {
             }),
         };
         write_usd(path, &out)
+    }
+}
+
+/// Writes an animation frame by frame into a USD file: the static content first, then one time
+/// sample of points per frame for the meshes marked `animated`. `checkpoint` publishes a
+/// consistent file with the frames so far; `finish` validates and publishes the final file.
+pub struct AnimationWriter {
+    writer: Py<PyAny>,
+    names: Vec<String>,
+}
+
+impl AnimationWriter {
+    /// Starts writing `out` (its animated meshes' first frame is the rest pose) to `path`.
+    pub fn create(path: &Path, out: &StageOut<'_>) -> Result<AnimationWriter> {
+        check_extension(path)?;
+        let p = path.to_string_lossy().into_owned();
+        let names = out
+            .meshes
+            .iter()
+            .filter(|m| m.animated)
+            .map(|m| m.name.clone())
+            .collect();
+        let writer = with_bridge(|py, module| {
+            let spec = stage_spec(py, out)?;
+            Ok(module
+                .getattr("AnimationWriter")?
+                .call1((p.as_str(), spec))?
+                .unbind())
+        })?;
+        Ok(AnimationWriter { writer, names })
+    }
+
+    /// Adds one time sample: `points[k]` for the k-th animated mesh, in order.
+    pub fn write_frame(&mut self, time_code: f64, points: &[&[Vector3<f64>]]) -> Result<()> {
+        if points.len() != self.names.len() {
+            return Err(Error::Invalid(format!(
+                "{} point sets for {} animated meshes",
+                points.len(),
+                self.names.len()
+            )));
+        }
+        let writer = &self.writer;
+        let names = &self.names;
+        with_bridge(|py, _| {
+            let d = PyDict::new(py);
+            for (name, pts) in names.iter().zip(points) {
+                let flat: Vec<f32> = pts
+                    .iter()
+                    .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                    .collect();
+                d.set_item(name, to_np(py, flat, &[pts.len(), 3])?)?;
+            }
+            writer.call_method1(py, "write_frame", (time_code, d))?;
+            Ok(())
+        })
+    }
+
+    /// Publishes the frames written so far at the target path.
+    pub fn checkpoint(&mut self) -> Result<()> {
+        let writer = &self.writer;
+        with_bridge(|py, _| writer.call_method0(py, "checkpoint").map(|_| ()))
+    }
+
+    /// Validates and publishes the final file; returns the validators' warnings.
+    pub fn finish(self) -> Result<Vec<String>> {
+        let writer = &self.writer;
+        with_bridge(|py, _| writer.call_method0(py, "close")?.extract(py))
     }
 }
