@@ -1,9 +1,11 @@
 //! Command-line interface: one module per command; each turns its arguments into library calls.
 
+mod bench;
 mod convert;
 mod inspect;
 mod mesh;
 mod samples;
+mod simulate;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -33,6 +35,10 @@ enum Command {
     Mesh(mesh::Args),
     /// Regenerate the sample scenes shipped in samples/.
     Samples(samples::Args),
+    /// Simulate a scene's cloth and write the animation to USD.
+    Simulate(simulate::Args),
+    /// Benchmarks (the simulator, side by side with Newton 1.8).
+    Bench(bench::Args),
 }
 
 /// Runs the command line; errors are printed by `main` with their causes.
@@ -55,6 +61,8 @@ pub fn run() -> anyhow::Result<ExitCode> {
         Command::Convert(a) => convert::run(a),
         Command::Mesh(a) => mesh::run(a),
         Command::Samples(a) => samples::run(a),
+        Command::Simulate(a) => simulate::run(a),
+        Command::Bench(a) => bench::run(a),
     }?;
     Ok(ExitCode::SUCCESS)
 }

@@ -3,5 +3,11 @@
 //! detection with quadratic repulsion against bodies and the cloth itself.
 
 pub mod collide;
+pub mod driver;
 pub mod energy;
+pub mod model;
 pub mod sparse;
+pub mod step;
+
+pub use model::ClothModel;
+pub use step::{ColliderFrame, Pin, PinTarget, SimParams, SimState, Simulator, StepStats};

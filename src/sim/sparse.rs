@@ -42,7 +42,13 @@ impl BlockCsr {
             row_ptr.push(col.len());
         }
         let nnz = col.len();
-        BlockCsr { row_ptr, col, blocks: vec![Matrix3::zeros(); nnz], diag, extra: Vec::new() }
+        BlockCsr {
+            row_ptr,
+            col,
+            blocks: vec![Matrix3::zeros(); nnz],
+            diag,
+            extra: Vec::new(),
+        }
     }
 
     /// Number of block rows.
@@ -68,7 +74,9 @@ impl BlockCsr {
 
     /// Zeroes all values and drops extra blocks.
     pub fn clear(&mut self) {
-        self.blocks.par_iter_mut().for_each(|b| *b = Matrix3::zeros());
+        self.blocks
+            .par_iter_mut()
+            .for_each(|b| *b = Matrix3::zeros());
         self.extra.clear();
     }
 
@@ -146,19 +154,32 @@ impl Pcg {
         }
         self.inv_diag.resize(n, Matrix3::zeros());
         // Block-Jacobi: the inverse of each vertex's 3×3 diagonal block (plus extra diagonal terms).
-        let mut diag: Vec<Matrix3<f64>> = (0..n).map(|i| a.blocks[a.diag_index(i as u32)]).collect();
+        let mut diag: Vec<Matrix3<f64>> =
+            (0..n).map(|i| a.blocks[a.diag_index(i as u32)]).collect();
         for (i, j, m) in &a.extra {
             if i == j {
                 diag[*i as usize] += m;
             }
         }
-        self.inv_diag.par_iter_mut().zip(diag.par_iter()).enumerate().for_each(|(i, (inv, d))| {
-            *inv = if free[i] {
-                d.try_inverse().unwrap_or_else(|| Matrix3::from_diagonal(&d.diagonal().map(|v| if v.abs() > 0.0 { 1.0 / v } else { 0.0 })))
-            } else {
-                Matrix3::zeros()
-            };
-        });
+        self.inv_diag
+            .par_iter_mut()
+            .zip(diag.par_iter())
+            .enumerate()
+            .for_each(|(i, (inv, d))| {
+                *inv = if free[i] {
+                    d.try_inverse().unwrap_or_else(|| {
+                        Matrix3::from_diagonal(&d.diagonal().map(|v| {
+                            if v.abs() > 0.0 {
+                                1.0 / v
+                            } else {
+                                0.0
+                            }
+                        }))
+                    })
+                } else {
+                    Matrix3::zeros()
+                };
+            });
         for (xi, f) in x.iter_mut().zip(free) {
             if !f {
                 *xi = Vector3::zeros();
@@ -171,10 +192,16 @@ impl Pcg {
         }
         a.matvec(x, &mut self.ap, free);
         self.r.par_iter_mut().enumerate().for_each(|(i, r)| {
-            *r = if free[i] { b[i] - self.ap[i] } else { Vector3::zeros() };
+            *r = if free[i] {
+                b[i] - self.ap[i]
+            } else {
+                Vector3::zeros()
+            };
         });
         let precondition = |inv: &[Matrix3<f64>], r: &[Vector3<f64>], z: &mut [Vector3<f64>]| {
-            z.par_iter_mut().enumerate().for_each(|(i, zi)| *zi = inv[i] * r[i]);
+            z.par_iter_mut()
+                .enumerate()
+                .for_each(|(i, zi)| *zi = inv[i] * r[i]);
         };
         precondition(&self.inv_diag, &self.r, &mut self.z);
         self.p.copy_from_slice(&self.z);
@@ -184,21 +211,32 @@ impl Pcg {
         while it < max_iters && res > rel_tol {
             a.matvec(&self.p, &mut self.ap, free);
             let pap = dot(&self.p, &self.ap);
-            if !(pap > 0.0) {
+            if pap.is_nan() || pap <= 0.0 {
                 break;
             }
             let alpha = rz / pap;
-            x.par_iter_mut().zip(self.p.par_iter()).for_each(|(xi, pi)| *xi += pi * alpha);
-            self.r.par_iter_mut().zip(self.ap.par_iter()).for_each(|(ri, api)| *ri -= api * alpha);
+            x.par_iter_mut()
+                .zip(self.p.par_iter())
+                .for_each(|(xi, pi)| *xi += pi * alpha);
+            self.r
+                .par_iter_mut()
+                .zip(self.ap.par_iter())
+                .for_each(|(ri, api)| *ri -= api * alpha);
             precondition(&self.inv_diag, &self.r, &mut self.z);
             let rz_new = dot(&self.r, &self.z);
             let beta = rz_new / rz;
             rz = rz_new;
-            self.p.par_iter_mut().zip(self.z.par_iter()).for_each(|(pi, zi)| *pi = zi + *pi * beta);
+            self.p
+                .par_iter_mut()
+                .zip(self.z.par_iter())
+                .for_each(|(pi, zi)| *pi = zi + *pi * beta);
             res = dot(&self.r, &self.r).sqrt() / b_norm;
             it += 1;
         }
-        CgStats { iterations: it, relative_residual: res }
+        CgStats {
+            iterations: it,
+            relative_residual: res,
+        }
     }
 }
 
@@ -229,14 +267,25 @@ mod tests {
         assert_eq!(a.extra.len(), 2);
         let mut free = vec![true; n as usize];
         free[0] = false;
-        let truth: Vec<Vector3<f64>> =
-            (0..n).map(|i| if i == 0 { Vector3::zeros() } else { Vector3::new(i as f64, 1.0, -0.5 * i as f64) }).collect();
+        let truth: Vec<Vector3<f64>> = (0..n)
+            .map(|i| {
+                if i == 0 {
+                    Vector3::zeros()
+                } else {
+                    Vector3::new(i as f64, 1.0, -0.5 * i as f64)
+                }
+            })
+            .collect();
         let mut b = vec![Vector3::zeros(); n as usize];
         a.matvec(&truth, &mut b, &free);
         let mut x = vec![Vector3::zeros(); n as usize];
         let stats = Pcg::default().solve(&a, &b, &mut x, &free, 1e-12, 1000);
         assert!(stats.relative_residual <= 1e-12, "{stats:?}");
-        let err = x.iter().zip(&truth).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max);
+        let err = x
+            .iter()
+            .zip(&truth)
+            .map(|(p, q)| (p - q).norm())
+            .fold(0.0, f64::max);
         assert!(err < 1e-8, "error {err}");
         // Warm start from the solution: no iteration needed.
         let stats = Pcg::default().solve(&a, &b, &mut x, &free, 1e-10, 1000);

@@ -11,11 +11,11 @@
 //! mapped to the 9 vertex coordinates by the constant linear map w = B·x. The Hessian is made PSD
 //! in that 6D space: the stretch terms analytically (the eigenvalue k(1 − 1/|w|) across the
 //! stretch direction is clamped at zero under compression) and, when the shear coupling still
-//! leaves it indefinite, by eigenvalue clamping of the 6×6 block.
+//! leaves it indefinite, by dropping that coupling (keeping the shear's Gauss-Newton part).
 
 use nalgebra::{Matrix2, Matrix3, SMatrix, Vector2, Vector3};
 
-use super::{project_psd, Mat9, Vec9};
+use super::{Mat9, Vec9};
 
 /// Rest data of one triangle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,13 +72,23 @@ impl Membrane {
 
     /// Energy, gradient in (w_u, w_v) and the 6×6 Hessian there; `psd` clamps the stretch
     /// terms' negative eigenvalues.
-    fn w_space(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3], psd: bool) -> (f64, [Vector3<f64>; 2], SMatrix<f64, 6, 6>) {
+    fn w_space(
+        &self,
+        k: &MembraneStiffness,
+        x: &[Vector3<f64>; 3],
+        psd: bool,
+        shear_coupling: bool,
+    ) -> (f64, [Vector3<f64>; 2], SMatrix<f64, 6, 6>) {
         let a = self.area_m2;
         let (wu, wv) = self.stretch_vectors(x);
         let (lu, lv) = (wu.norm().max(1e-12), wv.norm().max(1e-12));
         let (nu, nv) = (wu / lu, wv / lv);
         let s = wu.dot(&wv);
-        let e = a * 0.5 * (k.weft_n_m * (lu - 1.0).powi(2) + k.warp_n_m * (lv - 1.0).powi(2) + k.shear_n_m * s * s);
+        let e = a
+            * 0.5
+            * (k.weft_n_m * (lu - 1.0).powi(2)
+                + k.warp_n_m * (lv - 1.0).powi(2)
+                + k.shear_n_m * s * s);
         let gu = (nu * (k.weft_n_m * (lu - 1.0)) + wv * (k.shear_n_m * s)) * a;
         let gv = (nv * (k.warp_n_m * (lv - 1.0)) + wu * (k.shear_n_m * s)) * a;
         let stretch = |kk: f64, n: &Vector3<f64>, l: f64| {
@@ -89,7 +99,8 @@ impl Membrane {
         };
         let huu = (stretch(k.weft_n_m, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
         let hvv = (stretch(k.warp_n_m, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
-        let huv = (wv * wu.transpose() + Matrix3::identity() * s) * (k.shear_n_m * a);
+        let coupling = if shear_coupling { s } else { 0.0 };
+        let huv = (wv * wu.transpose() + Matrix3::identity() * coupling) * (k.shear_n_m * a);
         let mut h = SMatrix::<f64, 6, 6>::zeros();
         h.fixed_view_mut::<3, 3>(0, 0).copy_from(&huu);
         h.fixed_view_mut::<3, 3>(3, 3).copy_from(&hvv);
@@ -98,12 +109,13 @@ impl Membrane {
         (e, [gu, gv], h)
     }
 
-    fn to_vertices(&self, g: [Vector3<f64>; 2], h: &SMatrix<f64, 6, 6>) -> (Vec9, Mat9) {
+    fn vertex_space(&self, g: [Vector3<f64>; 2], h: &SMatrix<f64, 6, 6>) -> (Vec9, Mat9) {
         let mut grad = Vec9::zeros();
         let mut hess = Mat9::zeros();
         let c = [self.cu, self.cv];
         for i in 0..3 {
-            grad.fixed_rows_mut::<3>(3 * i).copy_from(&(g[0] * c[0][i] + g[1] * c[1][i]));
+            grad.fixed_rows_mut::<3>(3 * i)
+                .copy_from(&(g[0] * c[0][i] + g[1] * c[1][i]));
             for j in 0..3 {
                 let mut block = Matrix3::zeros();
                 for (p, cp) in c.iter().enumerate() {
@@ -117,26 +129,33 @@ impl Membrane {
         (grad, hess)
     }
 
-    /// Energy, gradient (9) and PSD Hessian (9×9).
-    pub fn energy_gradient_hessian(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> (f64, Vec9, Mat9) {
-        let (e, g, mut h) = self.w_space(k, x, true);
+    /// Energy, gradient (9) and PSD Hessian (9×9). The stretch terms are clamped analytically;
+    /// the shear coupling k_s·s·[[0, I], [I, 0]] is kept when the 6×6 block stays positive
+    /// definite (one 6×6 Cholesky) and dropped otherwise, which leaves a sum of PSD terms (the
+    /// shear's Gauss-Newton part k_s ∇C∇Cᵀ): no eigendecomposition on the hot path.
+    pub fn energy_gradient_hessian(
+        &self,
+        k: &MembraneStiffness,
+        x: &[Vector3<f64>; 3],
+    ) -> (f64, Vec9, Mat9) {
+        let (e, g, mut h) = self.w_space(k, x, true, true);
         if h.cholesky().is_none() {
-            h = project_psd(&h);
+            h = self.w_space(k, x, true, false).2;
         }
-        let (grad, hess) = self.to_vertices(g, &h);
+        let (grad, hess) = self.vertex_space(g, &h);
         (e, grad, hess)
     }
 
     /// Gradient (9) only.
     pub fn gradient(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> Vec9 {
-        let (_, g, h) = self.w_space(k, x, false);
-        self.to_vertices(g, &h).0
+        let (_, g, h) = self.w_space(k, x, false, true);
+        self.vertex_space(g, &h).0
     }
 
     /// The exact (unfiltered) Hessian, for tests and analysis.
     pub fn hessian_exact(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> Mat9 {
-        let (_, g, h) = self.w_space(k, x, false);
-        self.to_vertices(g, &h).1
+        let (_, g, h) = self.w_space(k, x, false, true);
+        self.vertex_space(g, &h).1
     }
 }
 
@@ -149,7 +168,10 @@ mod tests {
     pub(crate) struct Lcg(u64);
     impl Lcg {
         pub(crate) fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((self.0 >> 11) as f64) / ((1u64 << 53) as f64)
         }
     }
@@ -161,13 +183,21 @@ mod tests {
             Vector2::new(0.005 * r.next(), 0.02 + 0.01 * r.next()),
         ];
         let m = Membrane::new([0, 1, 2], &material).expect("triangle");
-        let k = MembraneStiffness { weft_n_m: 1800.0, warp_n_m: 2500.0, shear_n_m: 100.0 };
+        let k = MembraneStiffness {
+            weft_n_m: 1800.0,
+            warp_n_m: 2500.0,
+            shear_n_m: 100.0,
+        };
         // World: rotated, stretched or compressed, and sheared copy of the material triangle.
         let mut x = Vec9::zeros();
         let scale = 0.6 + 0.8 * r.next();
-        for i in 0..3 {
-            let p = Vector3::new(material[i].x * scale, material[i].y, 0.0);
-            let q = Vector3::new(p.x + 0.3 * p.y * r.next(), p.y * (0.7 + 0.6 * r.next()), 0.01 * r.next());
+        for (i, u) in material.iter().enumerate() {
+            let p = Vector3::new(u.x * scale, u.y, 0.0);
+            let q = Vector3::new(
+                p.x + 0.3 * p.y * r.next(),
+                p.y * (0.7 + 0.6 * r.next()),
+                0.01 * r.next(),
+            );
             x.fixed_rows_mut::<3>(3 * i).copy_from(&q);
         }
         (m, k, x)
@@ -200,19 +230,39 @@ mod tests {
             assert!((g - m.gradient(&k, &pts(&x))).norm() < 1e-9 * g.norm().max(1.0));
         }
         // Pure stretch along both axes, no shear: the exact Hessian is already PSD.
-        let material = [Vector2::new(0.0, 0.0), Vector2::new(0.02, 0.0), Vector2::new(0.0, 0.02)];
+        let material = [
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.02, 0.0),
+            Vector2::new(0.0, 0.02),
+        ];
         let m = Membrane::new([0, 1, 2], &material).expect("triangle");
-        let k = MembraneStiffness { weft_n_m: 1000.0, warp_n_m: 1500.0, shear_n_m: 50.0 };
-        let x = [Vector3::zeros(), Vector3::new(0.022, 0.0, 0.0), Vector3::new(0.0, 0.021, 0.0)];
+        let k = MembraneStiffness {
+            weft_n_m: 1000.0,
+            warp_n_m: 1500.0,
+            shear_n_m: 50.0,
+        };
+        let x = [
+            Vector3::zeros(),
+            Vector3::new(0.022, 0.0, 0.0),
+            Vector3::new(0.0, 0.021, 0.0),
+        ];
         let (_, _, h) = m.energy_gradient_hessian(&k, &x);
         assert!((h - m.hessian_exact(&k, &x)).norm() < 1e-9 * h.norm());
     }
 
     #[test]
     fn rest_state_is_free_and_rigid_motion_costs_nothing() {
-        let material = [Vector2::new(0.0, 0.0), Vector2::new(0.02, 0.001), Vector2::new(0.004, 0.018)];
+        let material = [
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.02, 0.001),
+            Vector2::new(0.004, 0.018),
+        ];
         let m = Membrane::new([0, 1, 2], &material).expect("triangle");
-        let k = MembraneStiffness { weft_n_m: 1000.0, warp_n_m: 1500.0, shear_n_m: 50.0 };
+        let k = MembraneStiffness {
+            weft_n_m: 1000.0,
+            warp_n_m: 1500.0,
+            shear_n_m: 50.0,
+        };
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -1.1, 0.7);
         let x = material.map(|u| rot * Vector3::new(u.x, u.y, 0.0) + Vector3::new(1.0, 2.0, 3.0));
         assert!(m.energy(&k, &x) < 1e-20);
@@ -223,6 +273,14 @@ mod tests {
         let stretch_v = material.map(|u| Vector3::new(u.x, 1.1 * u.y, 0.0));
         let e_v = m.energy(&k, &stretch_v);
         assert!(e_v > e_u, "warp is stiffer: {e_v} vs {e_u}");
-        assert!(Membrane::new([0, 1, 2], &[Vector2::zeros(), Vector2::new(1.0, 0.0), Vector2::new(2.0, 0.0)]).is_none());
+        assert!(Membrane::new(
+            [0, 1, 2],
+            &[
+                Vector2::zeros(),
+                Vector2::new(1.0, 0.0),
+                Vector2::new(2.0, 0.0)
+            ]
+        )
+        .is_none());
     }
 }

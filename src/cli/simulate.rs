@@ -1,0 +1,167 @@
+//! `clothsr simulate SCENE --edge-mm 20 --frames N -o OUT.usdc`: the cloth simulator alone,
+//! writing time-sampled points frame by frame.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clothsr::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
+use clothsr::scene::Scene;
+use clothsr::sim::driver::Simulation;
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Arguments of `simulate`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scene: USD (garments, colliders, solver), GarmentCode JSON or OBJ cloth.
+    scene: PathBuf,
+    /// Cloth edge length for sewing patterns, millimetres.
+    #[arg(long, default_value_t = 20.0)]
+    edge_mm: f64,
+    /// Frames to simulate (default: the scene's frame range).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Output USD file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Extra colliders (OBJ, OBJ sequence, USD).
+    #[arg(long)]
+    collider: Vec<PathBuf>,
+    /// Avatar (USD, UsdSkel or point cache).
+    #[arg(long)]
+    avatar: Option<PathBuf>,
+    /// Fabric preset for patterns and meshes without one.
+    #[arg(long, default_value = "cotton")]
+    fabric: String,
+    /// Time step in seconds (default: the scene's, else 1/300).
+    #[arg(long)]
+    dt: Option<f64>,
+    /// Disable cloth self-collision.
+    #[arg(long)]
+    no_self_collision: bool,
+    /// Write text USD even for a .usd file.
+    #[arg(long)]
+    ascii: bool,
+}
+
+/// Runs `simulate`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let output = super::check_output(&args.scene, &args.output)?;
+    anyhow::ensure!(
+        args.edge_mm.is_finite() && args.edge_mm > 0.0,
+        "--edge-mm must be positive"
+    );
+    let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
+    for c in args.collider.iter().chain(args.avatar.iter()) {
+        scene.add_collider_file(c)?;
+    }
+    if let Some(dt) = args.dt {
+        anyhow::ensure!(dt.is_finite() && dt > 0.0, "--dt must be positive");
+        scene.dt_s = dt;
+    }
+    let frames = args
+        .frames
+        .unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
+    anyhow::ensure!(
+        frames > 0,
+        "nothing to simulate: give --frames N (the scene's frame range is empty)"
+    );
+    let no_self = args.no_self_collision;
+    let mut sim = Simulation::new(&scene, args.edge_mm * 1e-3, |p| {
+        p.collision.self_collision = !no_self
+    })?;
+    let model = &sim.sim.model;
+    tracing::info!(
+        "{} vertices, {} triangles, {} hinges, {} seam pairs; dt {:.5} s, {} steps per frame, d̂ {:.1} mm",
+        model.num_vertices(),
+        model.mesh.triangles.len(),
+        model.hinges.len(),
+        model.mesh.seam_pairs.len(),
+        sim.sim.params.dt_s,
+        sim.steps_per_frame,
+        sim.sim.params.collision.dhat_m * 1e3
+    );
+
+    let start = scene.frame_start as f64;
+    let mut meshes: Vec<MeshOut> = (0..model.parts.len())
+        .map(|i| {
+            let part = &model.parts[i];
+            let mut m = MeshOut::cloth(&part.name, &model.part_mesh(i), &part.fabric, sim.edge_m);
+            m.animated = true;
+            m
+        })
+        .collect();
+    for c in &scene.colliders {
+        meshes.push(MeshOut::collider(c, scene.fps));
+    }
+    let stage = StageOut {
+        fps: scene.fps,
+        start,
+        end: start + frames as f64,
+        doc: Some(format!(
+            "clothsr simulate {} at {} mm",
+            args.scene.display(),
+            args.edge_mm
+        )),
+        ascii: args.ascii,
+        garments: Vec::new(),
+        meshes,
+        solver: Some(SolverSettings {
+            gravity_m_s2: scene.gravity_m_s2,
+            dt_s: sim.sim.params.dt_s,
+        }),
+    };
+    let mut writer = AnimationWriter::create(&output, &stage)?;
+    writer.write_frame(start, &sim.part_positions())?;
+
+    let bar = ProgressBar::new((frames * sim.steps_per_frame) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} eta {eta} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t0 = Instant::now();
+    let mut last_checkpoint = Instant::now();
+    for f in 1..=frames {
+        let result = sim.advance_frame(|_| bar.inc(1));
+        let stats = match result {
+            Ok(s) => s,
+            Err(e) => {
+                bar.abandon();
+                writer
+                    .checkpoint()
+                    .context("saving the frames simulated so far")?;
+                return Err(e).with_context(|| {
+                    format!(
+                        "frame {f}: {} keeps the {} frames simulated before",
+                        output.display(),
+                        f - 1
+                    )
+                });
+            }
+        };
+        bar.set_message(format!(
+            "frame {f}/{frames}  newton {:.1}/step  cg {:.0}/step  contacts {}  max penetration {:.2} mm",
+            stats.steps.newton_iters as f64 / stats.step_count as f64,
+            stats.steps.cg_iters as f64 / stats.step_count as f64,
+            stats.steps.contacts,
+            stats.max_penetration_m * 1e3
+        ));
+        writer.write_frame(start + f as f64, &sim.part_positions())?;
+        if last_checkpoint.elapsed().as_secs_f64() > 10.0 {
+            writer.checkpoint()?;
+            last_checkpoint = Instant::now();
+        }
+    }
+    bar.finish();
+    for w in writer.finish()? {
+        tracing::warn!("{}: {w}", output.display());
+    }
+    let secs = t0.elapsed().as_secs_f64();
+    tracing::info!(
+        "wrote {}: {frames} frames in {secs:.1} s ({:.2} ms per step, {:.1} s per simulated second)",
+        output.display(),
+        secs * 1e3 / (frames * sim.steps_per_frame) as f64,
+        secs / (frames as f64 / scene.fps)
+    );
+    Ok(())
+}

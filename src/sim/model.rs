@@ -1,0 +1,216 @@
+//! Rest data of everything the simulator integrates: one concatenated cloth mesh made of one or
+//! more garments, each with its fabric; lumped masses; membrane triangles, bending hinges, seams.
+
+use std::ops::Range;
+
+use nalgebra::Vector3;
+
+use super::energy::bending::{self, Hinge};
+use super::energy::membrane::{Membrane, MembraneStiffness};
+use crate::error::{Error, Result};
+use crate::garment::Fabric;
+use crate::mesh::ClothMesh;
+
+/// One garment inside the concatenated model.
+#[derive(Debug, Clone)]
+pub struct ClothPart {
+    /// Name (for outputs).
+    pub name: String,
+    /// Fabric.
+    pub fabric: Fabric,
+    /// Its vertices in the model.
+    pub vertices: Range<usize>,
+    /// Its triangles in the model.
+    pub triangles: Range<usize>,
+}
+
+/// The simulated cloth: all garments in one mesh, with per-element rest data.
+#[derive(Debug, Clone)]
+pub struct ClothModel {
+    /// All garments' meshes, concatenated (material coordinates, rest positions, seams).
+    pub mesh: ClothMesh,
+    /// Where each garment lies in `mesh`.
+    pub parts: Vec<ClothPart>,
+    /// Lumped vertex masses, kg.
+    pub mass_kg: Vec<f64>,
+    /// Membrane elements (one per triangle).
+    pub membranes: Vec<Membrane>,
+    /// Stiffness of each membrane element.
+    pub membrane_k: Vec<MembraneStiffness>,
+    /// Bending hinges (interior edges of each panel).
+    pub hinges: Vec<Hinge>,
+    /// Rayleigh damping coefficient of each membrane element, s.
+    pub membrane_damping_s: Vec<f64>,
+    /// Rayleigh damping coefficient of each hinge, s.
+    pub hinge_damping_s: Vec<f64>,
+    /// Unique mesh edges.
+    pub edges: Vec<[u32; 2]>,
+}
+
+impl ClothModel {
+    /// Builds the model from garments given as (name, mesh, fabric).
+    pub fn new(pieces: &[(&str, &ClothMesh, &Fabric)]) -> Result<ClothModel> {
+        if pieces.is_empty() {
+            return Err(Error::Invalid(
+                "nothing to simulate: the scene has no cloth".into(),
+            ));
+        }
+        let mut mesh = ClothMesh::default();
+        let mut parts = Vec::new();
+        let (mut membranes, mut membrane_k, mut membrane_damping_s) =
+            (Vec::new(), Vec::new(), Vec::new());
+        let (mut hinges, mut hinge_damping_s) = (Vec::new(), Vec::new());
+        for (name, m, fabric) in pieces {
+            fabric.validate().map_err(Error::Invalid)?;
+            m.validate()?;
+            let v0 = mesh.positions.len() as u32;
+            let t0 = mesh.triangles.len();
+            let p0 = mesh.panel_names.len() as u32;
+            mesh.positions.extend_from_slice(&m.positions);
+            mesh.material.extend_from_slice(&m.material);
+            mesh.triangles
+                .extend(m.triangles.iter().map(|t| t.map(|v| v + v0)));
+            mesh.panel_of_vertex
+                .extend(m.panel_of_vertex.iter().map(|p| p + p0));
+            mesh.panel_names
+                .extend(m.panel_names.iter().map(|p| format!("{name}/{p}")));
+            mesh.seam_pairs
+                .extend(m.seam_pairs.iter().map(|p| p.map(|v| v + v0)));
+            let k = MembraneStiffness {
+                weft_n_m: fabric.stretch_weft_n_m,
+                warp_n_m: fabric.stretch_warp_n_m,
+                shear_n_m: fabric.shear_n_m,
+            };
+            for (t, tri) in m.triangles.iter().enumerate() {
+                let el = Membrane::new(*tri, &m.material).ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "garment '{name}': triangle {t} is degenerate in material space"
+                    ))
+                })?;
+                membranes.push(Membrane {
+                    v: tri.map(|v| v + v0),
+                    ..el
+                });
+                membrane_k.push(k);
+                membrane_damping_s.push(fabric.damping_s);
+            }
+            for h in bending::hinges(&m.triangles, &m.material, fabric.bending_n_m) {
+                hinges.push(Hinge {
+                    v: h.v.map(|v| v + v0),
+                    ..h
+                });
+                hinge_damping_s.push(fabric.damping_s);
+            }
+            parts.push(ClothPart {
+                name: name.to_string(),
+                fabric: (*fabric).clone(),
+                vertices: v0 as usize..mesh.positions.len(),
+                triangles: t0..mesh.triangles.len(),
+            });
+        }
+        let mut mass_kg = vec![0.0; mesh.positions.len()];
+        for part in &parts {
+            for t in part.triangles.clone() {
+                let m = membranes[t].area_m2 * part.fabric.areal_density_kg_m2 / 3.0;
+                for v in membranes[t].v {
+                    mass_kg[v as usize] += m;
+                }
+            }
+        }
+        if let Some(v) = mass_kg.iter().position(|m| m.is_nan() || *m <= 0.0) {
+            return Err(Error::Invalid(format!(
+                "vertex {v} belongs to no triangle (zero mass)"
+            )));
+        }
+        let edges = mesh.edges();
+        Ok(ClothModel {
+            mesh,
+            parts,
+            mass_kg,
+            membranes,
+            membrane_k,
+            hinges,
+            membrane_damping_s,
+            hinge_damping_s,
+            edges,
+        })
+    }
+
+    /// The mesh of garment `part` alone (indices local to it).
+    pub fn part_mesh(&self, part: usize) -> ClothMesh {
+        let p = &self.parts[part];
+        let (v0, v1) = (p.vertices.start as u32, p.vertices.end as u32);
+        let m = &self.mesh;
+        let p0 = m
+            .panel_of_vertex
+            .get(p.vertices.start)
+            .copied()
+            .unwrap_or(0);
+        let panels: Vec<u32> = m.panel_of_vertex[p.vertices.clone()]
+            .iter()
+            .map(|x| x - p0)
+            .collect();
+        let num_panels = panels.iter().copied().max().map_or(0, |x| x + 1) as usize;
+        ClothMesh {
+            material: m.material[p.vertices.clone()].to_vec(),
+            positions: m.positions[p.vertices.clone()].to_vec(),
+            triangles: m.triangles[p.triangles.clone()]
+                .iter()
+                .map(|t| t.map(|v| v - v0))
+                .collect(),
+            panel_of_vertex: panels,
+            panel_names: m.panel_names[p0 as usize..p0 as usize + num_panels].to_vec(),
+            seam_pairs: m
+                .seam_pairs
+                .iter()
+                .filter(|s| s[0] >= v0 && s[0] < v1)
+                .map(|s| s.map(|v| v - v0))
+                .collect(),
+        }
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.mass_kg.len()
+    }
+
+    /// Total mass, kg.
+    pub fn total_mass_kg(&self) -> f64 {
+        self.mass_kg.iter().sum()
+    }
+
+    /// Smallest collision thickness of the garments' fabrics, m.
+    pub fn min_thickness_m(&self) -> f64 {
+        self.parts
+            .iter()
+            .map(|p| p.fabric.thickness_m)
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Vertex pairs coupled by any element (for the sparse pattern).
+    pub fn coupled_pairs(&self) -> Vec<(u32, u32)> {
+        let mut pairs: Vec<(u32, u32)> = self.edges.iter().map(|e| (e[0], e[1])).collect();
+        for h in &self.hinges {
+            pairs.push((h.v[2], h.v[3]));
+        }
+        pairs.extend(self.mesh.seam_pairs.iter().map(|p| (p[0], p[1])));
+        pairs
+    }
+
+    /// Elastic energy (membrane + bending) at positions `x`, joules.
+    pub fn elastic_energy(&self, x: &[Vector3<f64>]) -> f64 {
+        use rayon::prelude::*;
+        let mem: f64 = self
+            .membranes
+            .par_iter()
+            .zip(self.membrane_k.par_iter())
+            .map(|(m, k)| m.energy(k, &m.v.map(|v| x[v as usize])))
+            .sum();
+        let bend: f64 = self
+            .hinges
+            .par_iter()
+            .map(|h| bending::energy(h, &h.v.map(|v| x[v as usize])))
+            .sum();
+        mem + bend
+    }
+}

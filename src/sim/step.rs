@@ -1,0 +1,846 @@
+//! One implicit-Euler step as minimisation of the incremental potential
+//!
+//! x⁺ = argmin ½h⁻²‖x − x̃‖²_M + E(x) + D(x),  x̃ = xₙ + h vₙ + h² g,
+//!
+//! with E the membrane, bending, sewing and contact-repulsion energies, and D a Rayleigh-style
+//! damping potential: D(x) = Σ_c β k_c / (2h) · (∇C_c(xₙ) · (x − xₙ))² over every elastic condition
+//! C_c (weft, warp, shear of each triangle, angle of each hinge), i.e. stiffness-proportional
+//! damping of the strain rates (Baraff & Witkin 1998 §5) written as a potential so that line
+//! search stays consistent. Newton's method with a PSD Hessian, a block-Jacobi PCG linear solve
+//! and a backtracking line search; contacts are re-detected every iteration within
+//! d̂ + margin and each iteration moves no vertex more than margin / 2, so no contact can appear
+//! unseen. A step that yields NaN or cannot decrease the energy is retried as two half steps.
+
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
+use super::energy::bending::{self, BendingHessian};
+use super::energy::{sewing, Mat12, Mat9, Vec12, Vec9};
+use super::model::ClothModel;
+use super::sparse::{BlockCsr, Pcg};
+use crate::error::{Error, Result};
+
+/// Simulation settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimParams {
+    /// Time step, s.
+    pub dt_s: f64,
+    /// Gravity, m/s².
+    pub gravity_m_s2: Vector3<f64>,
+    /// Sewing spring stiffness per seam vertex pair, N/m.
+    pub sew_stiffness_n_m: f64,
+    /// Contact repulsion.
+    pub collision: CollisionParams,
+    /// Extra distance beyond d̂ within which contacts are tracked, m.
+    pub detection_margin_m: f64,
+    /// Coulomb friction coefficient against bodies.
+    pub friction: f64,
+    /// Mass-proportional (air) damping rate α, 1/s: the Rayleigh α M term, dissipating
+    /// ½ (α/h) Σ m ‖x − xₙ‖².
+    pub air_damping_per_s: f64,
+    /// Newton iterations at most per step.
+    pub newton_max_iters: usize,
+    /// Newton stops when no vertex moves more than this, m.
+    pub newton_tol_m: f64,
+    /// Relative residual of the linear solve.
+    pub cg_rel_tol: f64,
+    /// Linear-solve iterations at most.
+    pub cg_max_iters: usize,
+    /// How many times a failing step may be halved.
+    pub max_halvings: u32,
+    /// How bending Hessians are made PSD.
+    pub bending_hessian: BendingHessian,
+}
+
+impl SimParams {
+    /// Defaults for a model whose mean edge is `edge_m`: d̂ = 15 % of the edge (1–5 mm).
+    pub fn for_edge(edge_m: f64) -> SimParams {
+        let dhat = (0.15 * edge_m).clamp(1e-3, 5e-3);
+        SimParams {
+            dt_s: crate::scene::DEFAULT_DT_S,
+            gravity_m_s2: Vector3::new(0.0, -9.81, 0.0),
+            sew_stiffness_n_m: 1000.0,
+            collision: CollisionParams {
+                dhat_m: dhat,
+                kappa: 2000.0,
+                self_collision: true,
+            },
+            detection_margin_m: dhat,
+            friction: 0.3,
+            air_damping_per_s: 1.0,
+            newton_max_iters: 8,
+            // 1 cm/s of velocity error: far below what shows in an animation.
+            newton_tol_m: 1e-2 * crate::scene::DEFAULT_DT_S,
+            cg_rel_tol: 1e-3,
+            cg_max_iters: 200,
+            max_halvings: 4,
+            bending_hessian: BendingHessian::GaussNewton,
+        }
+    }
+}
+
+/// Positions and velocities of the cloth: plain data that the corrector may overwrite between
+/// steps (the paper's interleaving).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimState {
+    /// Positions, m.
+    pub x: Vec<Vector3<f64>>,
+    /// Velocities, m/s.
+    pub v: Vec<Vector3<f64>>,
+    /// Time, s.
+    pub t_s: f64,
+}
+
+/// A collision body at one instant.
+#[derive(Debug, Clone, Copy)]
+pub struct ColliderFrame<'a> {
+    /// Points, m.
+    pub points: &'a [Vector3<f64>],
+    /// Triangles, counter-clockwise seen from outside.
+    pub triangles: &'a [[u32; 3]],
+}
+
+/// Where a pinned vertex goes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PinTarget {
+    /// A fixed point, m.
+    Fixed(Vector3<f64>),
+    /// A point on a collider triangle, moving with it: barycentric weights.
+    Body {
+        /// Collider index.
+        collider: usize,
+        /// Triangle of the collider.
+        triangle: u32,
+        /// Barycentric weights.
+        bary: Vector3<f64>,
+    },
+}
+
+/// A vertex attached to a target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pin {
+    /// Cloth vertex.
+    pub v: u32,
+    /// Its target.
+    pub target: PinTarget,
+}
+
+/// What one step did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepStats {
+    /// Newton iterations (all sub-steps).
+    pub newton_iters: usize,
+    /// Conjugate-gradient iterations (all sub-steps).
+    pub cg_iters: usize,
+    /// Contacts in the last iteration.
+    pub contacts: usize,
+    /// Sub-steps taken (1 unless the step was halved).
+    pub substeps: usize,
+    /// Incremental potential at the end, J.
+    pub energy_j: f64,
+    /// Deepest cloth vertex below a collider surface, m (0 when none).
+    pub max_penetration_m: f64,
+}
+
+/// Gradients of the elastic conditions at the start of a step, for the damping potential.
+#[derive(Debug, Clone, Default)]
+struct DampingRows {
+    /// Per triangle: ∇C of weft, warp, shear and their coefficients β k A.
+    mem: Vec<([Vec9; 3], [f64; 3])>,
+    /// Per hinge: ∇θ and β · 2w.
+    hinge: Vec<(Vec12, f64)>,
+}
+
+/// The simulator: rest data, settings, pins and reusable buffers.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    /// The cloth.
+    pub model: ClothModel,
+    /// Settings.
+    pub params: SimParams,
+    /// Attached vertices.
+    pub pins: Vec<Pin>,
+    matrix: BlockCsr,
+    pcg: Pcg,
+    mem_blocks: Vec<[usize; 9]>,
+    hinge_blocks: Vec<[usize; 16]>,
+    free: Vec<bool>,
+    grad: Vec<Vector3<f64>>,
+    dx: Vec<Vector3<f64>>,
+    mem_local: Vec<(f64, Vec9, Mat9)>,
+    hinge_local: Vec<(f64, Vec12, Mat12)>,
+    detector: CollisionDetector,
+    /// For vertices within one hop of a seam: every vertex at most two hops away through mesh
+    /// edges and seam pairs (sorted).
+    seam_ring: std::collections::HashMap<u32, Vec<u32>>,
+    /// Small meshes run on one thread: rayon's hand-offs cost more than their work.
+    serial: Option<std::sync::Arc<rayon::ThreadPool>>,
+}
+
+/// Below this many vertices a step runs on a single thread.
+const SERIAL_BELOW_VERTICES: usize = 4000;
+
+fn gather3(x: &[Vector3<f64>], v: [u32; 3]) -> [Vector3<f64>; 3] {
+    v.map(|i| x[i as usize])
+}
+
+fn gather4(x: &[Vector3<f64>], v: [u32; 4]) -> [Vector3<f64>; 4] {
+    v.map(|i| x[i as usize])
+}
+
+fn stack<const N: usize, const M: usize>(p: &[Vector3<f64>; N]) -> nalgebra::SVector<f64, M> {
+    let mut out = nalgebra::SVector::<f64, M>::zeros();
+    for (i, q) in p.iter().enumerate() {
+        out.fixed_rows_mut::<3>(3 * i).copy_from(q);
+    }
+    out
+}
+
+/// Two-hop neighbourhoods (mesh edges + seam pairs) of the vertices within one hop of a seam.
+fn seam_rings(model: &ClothModel) -> std::collections::HashMap<u32, Vec<u32>> {
+    use std::collections::HashMap;
+    let seams = &model.mesh.seam_pairs;
+    if seams.is_empty() {
+        return HashMap::new();
+    }
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); model.num_vertices()];
+    for e in model.edges.iter().chain(seams.iter()) {
+        adj[e[0] as usize].push(e[1]);
+        adj[e[1] as usize].push(e[0]);
+    }
+    let mut band: Vec<u32> = seams.iter().flatten().copied().collect();
+    for p in seams.iter().flatten() {
+        band.extend_from_slice(&adj[*p as usize]);
+    }
+    band.sort_unstable();
+    band.dedup();
+    band.into_iter()
+        .map(|v| {
+            let mut ring: Vec<u32> = adj[v as usize].clone();
+            for w in &adj[v as usize] {
+                ring.extend_from_slice(&adj[*w as usize]);
+            }
+            ring.sort_unstable();
+            ring.dedup();
+            (v, ring)
+        })
+        .collect()
+}
+
+impl Simulator {
+    /// A simulator for `model` with `params`.
+    pub fn new(model: ClothModel, params: SimParams) -> Simulator {
+        let n = model.num_vertices();
+        let matrix = BlockCsr::with_pattern(n, model.coupled_pairs());
+        let idx = |i: u32, j: u32| matrix.find(i, j).unwrap_or(usize::MAX);
+        let mem_blocks = model
+            .membranes
+            .iter()
+            .map(|m| {
+                let mut b = [0; 9];
+                for (k, slot) in b.iter_mut().enumerate() {
+                    *slot = idx(m.v[k / 3], m.v[k % 3]);
+                }
+                b
+            })
+            .collect();
+        let hinge_blocks = model
+            .hinges
+            .iter()
+            .map(|h| {
+                let mut b = [0; 16];
+                for (k, slot) in b.iter_mut().enumerate() {
+                    *slot = idx(h.v[k / 4], h.v[k % 4]);
+                }
+                b
+            })
+            .collect();
+        Simulator {
+            free: vec![true; n],
+            grad: vec![Vector3::zeros(); n],
+            dx: vec![Vector3::zeros(); n],
+            mem_local: vec![(0.0, Vec9::zeros(), Mat9::zeros()); model.membranes.len()],
+            hinge_local: vec![(0.0, Vec12::zeros(), Mat12::zeros()); model.hinges.len()],
+            detector: CollisionDetector::new(),
+            seam_ring: seam_rings(&model),
+            serial: (n < SERIAL_BELOW_VERTICES)
+                .then(|| {
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(1)
+                        .build()
+                        .ok()
+                        .map(std::sync::Arc::new)
+                })
+                .flatten(),
+            model,
+            params,
+            pins: Vec::new(),
+            matrix,
+            pcg: Pcg::default(),
+            mem_blocks,
+            hinge_blocks,
+        }
+    }
+
+    /// The rest state: mesh positions, zero velocity, t = 0.
+    pub fn initial_state(&self) -> SimState {
+        let n = self.model.num_vertices();
+        SimState {
+            x: self.model.mesh.positions.clone(),
+            v: vec![Vector3::zeros(); n],
+            t_s: 0.0,
+        }
+    }
+
+    /// Sets the pins (replacing earlier ones).
+    pub fn set_pins(&mut self, pins: Vec<Pin>) {
+        self.free.iter_mut().for_each(|f| *f = true);
+        for p in &pins {
+            self.free[p.v as usize] = false;
+        }
+        self.pins = pins;
+    }
+
+    fn pin_position(&self, pin: &Pin, colliders: &[ColliderFrame<'_>]) -> Vector3<f64> {
+        match pin.target {
+            PinTarget::Fixed(p) => p,
+            PinTarget::Body {
+                collider,
+                triangle,
+                bary,
+            } => {
+                let c = &colliders[collider];
+                let t = c.triangles[triangle as usize];
+                c.points[t[0] as usize] * bary.x
+                    + c.points[t[1] as usize] * bary.y
+                    + c.points[t[2] as usize] * bary.z
+            }
+        }
+    }
+
+    /// Advances `state` by one time step; colliders are given at the start and the end of the
+    /// step (linearly interpolated inside when the step is subdivided).
+    pub fn step(
+        &mut self,
+        state: &SimState,
+        colliders_start: &[ColliderFrame<'_>],
+        colliders_end: &[ColliderFrame<'_>],
+    ) -> Result<(SimState, StepStats)> {
+        let mut stats = StepStats::default();
+        let h = self.params.dt_s;
+        let next = match self.serial.clone() {
+            Some(pool) => pool.install(|| {
+                self.advance(
+                    state,
+                    colliders_start,
+                    colliders_end,
+                    0.0,
+                    1.0,
+                    h,
+                    0,
+                    &mut stats,
+                )
+            })?,
+            None => self.advance(
+                state,
+                colliders_start,
+                colliders_end,
+                0.0,
+                1.0,
+                h,
+                0,
+                &mut stats,
+            )?,
+        };
+        Ok((next, stats))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn advance(
+        &mut self,
+        state: &SimState,
+        c0: &[ColliderFrame<'_>],
+        c1: &[ColliderFrame<'_>],
+        a: f64,
+        b: f64,
+        h: f64,
+        depth: u32,
+        stats: &mut StepStats,
+    ) -> Result<SimState> {
+        // Colliders at the end of this sub-step.
+        let lerp = |w: f64| -> Vec<Vec<Vector3<f64>>> {
+            c0.iter()
+                .zip(c1)
+                .map(|(p, q)| {
+                    p.points
+                        .iter()
+                        .zip(q.points)
+                        .map(|(x, y)| x * (1.0 - w) + y * w)
+                        .collect()
+                })
+                .collect()
+        };
+        let owned;
+        let end: Vec<ColliderFrame<'_>> = if b >= 1.0 {
+            c1.to_vec()
+        } else {
+            owned = lerp(b);
+            owned
+                .iter()
+                .zip(c1)
+                .map(|(p, c)| ColliderFrame {
+                    points: p,
+                    triangles: c.triangles,
+                })
+                .collect()
+        };
+        match self.solve_step(state, &end, h, stats) {
+            Ok(s) => Ok(s),
+            Err(e) if depth < self.params.max_halvings => {
+                tracing::debug!(
+                    "step at t = {:.5} s failed ({e}); halving dt to {:.2e} s",
+                    state.t_s,
+                    h / 2.0
+                );
+                let mid = 0.5 * (a + b);
+                let half = self.advance(state, c0, c1, a, mid, h / 2.0, depth + 1, stats)?;
+                self.advance(&half, c0, c1, mid, b, h / 2.0, depth + 1, stats)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn damping_rows(&self, x: &[Vector3<f64>]) -> DampingRows {
+        let m = &self.model;
+        let mem = m
+            .membranes
+            .par_iter()
+            .zip(m.membrane_k.par_iter().zip(m.membrane_damping_s.par_iter()))
+            .map(|(el, (k, beta))| {
+                let p = gather3(x, el.v);
+                let (wu, wv) = el.stretch_vectors(&p);
+                let (nu, nv) = (wu / wu.norm().max(1e-12), wv / wv.norm().max(1e-12));
+                let mut rows = [Vec9::zeros(); 3];
+                for i in 0..3 {
+                    rows[0]
+                        .fixed_rows_mut::<3>(3 * i)
+                        .copy_from(&(nu * el.cu[i]));
+                    rows[1]
+                        .fixed_rows_mut::<3>(3 * i)
+                        .copy_from(&(nv * el.cv[i]));
+                    rows[2]
+                        .fixed_rows_mut::<3>(3 * i)
+                        .copy_from(&(wv * el.cu[i] + wu * el.cv[i]));
+                }
+                let c = beta * el.area_m2;
+                (rows, [c * k.weft_n_m, c * k.warp_n_m, c * k.shear_n_m])
+            })
+            .collect();
+        let hinge = m
+            .hinges
+            .par_iter()
+            .zip(m.hinge_damping_s.par_iter())
+            .map(|(hg, beta)| {
+                let p = gather4(x, hg.v);
+                let grad =
+                    bending::dihedral_angle_gradient(&p).map_or_else(Vec12::zeros, |(_, g)| g);
+                (grad, beta * 2.0 * hg.weight)
+            })
+            .collect();
+        DampingRows { mem, hinge }
+    }
+
+    /// Total incremental potential at `x` with a fixed contact set.
+    #[allow(clippy::too_many_arguments)]
+    fn potential(
+        &self,
+        x: &[Vector3<f64>],
+        x_n: &[Vector3<f64>],
+        x_tilde: &[Vector3<f64>],
+        h: f64,
+        damping: &DampingRows,
+        contacts: &[Contact],
+    ) -> f64 {
+        let m = &self.model;
+        let air = self.params.air_damping_per_s * h;
+        let inertia: f64 = (0..x.len())
+            .into_par_iter()
+            .map(|i| {
+                0.5 * m.mass_kg[i]
+                    * ((x[i] - x_tilde[i]).norm_squared() + air * (x[i] - x_n[i]).norm_squared())
+            })
+            .sum::<f64>()
+            / (h * h);
+        let elastic = m.elastic_energy(x);
+        let damp_mem: f64 = m
+            .membranes
+            .par_iter()
+            .zip(damping.mem.par_iter())
+            .map(|(el, (rows, c))| {
+                let d: Vec9 = stack(&gather3(x, el.v)) - stack::<3, 9>(&gather3(x_n, el.v));
+                (0..3).map(|k| c[k] * rows[k].dot(&d).powi(2)).sum::<f64>()
+            })
+            .sum();
+        let damp_hinge: f64 = m
+            .hinges
+            .par_iter()
+            .zip(damping.hinge.par_iter())
+            .map(|(hg, (row, c))| {
+                let d: Vec12 = stack(&gather4(x, hg.v)) - stack::<4, 12>(&gather4(x_n, hg.v));
+                c * row.dot(&d).powi(2)
+            })
+            .sum();
+        let sew: f64 = m
+            .mesh
+            .seam_pairs
+            .iter()
+            .map(|p| {
+                sewing::energy(
+                    self.params.sew_stiffness_n_m,
+                    &x[p[0] as usize],
+                    &x[p[1] as usize],
+                )
+            })
+            .sum();
+        let contact: f64 = contacts
+            .par_iter()
+            .map(|c| c.energy(x, &self.params.collision))
+            .sum();
+        inertia + elastic + (damp_mem + damp_hinge) / (2.0 * h) + sew + contact
+    }
+
+    /// Assembles gradient and Hessian at `x`; returns the potential.
+    #[allow(clippy::too_many_arguments)]
+    fn assemble(
+        &mut self,
+        x: &[Vector3<f64>],
+        x_n: &[Vector3<f64>],
+        x_tilde: &[Vector3<f64>],
+        h: f64,
+        damping: &DampingRows,
+        contacts: &[Contact],
+    ) -> f64 {
+        let inv_h2 = 1.0 / (h * h);
+        let mode = self.params.bending_hessian;
+        let model = &self.model;
+        // Element contributions in parallel, then a sequential scatter.
+        self.mem_local
+            .par_iter_mut()
+            .zip(model.membranes.par_iter())
+            .zip(model.membrane_k.par_iter().zip(damping.mem.par_iter()))
+            .for_each(|((out, el), (k, (rows, c)))| {
+                let p = gather3(x, el.v);
+                let (mut e, mut g, mut hm) = el.energy_gradient_hessian(k, &p);
+                let d: Vec9 = stack(&p) - stack::<3, 9>(&gather3(x_n, el.v));
+                for q in 0..3 {
+                    let s = rows[q].dot(&d);
+                    e += c[q] * s * s / (2.0 * h);
+                    g += rows[q] * (c[q] * s / h);
+                    hm += rows[q] * rows[q].transpose() * (c[q] / h);
+                }
+                *out = (e, g, hm);
+            });
+        self.hinge_local
+            .par_iter_mut()
+            .zip(model.hinges.par_iter())
+            .zip(damping.hinge.par_iter())
+            .for_each(|((out, hg), (row, c))| {
+                let p = gather4(x, hg.v);
+                let (mut e, mut g, mut hm) = bending::energy_gradient_hessian(hg, &p, mode);
+                let d: Vec12 = stack(&p) - stack::<4, 12>(&gather4(x_n, hg.v));
+                let s = row.dot(&d);
+                e += c * s * s / (2.0 * h);
+                g += row * (c * s / h);
+                hm += row * row.transpose() * (c / h);
+                *out = (e, g, hm);
+            });
+        let contact_local: Vec<(f64, Vec12, Mat12)> = contacts
+            .par_iter()
+            .map(|c| c.energy_gradient_hessian(x, &self.params.collision))
+            .collect();
+
+        self.matrix.clear();
+        let mut energy = 0.0;
+        // Inertia plus air damping ½ (α/h) m ‖x − xₙ‖² = ½ h⁻² (αh) m ‖x − xₙ‖².
+        let air = self.params.air_damping_per_s * h;
+        for i in 0..x.len() {
+            let m = model.mass_kg[i];
+            let (a, b) = (x[i] - x_tilde[i], x[i] - x_n[i]);
+            energy += 0.5 * m * inv_h2 * (a.norm_squared() + air * b.norm_squared());
+            self.grad[i] = (a + b * air) * (m * inv_h2);
+            let d = self.matrix.diag_index(i as u32);
+            self.matrix.blocks[d] += Matrix3::identity() * (m * inv_h2 * (1.0 + air));
+        }
+        for ((e, g, hm), (el, blocks)) in self
+            .mem_local
+            .iter()
+            .zip(model.membranes.iter().zip(&self.mem_blocks))
+        {
+            energy += e;
+            for a in 0..3 {
+                self.grad[el.v[a] as usize] += g.fixed_rows::<3>(3 * a);
+                for b in 0..3 {
+                    self.matrix.blocks[blocks[3 * a + b]] += hm.fixed_view::<3, 3>(3 * a, 3 * b);
+                }
+            }
+        }
+        for ((e, g, hm), (hg, blocks)) in self
+            .hinge_local
+            .iter()
+            .zip(model.hinges.iter().zip(&self.hinge_blocks))
+        {
+            energy += e;
+            for a in 0..4 {
+                self.grad[hg.v[a] as usize] += g.fixed_rows::<3>(3 * a);
+                for b in 0..4 {
+                    self.matrix.blocks[blocks[4 * a + b]] += hm.fixed_view::<3, 3>(3 * a, 3 * b);
+                }
+            }
+        }
+        let k_sew = self.params.sew_stiffness_n_m;
+        for p in &model.mesh.seam_pairs {
+            let (i, j) = (p[0], p[1]);
+            energy += sewing::energy(k_sew, &x[i as usize], &x[j as usize]);
+            let (g, hm) = sewing::gradient_hessian(k_sew, &x[i as usize], &x[j as usize]);
+            self.grad[i as usize] += g.fixed_rows::<3>(0);
+            self.grad[j as usize] += g.fixed_rows::<3>(3);
+            for (a, va) in [i, j].iter().enumerate() {
+                for (b, vb) in [i, j].iter().enumerate() {
+                    self.matrix
+                        .add(*va, *vb, &hm.fixed_view::<3, 3>(3 * a, 3 * b).into_owned());
+                }
+            }
+        }
+        for (c, (e, g, hm)) in contacts.iter().zip(&contact_local) {
+            energy += e;
+            let dofs = c.cloth_dofs();
+            for (a, va) in dofs.iter().enumerate() {
+                let Some(va) = va else { continue };
+                self.grad[*va as usize] += g.fixed_rows::<3>(3 * a);
+                for (b, vb) in dofs.iter().enumerate() {
+                    if let Some(vb) = vb {
+                        self.matrix.add(
+                            *va,
+                            *vb,
+                            &hm.fixed_view::<3, 3>(3 * a, 3 * b).into_owned(),
+                        );
+                    }
+                }
+            }
+        }
+        for (gi, f) in self.grad.iter_mut().zip(&self.free) {
+            if !f {
+                *gi = Vector3::zeros();
+            }
+        }
+        energy
+    }
+
+    fn contacts(&mut self, x: &[Vector3<f64>], colliders: &[ColliderFrame<'_>]) -> Vec<Contact> {
+        let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
+        let mut params = self.params.collision;
+        params.dhat_m += self.params.detection_margin_m;
+        let mut contacts = self.detector.find_contacts(
+            x,
+            &self.model.mesh.triangles,
+            &self.model.edges,
+            &bodies,
+            &params,
+        );
+        // Panels sewn together must be free to meet along the seam: no repulsion between
+        // vertices that are at most two hops apart through the seam.
+        if !self.seam_ring.is_empty() {
+            let near = |a: u32, b: u32| {
+                self.seam_ring
+                    .get(&a)
+                    .is_some_and(|r| r.binary_search(&b).is_ok())
+            };
+            contacts.retain(|c| match c {
+                Contact::VertexObstacle { .. } => true,
+                Contact::VertexTriangle { v, t } => !t.iter().any(|&w| near(*v, w)),
+                Contact::EdgeEdge { a, b } => !a.iter().any(|&p| b.iter().any(|&q| near(p, q))),
+            });
+        }
+        contacts
+    }
+
+    fn solve_step(
+        &mut self,
+        state: &SimState,
+        colliders: &[ColliderFrame<'_>],
+        h: f64,
+        stats: &mut StepStats,
+    ) -> Result<SimState> {
+        let n = self.model.num_vertices();
+        let x_n = &state.x;
+        let g = self.params.gravity_m_s2;
+        let mut x_tilde: Vec<Vector3<f64>> = (0..n)
+            .map(|i| x_n[i] + state.v[i] * h + g * (h * h))
+            .collect();
+        // Start from the inertial prediction without gravity: free flight is then one step away.
+        let mut x: Vec<Vector3<f64>> = (0..n).map(|i| x_n[i] + state.v[i] * h).collect();
+        for pin in &self.pins {
+            let p = self.pin_position(pin, colliders);
+            x[pin.v as usize] = p;
+            x_tilde[pin.v as usize] = p;
+        }
+        let damping = self.damping_rows(x_n);
+        let max_move = 0.5 * self.params.detection_margin_m;
+        let mut contacts = Vec::new();
+        let mut energy = f64::NAN;
+        self.dx.iter_mut().for_each(|d| *d = Vector3::zeros());
+        for it in 0..self.params.newton_max_iters {
+            let t_detect = std::time::Instant::now();
+            contacts = self.contacts(&x, colliders);
+            let t_assemble = std::time::Instant::now();
+            energy = self.assemble(&x, x_n, &x_tilde, h, &damping, &contacts);
+            let t_solve = std::time::Instant::now();
+            if !energy.is_finite() {
+                return Err(Error::Simulation(format!(
+                    "energy is not finite at t = {:.5} s",
+                    state.t_s
+                )));
+            }
+            let rhs: Vec<Vector3<f64>> = self.grad.iter().map(|g| -g).collect();
+            let mut dx = std::mem::take(&mut self.dx);
+            let cg = self.pcg.solve(
+                &self.matrix,
+                &rhs,
+                &mut dx,
+                &self.free,
+                self.params.cg_rel_tol,
+                self.params.cg_max_iters,
+            );
+            stats.cg_iters += cg.iterations;
+            stats.newton_iters += 1;
+            let t_search = std::time::Instant::now();
+            let slope: f64 = self.grad.iter().zip(&dx).map(|(g, d)| g.dot(d)).sum();
+            let longest = dx.iter().map(|d| d.norm()).fold(0.0, f64::max);
+            if !longest.is_finite() || !slope.is_finite() {
+                self.dx = vec![Vector3::zeros(); n];
+                return Err(Error::Simulation(format!(
+                    "the Newton direction is not finite at t = {:.5} s",
+                    state.t_s
+                )));
+            }
+            if longest < self.params.newton_tol_m || slope >= 0.0 {
+                self.dx = dx;
+                break;
+            }
+            let mut alpha = (max_move / longest).min(1.0);
+            let mut trial: Vec<Vector3<f64>> = x.clone();
+            let mut accepted = false;
+            for _ in 0..12 {
+                trial
+                    .par_iter_mut()
+                    .zip(x.par_iter().zip(dx.par_iter()))
+                    .for_each(|(t, (xi, di))| *t = xi + di * alpha);
+                let e = self.potential(&trial, x_n, &x_tilde, h, &damping, &contacts);
+                if e.is_finite() && e <= energy + 1e-4 * alpha * slope {
+                    accepted = true;
+                    energy = e;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            if !accepted {
+                self.dx = vec![Vector3::zeros(); n];
+                if it == 0 {
+                    return Err(Error::Simulation(format!(
+                        "no energy decrease at t = {:.5} s",
+                        state.t_s
+                    )));
+                }
+                break;
+            }
+            x = trial;
+            let moved = longest * alpha;
+            tracing::trace!(
+                it,
+                longest,
+                alpha,
+                cg = cg.iterations,
+                contacts = contacts.len(),
+                energy,
+                detect_ms = (t_assemble - t_detect).as_secs_f64() * 1e3,
+                assemble_ms = (t_solve - t_assemble).as_secs_f64() * 1e3,
+                solve_ms = (t_search - t_solve).as_secs_f64() * 1e3,
+                search_ms = t_search.elapsed().as_secs_f64() * 1e3,
+                "newton"
+            );
+            // Warm start the next solve with what is left of this direction.
+            dx.iter_mut().for_each(|d| *d *= 1.0 - alpha);
+            self.dx = dx;
+            if moved < self.params.newton_tol_m {
+                break;
+            }
+        }
+        let mut v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
+        self.apply_friction(&mut x, &mut v, &contacts, h);
+        if let Some(i) = x
+            .iter()
+            .chain(&v)
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(Error::Simulation(format!(
+                "vertex {} is not finite at t = {:.5} s",
+                i % n,
+                state.t_s
+            )));
+        }
+        stats.contacts = contacts.len();
+        stats.substeps += 1;
+        stats.energy_j = energy;
+        stats.max_penetration_m = stats.max_penetration_m.max(self.detector.max_penetration());
+        Ok(SimState {
+            x,
+            v,
+            t_s: state.t_s + h,
+        })
+    }
+
+    /// Coulomb friction against bodies, applied to velocities after the solve: the tangential
+    /// velocity of a vertex in contact shrinks by μ times the velocity change its repulsion
+    /// force imparts over the step.
+    fn apply_friction(
+        &self,
+        x: &mut [Vector3<f64>],
+        v: &mut [Vector3<f64>],
+        contacts: &[Contact],
+        h: f64,
+    ) {
+        let mu = self.params.friction;
+        if mu <= 0.0 {
+            return;
+        }
+        let p = &self.params.collision;
+        for c in contacts {
+            let Contact::VertexObstacle { v: i, tri } = c else {
+                continue;
+            };
+            let i = *i as usize;
+            if !self.free[i] {
+                continue;
+            }
+            let d = c.distance(x);
+            if d >= p.dhat_m {
+                continue;
+            }
+            let n = (tri[1] - tri[0]).cross(&(tri[2] - tri[0]));
+            let Some(n) = n.try_normalize(1e-20) else {
+                continue;
+            };
+            let impulse_dv = p.kappa * (p.dhat_m - d) * h / self.model.mass_kg[i];
+            let vt = v[i] - n * n.dot(&v[i]);
+            let speed = vt.norm();
+            if speed <= 0.0 {
+                continue;
+            }
+            let cut = (mu * impulse_dv).min(speed);
+            let dv = -vt * (cut / speed);
+            v[i] += dv;
+            x[i] += dv * h;
+        }
+    }
+}

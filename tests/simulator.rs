@@ -1,0 +1,213 @@
+//! The cloth simulator on small scenes: equilibrium, energy, contact, sewing, stability.
+
+use nalgebra::Vector3;
+
+use clothsr::garment::Fabric;
+use clothsr::mesh::{mesh_garment, MeshOptions};
+use clothsr::scene::samples::flat_sheet;
+use clothsr::scene::{Collider, Scene};
+use clothsr::sim::driver::Simulation;
+use clothsr::sim::{Pin, PinTarget};
+
+fn sheet_scene(size_m: f64, height_m: f64, fabric: Fabric) -> Scene {
+    Scene {
+        garments: vec![flat_sheet(
+            "sheet",
+            size_m,
+            size_m,
+            Vector3::new(0.0, height_m, 0.0),
+            fabric,
+        )],
+        ..Scene::default()
+    }
+}
+
+fn gravity_pe(sim: &Simulation) -> f64 {
+    let g = sim.sim.params.gravity_m_s2;
+    sim.state
+        .x
+        .iter()
+        .zip(&sim.sim.model.mass_kg)
+        .map(|(x, m)| -m * g.dot(x))
+        .sum()
+}
+
+#[test]
+fn hanging_sheet_pinned_at_two_corners_comes_to_rest() {
+    let scene = sheet_scene(0.3, 1.0, Fabric::preset("cotton").expect("preset"));
+    let mut sim = Simulation::new(&scene, 0.03, |_| {}).expect("setup");
+    // Pin the two corners of one side where they are.
+    let x0 = sim.state.x.clone();
+    let zmax = x0.iter().map(|p| p.z).fold(f64::MIN, f64::max);
+    let xmin = x0.iter().map(|p| p.x).fold(f64::MAX, f64::min);
+    let xmax = x0.iter().map(|p| p.x).fold(f64::MIN, f64::max);
+    let corner = |x: f64| {
+        (0..x0.len()).min_by(|&a, &b| {
+            let da = (x0[a] - Vector3::new(x, 1.0, zmax)).norm();
+            let db = (x0[b] - Vector3::new(x, 1.0, zmax)).norm();
+            da.total_cmp(&db)
+        })
+    };
+    let pins: Vec<Pin> = [corner(xmin), corner(xmax)]
+        .into_iter()
+        .flatten()
+        .map(|v| Pin {
+            v: v as u32,
+            target: PinTarget::Fixed(x0[v]),
+        })
+        .collect();
+    assert_eq!(pins.len(), 2);
+    sim.sim.set_pins(pins.clone());
+    let mut ke = Vec::new();
+    for _ in 0..150 {
+        sim.advance_frame(|_| {}).expect("frame");
+        ke.push(sim.kinetic_energy_j());
+    }
+    let peak = ke.iter().copied().fold(0.0, f64::max);
+    let last = *ke.last().expect("frames");
+    assert!(peak > 1e-4, "the sheet swings: peak KE {peak}");
+    assert!(
+        last < 1e-3 * peak,
+        "kinetic energy {last:e} J did not decay (peak {peak:e} J)"
+    );
+    for p in &pins {
+        let PinTarget::Fixed(t) = p.target else {
+            unreachable!()
+        };
+        assert!((sim.state.x[p.v as usize] - t).norm() < 1e-12, "pins hold");
+    }
+    // It hangs: the free side is well below the pinned one.
+    let low = sim.state.x.iter().map(|p| p.y).fold(f64::MAX, f64::min);
+    assert!(low < 1.0 - 0.2, "lowest point {low}");
+}
+
+#[test]
+fn undamped_free_fall_with_contact_free_folding_never_gains_energy() {
+    let mut fabric = Fabric::preset("silk").expect("preset");
+    fabric.damping_s = 0.0;
+    let mut scene = sheet_scene(0.3, 1.0, fabric);
+    // Tilt the sheet so it flutters (membrane + bending work) while falling.
+    scene.garments[0].panels[0].placement.rotation_xyz_deg = Vector3::new(-60.0, 0.0, 10.0);
+    let mut sim =
+        Simulation::new(&scene, 0.03, |p| p.collision.self_collision = false).expect("setup");
+    let total = |s: &Simulation| {
+        s.kinetic_energy_j() + gravity_pe(s) + s.sim.model.elastic_energy(&s.state.x)
+    };
+    let mut prev = total(&sim);
+    let e0 = prev;
+    for _ in 0..30 {
+        sim.advance_frame(|_| {}).expect("frame");
+        let e = total(&sim);
+        assert!(
+            e <= prev + 1e-6 * e0.abs().max(1e-3),
+            "energy rose from {prev} to {e}"
+        );
+        prev = e;
+    }
+}
+
+#[test]
+fn sheet_dropped_on_a_sphere_stays_outside_and_finite() {
+    let radius = 0.12;
+    let centre = Vector3::new(0.0, 0.12, 0.0);
+    let mut scene = sheet_scene(0.4, 0.27, Fabric::preset("silk").expect("preset"));
+    let ball = Collider::sphere("ball", centre, radius, 3);
+    // Inner radius of the polyhedron: distance from the centre to the closest face plane.
+    let pts: Vec<Vector3<f64>> = ball.frames[0].iter().map(|p| p.cast::<f64>()).collect();
+    let r_in = ball
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| pts[i as usize]);
+            let n = (b - a).cross(&(c - a)).normalize();
+            n.dot(&(a - centre)).abs()
+        })
+        .fold(f64::MAX, f64::min);
+    scene.colliders.push(ball);
+    let mut sim = Simulation::new(&scene, 0.03, |_| {}).expect("setup");
+    let dhat = sim.sim.params.collision.dhat_m;
+    let mut deepest: f64 = 0.0;
+    for _ in 0..100 {
+        sim.advance_frame(|s| assert!(s.energy_j.is_finite()))
+            .expect("frame");
+        for p in &sim.state.x {
+            assert!(p.iter().all(|c| c.is_finite()));
+            deepest = deepest.max(r_in - (p - centre).norm());
+        }
+    }
+    assert!(
+        deepest < dhat / 2.0,
+        "a vertex went {:.2} mm inside (d̂ = {:.1} mm)",
+        deepest * 1e3,
+        dhat * 1e3
+    );
+    // The sheet rests on the ball: its centre stays above the top, the rim hangs lower.
+    let top = centre.y + radius;
+    let mid = sim
+        .state
+        .x
+        .iter()
+        .min_by(|a, b| (a.x * a.x + a.z * a.z).total_cmp(&(b.x * b.x + b.z * b.z)))
+        .expect("vertex");
+    assert!(
+        mid.y > top && mid.y < top + 0.01,
+        "centre vertex at {} (top {top})",
+        mid.y
+    );
+    let low = sim.state.x.iter().map(|p| p.y).fold(f64::MAX, f64::min);
+    assert!(low < top - 0.05, "the rim drapes: lowest {low}");
+}
+
+#[test]
+fn sewing_closes_a_two_panel_tube() {
+    use clothsr::garment::{EdgeRef, Garment, Seam};
+    use clothsr::scene::samples::flat_sheet;
+    // Two 0.2 m × 0.2 m panels facing each other 6 cm apart, sewn along both vertical sides.
+    let mut front = flat_sheet("f", 0.2, 0.2, Vector3::zeros(), Fabric::default())
+        .panels
+        .remove(0);
+    front.name = "front".into();
+    front.placement.rotation_xyz_deg = Vector3::zeros();
+    front.placement.translation_m = Vector3::new(-0.1, 0.0, 0.03);
+    let mut back = front.clone();
+    back.name = "back".into();
+    back.placement.rotation_xyz_deg = Vector3::new(0.0, 180.0, 0.0);
+    back.placement.translation_m = Vector3::new(0.1, 0.0, -0.03);
+    let mut g = Garment {
+        name: "tube".into(),
+        panels: vec![front, back],
+        seams: vec![
+            Seam {
+                a: EdgeRef { panel: 0, edge: 1 },
+                b: EdgeRef { panel: 1, edge: 3 },
+                reversed: true,
+            },
+            Seam {
+                a: EdgeRef { panel: 0, edge: 3 },
+                b: EdgeRef { panel: 1, edge: 1 },
+                reversed: true,
+            },
+        ],
+        fabric: Fabric::default(),
+    };
+    g.orient_seams_by_placement();
+    let mesh = mesh_garment(&g, &MeshOptions::with_edge(0.02)).expect("mesh");
+    let gap = |x: &[Vector3<f64>]| {
+        mesh.seam_pairs
+            .iter()
+            .map(|p| (x[p[0] as usize] - x[p[1] as usize]).norm())
+            .fold(0.0, f64::max)
+    };
+    assert!(gap(&mesh.positions) > 0.05, "panels start apart");
+    let scene = Scene {
+        garments: vec![g],
+        gravity_m_s2: Vector3::zeros(),
+        ..Scene::default()
+    };
+    let mut sim = Simulation::new(&scene, 0.02, |_| {}).expect("setup");
+    for _ in 0..60 {
+        sim.advance_frame(|_| {}).expect("frame");
+    }
+    let g = gap(&sim.state.x);
+    assert!(g < 1e-3, "seams still {:.2} mm apart", g * 1e3);
+}
