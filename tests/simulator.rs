@@ -211,3 +211,38 @@ fn sewing_closes_a_two_panel_tube() {
     let g = gap(&sim.state.x);
     assert!(g < 1e-3, "seams still {:.2} mm apart", g * 1e3);
 }
+
+#[test]
+fn simulate_command_writes_a_valid_time_sampled_usd() {
+    use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("drop.usdc");
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let res = std::process::Command::new(env!("CARGO_BIN_EXE_clothsr"))
+        .arg("simulate")
+        .arg(root.join("samples/sheet_sphere.usda"))
+        .args(["--edge-mm", "50", "--frames", "3", "-o"])
+        .arg(&out)
+        .output()
+        .expect("run");
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let issues = validate_usd(&out).expect("validate");
+    assert!(issues.iter().all(|i| i.0 != "error"), "{issues:?}");
+    let s = read_usd(&out).expect("read");
+    assert_eq!((s.start, s.end), (0.0, 3.0));
+    let cloth = s
+        .meshes
+        .iter()
+        .find(|m| m.role == MeshRole::Cloth)
+        .expect("cloth");
+    assert_eq!(cloth.time_codes, vec![0.0, 1.0, 2.0, 3.0]);
+    // It falls under gravity: lower at frame 3 than at frame 0.
+    let mean_y = |f: &Vec<Vector3<f32>>| f.iter().map(|p| p.y).sum::<f32>() / f.len() as f32;
+    assert!(mean_y(&cloth.frames[3]) < mean_y(&cloth.frames[0]) - 1e-3);
+    assert!(cloth.uv.is_some() && cloth.fabric.is_some());
+    assert!(s.meshes.iter().any(|m| m.role == MeshRole::Collider));
+}

@@ -132,7 +132,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .iter()
             .min_by(|a, b| ((a.0 as f64 - verts).abs()).total_cmp(&(b.0 as f64 - verts).abs()));
         match mine {
-            Some((n, m)) => println!("  {solver:<12} {verts:>8} verts {ms:>10.2} ms/step   clothsr {m:.2} ms at {n} verts: {:.2}× faster", ms / m),
+            Some((n, m)) => println!(
+                "  {solver:<12} {verts:>8} verts {ms:>10.2} ms/step   clothsr {m:.2} ms at {n} verts: clothsr / {solver} = {:.2}",
+                m / ms
+            ),
             None => println!("  {solver:<12} {verts:>8} verts {ms:>10.2} ms/step"),
         }
     }

@@ -10,4 +10,6 @@ pub mod sparse;
 pub mod step;
 
 pub use model::ClothModel;
-pub use step::{ColliderFrame, Pin, PinTarget, SimParams, SimState, Simulator, StepStats};
+pub use step::{
+    ColliderFrame, LinearSolver, Pin, PinTarget, SimParams, SimState, Simulator, StepStats,
+};
