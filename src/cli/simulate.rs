@@ -27,6 +27,12 @@ pub struct Args {
     /// Extra colliders (OBJ, OBJ sequence, USD).
     #[arg(long)]
     collider: Vec<PathBuf>,
+    /// Scale applied to the --collider files' points (their units to metres).
+    #[arg(long, default_value_t = 1.0)]
+    collider_scale: f64,
+    /// Offset (x,y,z metres) applied to the --collider files after scaling.
+    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    collider_offset: Option<Vec<f64>>,
     /// Avatar (USD, UsdSkel or point cache).
     #[arg(long)]
     avatar: Option<PathBuf>,
@@ -52,8 +58,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--edge-mm must be positive"
     );
     let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
-    for c in args.collider.iter().chain(args.avatar.iter()) {
-        scene.add_collider_file(c)?;
+    let offset = args
+        .collider_offset
+        .as_ref()
+        .map_or(nalgebra::Vector3::zeros(), |o| {
+            nalgebra::Vector3::new(o[0], o[1], o[2])
+        });
+    for c in &args.collider {
+        scene.add_collider_file_transformed(c, args.collider_scale, offset)?;
+    }
+    if let Some(a) = &args.avatar {
+        scene.add_collider_file(a)?;
     }
     if let Some(dt) = args.dt {
         anyhow::ensure!(dt.is_finite() && dt > 0.0, "--dt must be positive");
@@ -139,13 +154,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 });
             }
         };
-        bar.set_message(format!(
+        let message = format!(
             "frame {f}/{frames}  newton {:.1}/step  cg {:.0}/step  contacts {}  max penetration {:.2} mm",
             stats.steps.newton_iters as f64 / stats.step_count as f64,
             stats.steps.cg_iters as f64 / stats.step_count as f64,
             stats.steps.contacts,
             stats.max_penetration_m * 1e3
-        ));
+        );
+        if bar.is_hidden() {
+            // No terminal (batch, CI, DCC pipelines): log instead of drawing a bar.
+            tracing::info!("{message}  ({:.1} s elapsed)", t0.elapsed().as_secs_f64());
+        }
+        bar.set_message(message);
         writer.write_frame(start + f as f64, &sim.part_positions())?;
         if last_checkpoint.elapsed().as_secs_f64() > 10.0 {
             writer.checkpoint()?;

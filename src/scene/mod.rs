@@ -82,6 +82,17 @@ impl Collider {
         );
     }
 
+    /// Scales the collider about the origin by `scale`, then moves it by `offset_m`.
+    pub fn transformed(mut self, scale: f64, offset_m: Vector3<f64>) -> Self {
+        let off = offset_m.cast::<f32>();
+        for frame in &mut self.frames {
+            for p in frame.iter_mut() {
+                *p = *p * scale as f32 + off;
+            }
+        }
+        self
+    }
+
     /// An icosphere of `radius` around `centre` (`subdivisions` = 3 gives 642 points).
     pub fn sphere(name: &str, centre: Vector3<f64>, radius: f64, subdivisions: usize) -> Self {
         let t = (1.0 + 5f64.sqrt()) / 2.0;
@@ -396,6 +407,33 @@ impl Scene {
     /// Adds a collider file: OBJ, OBJ sequence (`%04d` / `####`, frames at the scene's fps) or
     /// USD (every mesh of the stage, skinned where UsdSkel).
     pub fn add_collider_file(&mut self, path: &Path) -> Result<()> {
+        self.add_collider_file_transformed(path, 1.0, Vector3::zeros())
+    }
+
+    /// As [`Scene::add_collider_file`], scaling the file's points by `scale` (units to metres)
+    /// and moving them by `offset_m`.
+    pub fn add_collider_file_transformed(
+        &mut self,
+        path: &Path,
+        scale: f64,
+        offset_m: Vector3<f64>,
+    ) -> Result<()> {
+        if !(scale.is_finite() && scale > 0.0) || !offset_m.iter().all(|c| c.is_finite()) {
+            return Err(Error::bad_input(
+                path,
+                format!("collider scale {scale} / offset must be finite and positive"),
+            ));
+        }
+        let first = self.colliders.len();
+        self.add_collider_file_raw(path)?;
+        for c in &mut self.colliders[first..] {
+            *c = std::mem::replace(c, Collider::fixed("", Vec::new(), Vec::new()))
+                .transformed(scale, offset_m);
+        }
+        Ok(())
+    }
+
+    fn add_collider_file_raw(&mut self, path: &Path) -> Result<()> {
         let text = path.to_string_lossy();
         if text.contains('%') || text.contains('#') {
             let (triangles, frames) = obj::read_obj_sequence(path)?;

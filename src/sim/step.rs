@@ -30,6 +30,8 @@ pub struct SimParams {
     pub gravity_m_s2: Vector3<f64>,
     /// Sewing spring stiffness per seam vertex pair, N/m.
     pub sew_stiffness_n_m: f64,
+    /// Speed at which seam rest lengths shrink from their initial gap to zero, m/s.
+    pub sew_speed_m_s: f64,
     /// Contact repulsion.
     pub collision: CollisionParams,
     /// Extra distance beyond d̂ within which contacts are tracked, m.
@@ -69,13 +71,15 @@ pub enum LinearSolver {
 }
 
 impl SimParams {
-    /// Defaults for a model whose mean edge is `edge_m`: d̂ = 15 % of the edge (1–5 mm).
+    /// Defaults for a model whose mean edge is `edge_m`: d̂ = 15 % of the edge (0.3–5 mm): well
+    /// below the edge so that neighbouring elements sharing no vertex do not repel at rest.
     pub fn for_edge(edge_m: f64) -> SimParams {
-        let dhat = (0.15 * edge_m).clamp(1e-3, 5e-3);
+        let dhat = (0.15 * edge_m).clamp(3e-4, 5e-3);
         SimParams {
             dt_s: crate::scene::DEFAULT_DT_S,
             gravity_m_s2: Vector3::new(0.0, -9.81, 0.0),
             sew_stiffness_n_m: 1000.0,
+            sew_speed_m_s: 0.5,
             collision: CollisionParams {
                 dhat_m: dhat,
                 kappa: 2000.0,
@@ -195,6 +199,10 @@ pub struct Simulator {
     seam_ring: std::collections::HashMap<u32, Vec<u32>>,
     cholesky: Option<CholeskyPreconditioner>,
     last_cg_iters: usize,
+    /// Initial gap of each seam pair (rest lengths shrink from it), m.
+    seam_gap0_m: Vec<f64>,
+    /// Time at the end of the step being solved, s.
+    time_end_s: f64,
     /// Small meshes run on one thread: rayon's hand-offs cost more than their work.
     serial: Option<std::sync::Arc<rayon::ThreadPool>>,
 }
@@ -287,6 +295,16 @@ impl Simulator {
             seam_ring: seam_rings(&model),
             cholesky: None,
             last_cg_iters: usize::MAX,
+            seam_gap0_m: model
+                .mesh
+                .seam_pairs
+                .iter()
+                .map(|p| {
+                    (model.mesh.positions[p[0] as usize] - model.mesh.positions[p[1] as usize])
+                        .norm()
+                })
+                .collect(),
+            time_end_s: 0.0,
             serial: (n < SERIAL_BELOW_VERTICES)
                 .then(|| {
                     rayon::ThreadPoolBuilder::new()
@@ -518,9 +536,11 @@ impl Simulator {
             .mesh
             .seam_pairs
             .iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(k, p)| {
                 sewing::energy(
                     self.params.sew_stiffness_n_m,
+                    self.seam_rest_m(k),
                     &x[p[0] as usize],
                     &x[p[1] as usize],
                 )
@@ -622,10 +642,11 @@ impl Simulator {
             }
         }
         let k_sew = self.params.sew_stiffness_n_m;
-        for p in &model.mesh.seam_pairs {
+        for (k, p) in model.mesh.seam_pairs.iter().enumerate() {
             let (i, j) = (p[0], p[1]);
-            energy += sewing::energy(k_sew, &x[i as usize], &x[j as usize]);
-            let (g, hm) = sewing::gradient_hessian(k_sew, &x[i as usize], &x[j as usize]);
+            let rest = self.seam_rest_m(k);
+            energy += sewing::energy(k_sew, rest, &x[i as usize], &x[j as usize]);
+            let (g, hm) = sewing::gradient_hessian(k_sew, rest, &x[i as usize], &x[j as usize]);
             self.grad[i as usize] += g.fixed_rows::<3>(0);
             self.grad[j as usize] += g.fixed_rows::<3>(3);
             for (a, va) in [i, j].iter().enumerate() {
@@ -658,6 +679,11 @@ impl Simulator {
             }
         }
         energy
+    }
+
+    /// Rest length of seam pair `k` at the end of the current step.
+    fn seam_rest_m(&self, k: usize) -> f64 {
+        (self.seam_gap0_m[k] - self.params.sew_speed_m_s * self.time_end_s).max(0.0)
     }
 
     fn linear_solve(
@@ -747,6 +773,7 @@ impl Simulator {
         stats: &mut StepStats,
     ) -> Result<SimState> {
         let n = self.model.num_vertices();
+        self.time_end_s = state.t_s + h;
         let x_n = &state.x;
         let g = self.params.gravity_m_s2;
         let mut x_tilde: Vec<Vector3<f64>> = (0..n)
