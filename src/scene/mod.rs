@@ -418,7 +418,7 @@ impl Scene {
         scale: f64,
         offset_m: Vector3<f64>,
     ) -> Result<()> {
-        if !(scale.is_finite() && scale > 0.0) || !offset_m.iter().all(|c| c.is_finite()) {
+        if !(scale.is_finite() && scale > 0.0 && offset_m.iter().all(|c| c.is_finite())) {
             return Err(Error::bad_input(
                 path,
                 format!("collider scale {scale} / offset must be finite and positive"),
