@@ -246,3 +246,42 @@ fn simulate_command_writes_a_valid_time_sampled_usd() {
     assert!(cloth.uv.is_some() && cloth.fabric.is_some());
     assert!(s.meshes.iter().any(|m| m.role == MeshRole::Collider));
 }
+
+#[test]
+fn sheet_drapes_over_the_bunny_without_penetrating() {
+    let mut scene = sheet_scene(0.4, 0.0, Fabric::preset("silk").expect("preset"));
+    let bunny =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/colliders/bunny.obj");
+    // The bunny is ~9.9 units tall: 0.025 makes it a 25 cm rabbit.
+    scene
+        .add_collider_file_transformed(&bunny, 0.025, Vector3::zeros())
+        .expect("bunny");
+    let pts = &scene.colliders[0].frames[0];
+    let top = pts.iter().map(|p| p.y as f64).fold(f64::MIN, f64::max);
+    let (cx, cz) = (
+        pts.iter().map(|p| p.x as f64).sum::<f64>() / pts.len() as f64,
+        pts.iter().map(|p| p.z as f64).sum::<f64>() / pts.len() as f64,
+    );
+    let sheet = &mut scene.garments[0].panels[0].placement.translation_m;
+    *sheet += Vector3::new(cx, top + 0.02, cz);
+    let mut sim = Simulation::new(&scene, 0.03, |_| {}).expect("setup");
+    let dhat = sim.sim.params.collision.dhat_m;
+    let mut deepest: f64 = 0.0;
+    for _ in 0..25 {
+        let f = sim.advance_frame(|_| {}).expect("frame");
+        deepest = deepest.max(f.max_penetration_m);
+        assert!(sim.state.x.iter().all(|p| p.iter().all(|c| c.is_finite())));
+    }
+    assert!(
+        deepest < dhat / 2.0,
+        "{:.2} mm inside the bunny",
+        deepest * 1e3
+    );
+    let highest = sim.state.x.iter().map(|p| p.y).fold(f64::MIN, f64::max);
+    let lowest = sim.state.x.iter().map(|p| p.y).fold(f64::MAX, f64::min);
+    assert!(
+        highest < top + 0.02 && highest > top - 0.01,
+        "rests on the bunny: top {top}, sheet {highest}"
+    );
+    assert!(lowest < highest - 0.05, "drapes: {lowest} .. {highest}");
+}
