@@ -125,15 +125,93 @@ pub struct CgStats {
 /// Reusable buffers of the conjugate-gradient solver.
 #[derive(Debug, Clone, Default)]
 pub struct Pcg {
+    bufs: CgBuffers,
+    inv_diag: Vec<Matrix3<f64>>,
+}
+
+#[derive(Debug, Clone, Default)]
+struct CgBuffers {
     r: Vec<Vector3<f64>>,
     z: Vec<Vector3<f64>>,
     p: Vec<Vector3<f64>>,
     ap: Vec<Vector3<f64>>,
-    inv_diag: Vec<Matrix3<f64>>,
 }
 
 fn dot(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.par_iter().zip(b).map(|(x, y)| x.dot(y)).sum()
+}
+
+impl CgBuffers {
+    /// Preconditioned conjugate gradients on the free vertices, warm-started from `x`;
+    /// `precondition(r, z)` applies the preconditioner.
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &mut self,
+        a: &BlockCsr,
+        b: &[Vector3<f64>],
+        x: &mut [Vector3<f64>],
+        free: &[bool],
+        mut precondition: impl FnMut(&[Vector3<f64>], &mut [Vector3<f64>]),
+        rel_tol: f64,
+        max_iters: usize,
+    ) -> CgStats {
+        let n = a.n();
+        for buf in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
+            buf.resize(n, Vector3::zeros());
+        }
+        for (xi, f) in x.iter_mut().zip(free) {
+            if !f {
+                *xi = Vector3::zeros();
+            }
+        }
+        let b_norm = dot(b, b).sqrt();
+        if b_norm == 0.0 {
+            x.iter_mut().for_each(|v| *v = Vector3::zeros());
+            return CgStats::default();
+        }
+        a.matvec(x, &mut self.ap, free);
+        self.r.par_iter_mut().enumerate().for_each(|(i, r)| {
+            *r = if free[i] {
+                b[i] - self.ap[i]
+            } else {
+                Vector3::zeros()
+            };
+        });
+        precondition(&self.r, &mut self.z);
+        self.p.copy_from_slice(&self.z);
+        let mut rz = dot(&self.r, &self.z);
+        let mut res = dot(&self.r, &self.r).sqrt() / b_norm;
+        let mut it = 0;
+        while it < max_iters && res > rel_tol {
+            a.matvec(&self.p, &mut self.ap, free);
+            let pap = dot(&self.p, &self.ap);
+            if pap.is_nan() || pap <= 0.0 {
+                break;
+            }
+            let alpha = rz / pap;
+            x.par_iter_mut()
+                .zip(self.p.par_iter())
+                .for_each(|(xi, pi)| *xi += pi * alpha);
+            self.r
+                .par_iter_mut()
+                .zip(self.ap.par_iter())
+                .for_each(|(ri, api)| *ri -= api * alpha);
+            precondition(&self.r, &mut self.z);
+            let rz_new = dot(&self.r, &self.z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            self.p
+                .par_iter_mut()
+                .zip(self.z.par_iter())
+                .for_each(|(pi, zi)| *pi = zi + *pi * beta);
+            res = dot(&self.r, &self.r).sqrt() / b_norm;
+            it += 1;
+        }
+        CgStats {
+            iterations: it,
+            relative_residual: res,
+        }
+    }
 }
 
 impl Pcg {
@@ -149,9 +227,6 @@ impl Pcg {
         max_iters: usize,
     ) -> CgStats {
         let n = a.n();
-        for buf in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
-            buf.resize(n, Vector3::zeros());
-        }
         self.inv_diag.resize(n, Matrix3::zeros());
         // Block-Jacobi: the inverse of each vertex's 3×3 diagonal block (plus extra diagonal terms).
         let mut diag: Vec<Matrix3<f64>> =
@@ -180,63 +255,36 @@ impl Pcg {
                     Matrix3::zeros()
                 };
             });
-        for (xi, f) in x.iter_mut().zip(free) {
-            if !f {
-                *xi = Vector3::zeros();
-            }
-        }
-        let b_norm = dot(b, b).sqrt();
-        if b_norm == 0.0 {
-            x.iter_mut().for_each(|v| *v = Vector3::zeros());
-            return CgStats::default();
-        }
-        a.matvec(x, &mut self.ap, free);
-        self.r.par_iter_mut().enumerate().for_each(|(i, r)| {
-            *r = if free[i] {
-                b[i] - self.ap[i]
-            } else {
-                Vector3::zeros()
-            };
-        });
-        let precondition = |inv: &[Matrix3<f64>], r: &[Vector3<f64>], z: &mut [Vector3<f64>]| {
+        let inv = &self.inv_diag;
+        let jacobi = |r: &[Vector3<f64>], z: &mut [Vector3<f64>]| {
             z.par_iter_mut()
                 .enumerate()
                 .for_each(|(i, zi)| *zi = inv[i] * r[i]);
         };
-        precondition(&self.inv_diag, &self.r, &mut self.z);
-        self.p.copy_from_slice(&self.z);
-        let mut rz = dot(&self.r, &self.z);
-        let mut res = dot(&self.r, &self.r).sqrt() / b_norm;
-        let mut it = 0;
-        while it < max_iters && res > rel_tol {
-            a.matvec(&self.p, &mut self.ap, free);
-            let pap = dot(&self.p, &self.ap);
-            if pap.is_nan() || pap <= 0.0 {
-                break;
-            }
-            let alpha = rz / pap;
-            x.par_iter_mut()
-                .zip(self.p.par_iter())
-                .for_each(|(xi, pi)| *xi += pi * alpha);
-            self.r
-                .par_iter_mut()
-                .zip(self.ap.par_iter())
-                .for_each(|(ri, api)| *ri -= api * alpha);
-            precondition(&self.inv_diag, &self.r, &mut self.z);
-            let rz_new = dot(&self.r, &self.z);
-            let beta = rz_new / rz;
-            rz = rz_new;
-            self.p
-                .par_iter_mut()
-                .zip(self.z.par_iter())
-                .for_each(|(pi, zi)| *pi = zi + *pi * beta);
-            res = dot(&self.r, &self.r).sqrt() / b_norm;
-            it += 1;
-        }
-        CgStats {
-            iterations: it,
-            relative_residual: res,
-        }
+        self.bufs.run(a, b, x, free, jacobi, rel_tol, max_iters)
+    }
+
+    /// As [`Pcg::solve`], preconditioned by a Cholesky factor of an earlier matrix.
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve_with_factor(
+        &mut self,
+        a: &BlockCsr,
+        b: &[Vector3<f64>],
+        x: &mut [Vector3<f64>],
+        free: &[bool],
+        pre: &mut CholeskyPreconditioner,
+        rel_tol: f64,
+        max_iters: usize,
+    ) -> CgStats {
+        self.bufs.run(
+            a,
+            b,
+            x,
+            free,
+            |r, z| pre.apply(r, z, free),
+            rel_tol,
+            max_iters,
+        )
     }
 }
 
@@ -451,76 +499,6 @@ impl CholeskyPreconditioner {
             } else {
                 Vector3::zeros()
             };
-        }
-    }
-}
-
-impl Pcg {
-    /// As [`Pcg::solve`], preconditioned by a Cholesky factor of an earlier matrix.
-    #[allow(clippy::too_many_arguments)]
-    pub fn solve_with_factor(
-        &mut self,
-        a: &BlockCsr,
-        b: &[Vector3<f64>],
-        x: &mut [Vector3<f64>],
-        free: &[bool],
-        pre: &mut CholeskyPreconditioner,
-        rel_tol: f64,
-        max_iters: usize,
-    ) -> CgStats {
-        let n = a.n();
-        for buf in [&mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
-            buf.resize(n, Vector3::zeros());
-        }
-        for (xi, f) in x.iter_mut().zip(free) {
-            if !f {
-                *xi = Vector3::zeros();
-            }
-        }
-        let b_norm = dot(b, b).sqrt();
-        if b_norm == 0.0 {
-            x.iter_mut().for_each(|v| *v = Vector3::zeros());
-            return CgStats::default();
-        }
-        a.matvec(x, &mut self.ap, free);
-        for i in 0..n {
-            self.r[i] = if free[i] {
-                b[i] - self.ap[i]
-            } else {
-                Vector3::zeros()
-            };
-        }
-        pre.apply(&self.r, &mut self.z, free);
-        self.p.copy_from_slice(&self.z);
-        let mut rz = dot(&self.r, &self.z);
-        let mut res = dot(&self.r, &self.r).sqrt() / b_norm;
-        let mut it = 0;
-        while it < max_iters && res > rel_tol {
-            a.matvec(&self.p, &mut self.ap, free);
-            let pap = dot(&self.p, &self.ap);
-            if pap.is_nan() || pap <= 0.0 {
-                break;
-            }
-            let alpha = rz / pap;
-            for (xi, pi) in x.iter_mut().zip(&self.p) {
-                *xi += pi * alpha;
-            }
-            for (ri, api) in self.r.iter_mut().zip(&self.ap) {
-                *ri -= api * alpha;
-            }
-            pre.apply(&self.r, &mut self.z, free);
-            let rz_new = dot(&self.r, &self.z);
-            let beta = rz_new / rz;
-            rz = rz_new;
-            for (pi, zi) in self.p.iter_mut().zip(&self.z) {
-                *pi = zi + *pi * beta;
-            }
-            res = dot(&self.r, &self.r).sqrt() / b_norm;
-            it += 1;
-        }
-        CgStats {
-            iterations: it,
-            relative_residual: res,
         }
     }
 }
