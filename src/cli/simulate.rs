@@ -155,9 +155,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         };
         let message = format!(
-            "frame {f}/{frames}  newton {:.1}/step  cg {:.0}/step  contacts {}  max penetration {:.2} mm",
+            "frame {f}/{frames}  newton {:.1}/step  cg {:.0}/step  substeps {}  contacts {}  max penetration {:.2} mm",
             stats.steps.newton_iters as f64 / stats.step_count as f64,
             stats.steps.cg_iters as f64 / stats.step_count as f64,
+            stats.steps.substeps,
             stats.steps.contacts,
             stats.max_penetration_m * 1e3
         );
