@@ -757,7 +757,7 @@ impl Simulator {
                     .is_some_and(|r| r.binary_search(&b).is_ok())
             };
             contacts.retain(|c| match c {
-                Contact::VertexObstacle { .. } => true,
+                Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. } => true,
                 Contact::VertexTriangle { v, t } => !t.iter().any(|&w| near(*v, w)),
                 Contact::EdgeEdge { a, b } => !a.iter().any(|&p| b.iter().any(|&q| near(p, q))),
             });

@@ -76,6 +76,14 @@ pub enum Contact {
         /// Cloth triangle.
         t: [u32; 3],
     },
+    /// Cloth edge `a` against a sharp collider edge (points at the current time): keeps box
+    /// edges and other creases from slicing between cloth vertices.
+    EdgeObstacle {
+        /// Cloth edge.
+        a: [u32; 2],
+        /// Collider edge end points.
+        edge: [Vector3<f64>; 2],
+    },
     /// Cloth edge `a` against cloth edge `b` (no shared vertex).
     EdgeEdge {
         /// First cloth edge.
@@ -104,6 +112,7 @@ impl Contact {
             Contact::VertexObstacle { v, .. } => [Some(v), None, None, None],
             Contact::VertexTriangle { v, t } => [Some(v), Some(t[0]), Some(t[1]), Some(t[2])],
             Contact::EdgeEdge { a, b } => [Some(a[0]), Some(a[1]), Some(b[0]), Some(b[1])],
+            Contact::EdgeObstacle { a, .. } => [Some(a[0]), Some(a[1]), None, None],
         }
     }
 
@@ -111,6 +120,9 @@ impl Contact {
     pub fn points(&self, x: &[Vector3<f64>]) -> [Vector3<f64>; 4] {
         match self {
             Contact::VertexObstacle { v, tri } => [x[*v as usize], tri[0], tri[1], tri[2]],
+            Contact::EdgeObstacle { a, edge } => {
+                [x[a[0] as usize], x[a[1] as usize], edge[0], edge[1]]
+            }
             _ => self
                 .cloth_dofs()
                 .map(|i| i.map_or_else(Vector3::zeros, |i| x[i as usize])),
@@ -123,7 +135,7 @@ impl Contact {
         match self {
             Contact::VertexObstacle { .. } => vertex_obstacle_jet(&p),
             Contact::VertexTriangle { .. } => vertex_triangle_jet(&p),
-            Contact::EdgeEdge { .. } => edge_edge_jet(&p),
+            Contact::EdgeEdge { .. } | Contact::EdgeObstacle { .. } => edge_edge_jet(&p),
         }
     }
 
@@ -162,7 +174,9 @@ impl Contact {
         match self {
             Contact::VertexObstacle { .. } => obstacle_eval(&p[0], &p[1], &p[2], &p[3]).distance(),
             Contact::VertexTriangle { .. } => point_triangle(&p[0], &p[1], &p[2], &p[3]).dist,
-            Contact::EdgeEdge { .. } => segment_segment(&p[0], &p[1], &p[2], &p[3]).dist,
+            Contact::EdgeEdge { .. } | Contact::EdgeObstacle { .. } => {
+                segment_segment(&p[0], &p[1], &p[2], &p[3]).dist
+            }
         }
     }
 }
@@ -209,6 +223,42 @@ fn triangle_boxes(pts: &[Vector3<f64>], tris: &[[u32; 3]], r: f64) -> Vec<Aabb> 
 }
 
 /// Boxes of edges, inflated by `r`.
+/// Collider edges whose two faces meet at more than this angle (degrees) get edge contacts.
+pub const SHARP_EDGE_DEG: f64 = 30.0;
+
+/// Edges of a triangle mesh whose adjacent face normals differ by more than `angle_deg`, plus
+/// boundary edges: the creases a cloth edge can catch on between its vertices.
+pub fn sharp_edges(pts: &[Vector3<f64>], tris: &[[u32; 3]], angle_deg: f64) -> Vec<[u32; 2]> {
+    let cos_max = angle_deg.to_radians().cos();
+    let normal = |t: &[u32; 3]| {
+        let [a, b, c] = tri_points(pts, t);
+        (b - a).cross(&(c - a)).try_normalize(1e-30)
+    };
+    let mut faces: std::collections::HashMap<[u32; 2], Vec<usize>> =
+        std::collections::HashMap::new();
+    for (k, t) in tris.iter().enumerate() {
+        for e in [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]] {
+            faces
+                .entry([e[0].min(e[1]), e[0].max(e[1])])
+                .or_default()
+                .push(k);
+        }
+    }
+    let mut out: Vec<[u32; 2]> = faces
+        .into_iter()
+        .filter(|(_, f)| match f.as_slice() {
+            [a, b] => match (normal(&tris[*a]), normal(&tris[*b])) {
+                (Some(n1), Some(n2)) => n1.dot(&n2) < cos_max,
+                _ => false,
+            },
+            _ => true,
+        })
+        .map(|(e, _)| e)
+        .collect();
+    out.sort_unstable();
+    out
+}
+
 fn edge_boxes(pts: &[Vector3<f64>], edges: &[[u32; 2]], r: f64) -> Vec<Aabb> {
     edges
         .par_iter()
@@ -425,6 +475,30 @@ impl CollisionDetector {
         self.max_penetration = per_vertex.iter().map(|p| p.0).fold(0.0, f64::max);
         let mut contacts: Vec<Contact> = per_vertex.into_iter().flat_map(|p| p.1).collect();
 
+        // Sharp collider edges (creases) against cloth edges.
+        if dhat > 0.0 && !cloth_edges.is_empty() && colliders.iter().any(|(_, t)| !t.is_empty()) {
+            let cloth_edge_bvh = Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * dhat));
+            for (pts, tris) in colliders {
+                let sharp = sharp_edges(pts, tris, SHARP_EDGE_DEG);
+                if sharp.is_empty() {
+                    continue;
+                }
+                let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * dhat));
+                contacts.extend(cloth_edge_bvh.pairs_with_filter_map(&body, |i, j| {
+                    let a = cloth_edges[i as usize];
+                    let e = sharp[j as usize];
+                    let (p0, p1) = (&pts[e[0] as usize], &pts[e[1] as usize]);
+                    let d =
+                        segment_segment(&cloth_x[a[0] as usize], &cloth_x[a[1] as usize], p0, p1)
+                            .dist;
+                    (d < dhat).then_some(Contact::EdgeObstacle {
+                        a,
+                        edge: [*p0, *p1],
+                    })
+                }));
+            }
+        }
+
         if params.self_collision && dhat > 0.0 && !cloth_tris.is_empty() {
             self.cloth_tris.update(
                 cloth_tris.as_flattened(),
@@ -471,6 +545,65 @@ impl CollisionDetector {
             contacts.extend(ee);
         }
         contacts
+    }
+}
+
+#[cfg(test)]
+mod edge_obstacle_tests {
+    use super::*;
+
+    #[test]
+    fn a_box_edge_between_cloth_vertices_is_a_contact() {
+        // A unit cube's top edge along x at (y, z) = (1, 1); a cloth edge crossing it 1 mm above,
+        // with both cloth vertices far from every face (so no vertex contact can see it).
+        let pts: Vec<Vector3<f64>> = (0..8)
+            .map(|i| Vector3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64))
+            .collect();
+        let tris = vec![
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
+        let sharp = sharp_edges(&pts, &tris, SHARP_EDGE_DEG);
+        assert_eq!(
+            sharp.len(),
+            12,
+            "a cube has 12 creases, its face diagonals are flat"
+        );
+        let x = [Vector3::new(0.5, 1.3, 0.7), Vector3::new(0.5, 0.7, 1.3)];
+        let lifted: Vec<Vector3<f64>> = x
+            .iter()
+            .map(|p| p + Vector3::new(0.0, 0.001, 0.001) / 2f64.sqrt())
+            .collect();
+        let params = CollisionParams {
+            dhat_m: 0.003,
+            kappa: 1000.0,
+            self_collision: false,
+        };
+        let contacts = find_contacts(&lifted, &[], &[[0, 1]], &[(&pts, &tris)], &params);
+        let edge: Vec<&Contact> = contacts
+            .iter()
+            .filter(|c| matches!(c, Contact::EdgeObstacle { .. }))
+            .collect();
+        assert_eq!(edge.len(), 1, "{contacts:?}");
+        let d = edge[0].distance(&lifted);
+        assert!((d - 0.001).abs() < 1e-9, "distance {d}");
+        // Its force pushes the cloth edge away from the crease (outwards along (0, 1, 1)).
+        let (_, g, _) = edge[0].energy_gradient_hessian(&lifted, &params);
+        let push = -(g.fixed_rows::<3>(0) + g.fixed_rows::<3>(3));
+        assert!(push.dot(&Vector3::new(0.0, 1.0, 1.0)) > 0.0);
+        // Far away: no contact.
+        let far: Vec<Vector3<f64>> = x.iter().map(|p| p + Vector3::new(0.0, 0.1, 0.1)).collect();
+        assert!(find_contacts(&far, &[], &[[0, 1]], &[(&pts, &tris)], &params).is_empty());
     }
 }
 
@@ -611,6 +744,11 @@ mod tests {
     ) -> (BTreeMap<u32, Vec<f64>>, f64) {
         let mut got: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
         for c in contacts {
+            // Crease contacts are compared in their own test.
+            if matches!(c, Contact::EdgeObstacle { .. }) {
+                assert!(c.distance(x) < dhat);
+                continue;
+            }
             let Contact::VertexObstacle { v, .. } = c else {
                 panic!("self contact with self_collision off");
             };
@@ -756,7 +894,10 @@ mod tests {
         );
         assert!(want.contains_key(&220) && want.contains_key(&221) && !want.contains_key(&0));
         // Penetrating vertices have negative distances and get pushed outward.
-        for c in contacts.iter().filter(|c| c.cloth_dofs()[0] == Some(221)) {
+        for c in contacts
+            .iter()
+            .filter(|c| matches!(c, Contact::VertexObstacle { v: 221, .. }))
+        {
             assert!(c.distance(&x) < -0.015);
             let (e, g, h) = c.energy_gradient_hessian(&x, &params);
             assert!(e > 0.0 && (-g.fixed_rows::<3>(0)).dot(&x[221]) > 0.0);
@@ -812,7 +953,9 @@ mod tests {
             match c {
                 Contact::VertexTriangle { v, t } => assert!(vt.insert((*v, *t))),
                 Contact::EdgeEdge { a, b } => assert!(ee.insert((*a, *b))),
-                Contact::VertexObstacle { .. } => panic!("no colliders"),
+                Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. } => {
+                    panic!("no colliders")
+                }
             }
             assert!(c.distance(&x) < dhat);
             let (en, g, h) = c.energy_gradient_hessian(&x, &params);
