@@ -191,6 +191,7 @@ pub struct Simulator {
     free: Vec<bool>,
     grad: Vec<Vector3<f64>>,
     dx: Vec<Vector3<f64>>,
+    rhs: Vec<Vector3<f64>>,
     mem_local: Vec<(f64, Vec9, Mat9)>,
     hinge_local: Vec<(f64, Vec12, Mat12)>,
     detector: CollisionDetector,
@@ -224,6 +225,12 @@ fn stack<const N: usize, const M: usize>(p: &[Vector3<f64>; N]) -> nalgebra::SVe
         out.fixed_rows_mut::<3>(3 * i).copy_from(q);
     }
     out
+}
+
+/// Pattern slots of every (row, column) block pair of an element's `N` vertices, row-major
+/// (`M` = `N`²).
+fn block_slots<const N: usize, const M: usize>(matrix: &BlockCsr, v: [u32; N]) -> [usize; M] {
+    std::array::from_fn(|k| matrix.find(v[k / N], v[k % N]).unwrap_or(usize::MAX))
 }
 
 /// Two-hop neighbourhoods (mesh edges + seam pairs) of the vertices within one hop of a seam.
@@ -262,33 +269,21 @@ impl Simulator {
     pub fn new(model: ClothModel, params: SimParams) -> Simulator {
         let n = model.num_vertices();
         let matrix = BlockCsr::with_pattern(n, model.coupled_pairs());
-        let idx = |i: u32, j: u32| matrix.find(i, j).unwrap_or(usize::MAX);
         let mem_blocks = model
             .membranes
             .iter()
-            .map(|m| {
-                let mut b = [0; 9];
-                for (k, slot) in b.iter_mut().enumerate() {
-                    *slot = idx(m.v[k / 3], m.v[k % 3]);
-                }
-                b
-            })
+            .map(|m| block_slots(&matrix, m.v))
             .collect();
         let hinge_blocks = model
             .hinges
             .iter()
-            .map(|h| {
-                let mut b = [0; 16];
-                for (k, slot) in b.iter_mut().enumerate() {
-                    *slot = idx(h.v[k / 4], h.v[k % 4]);
-                }
-                b
-            })
+            .map(|h| block_slots(&matrix, h.v))
             .collect();
         Simulator {
             free: vec![true; n],
             grad: vec![Vector3::zeros(); n],
             dx: vec![Vector3::zeros(); n],
+            rhs: Vec::with_capacity(n),
             mem_local: vec![(0.0, Vec9::zeros(), Mat9::zeros()); model.membranes.len()],
             hinge_local: vec![(0.0, Vec12::zeros(), Mat12::zeros()); model.hinges.len()],
             detector: CollisionDetector::new(),
@@ -803,9 +798,13 @@ impl Simulator {
                     state.t_s
                 )));
             }
-            let rhs: Vec<Vector3<f64>> = self.grad.iter().map(|g| -g).collect();
+            // Reused across iterations: no per-iteration allocation of the right-hand side.
+            let mut rhs = std::mem::take(&mut self.rhs);
+            rhs.clear();
+            rhs.extend(self.grad.iter().map(|g| -g));
             let mut dx = std::mem::take(&mut self.dx);
             let cg = self.linear_solve(&rhs, &mut dx);
+            self.rhs = rhs;
             stats.cg_iters += cg.iterations;
             stats.newton_iters += 1;
             let t_search = std::time::Instant::now();

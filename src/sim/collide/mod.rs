@@ -556,23 +556,9 @@ mod edge_obstacle_tests {
     fn a_box_edge_between_cloth_vertices_is_a_contact() {
         // A unit cube's top edge along x at (y, z) = (1, 1); a cloth edge crossing it 1 mm above,
         // with both cloth vertices far from every face (so no vertex contact can see it).
-        let pts: Vec<Vector3<f64>> = (0..8)
-            .map(|i| Vector3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64))
-            .collect();
-        let tris = vec![
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ];
+        let cube = crate::scene::Collider::cuboid("cube", Vector3::zeros(), Vector3::repeat(1.0));
+        let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
+        let tris = cube.triangles;
         let sharp = sharp_edges(&pts, &tris, SHARP_EDGE_DEG);
         assert_eq!(
             sharp.len(),
