@@ -27,6 +27,17 @@ pub struct Args {
     /// Skip the Newton 1.8 side-by-side run.
     #[arg(long)]
     no_peer: bool,
+    /// Solver modes to time: `converged` (Newton to tolerance, the simulator's default, for
+    /// ground truth) and `fast` (one full Newton step when the line search accepts it, as in
+    /// Baraff & Witkin and Style3D; the pipeline's coarse simulation, which the corrector fixes).
+    #[arg(long, default_value = "converged,fast", value_delimiter = ',')]
+    modes: Vec<String>,
+    /// Relative residual of the linear solve (default: the simulator's).
+    #[arg(long)]
+    cg_tol: Option<f64>,
+    /// Linear-solve iterations at most (default: the simulator's).
+    #[arg(long)]
+    cg_max: Option<usize>,
 }
 
 fn parse_size(s: &str) -> anyhow::Result<f64> {
@@ -48,12 +59,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "unknown benchmark '{}' (known: sim)",
         args.what
     );
+    for m in &args.modes {
+        anyhow::ensure!(
+            m == "converged" || m == "fast",
+            "unknown mode '{m}' (known: converged, fast)"
+        );
+    }
     println!(
-        "{:>8} {:>8} {:>10} {:>10} {:>10} {:>9}",
-        "verts", "tris", "ms/step", "newton/st", "cg/newton", "contacts"
+        "{:>10} {:>8} {:>8} {:>10} {:>10} {:>10} {:>9}",
+        "mode", "verts", "tris", "ms/step", "newton/st", "cg/newton", "contacts"
     );
     let mut ours = Vec::new();
-    for s in &args.sizes {
+    for (mode, s) in args
+        .modes
+        .iter()
+        .flat_map(|m| args.sizes.iter().map(move |s| (m.as_str(), s)))
+    {
         let verts = parse_size(s)?;
         // 1 m² of pattern holds ≈ 2950 vertices at 20 mm edges, scaling with 1/h².
         let edge_m = 0.020 * (2950.0 / verts).sqrt();
@@ -70,7 +91,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         scene
             .colliders
             .push(Collider::sphere("sphere", Vector3::zeros(), 0.3, 4));
-        let mut sim = Simulation::new(&scene, edge_m, |p| p.collision.self_collision = false)?;
+        let mut sim = Simulation::new(&scene, edge_m, |p| {
+            p.collision.self_collision = false;
+            p.newton_exact = mode == "converged";
+            if let Some(t) = args.cg_tol {
+                p.cg_rel_tol = t;
+            }
+            if let Some(m) = args.cg_max {
+                p.cg_max_iters = m;
+            }
+        })?;
         sim.steps_per_frame = 1;
         for _ in 0..20 {
             sim.advance_frame(|_| {})?;
@@ -86,12 +116,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let ms = t.elapsed().as_secs_f64() * 1e3 / args.steps as f64;
         let n = sim.sim.model.num_vertices();
         println!(
-            "{n:>8} {:>8} {ms:>10.2} {:>10.2} {:>10.1} {contacts:>9}",
+            "{mode:>10} {n:>8} {:>8} {ms:>10.2} {:>10.2} {:>10.1} {contacts:>9}",
             sim.sim.model.mesh.triangles.len(),
             newton as f64 / args.steps as f64,
             cg as f64 / newton.max(1) as f64
         );
-        ours.push((n, ms));
+        ours.push((mode, n, ms));
     }
     if args.no_peer {
         return Ok(());
@@ -128,15 +158,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ) else {
             continue;
         };
-        let mine = ours
-            .iter()
-            .min_by(|a, b| ((a.0 as f64 - verts).abs()).total_cmp(&(b.0 as f64 - verts).abs()));
-        match mine {
-            Some((n, m)) => println!(
-                "  {solver:<12} {verts:>8} verts {ms:>10.2} ms/step   clothsr {m:.2} ms at {n} verts: clothsr / {solver} = {:.2}",
-                m / ms
-            ),
-            None => println!("  {solver:<12} {verts:>8} verts {ms:>10.2} ms/step"),
+        for mode in &args.modes {
+            let mine = ours
+                .iter()
+                .filter(|o| o.0 == mode)
+                .min_by(|a, b| ((a.1 as f64 - verts).abs()).total_cmp(&(b.1 as f64 - verts).abs()));
+            if let Some((_, n, m)) = mine {
+                println!(
+                    "  {solver:<10} {verts:>6} verts {ms:>9.2} ms/step | clothsr {mode:<9} {m:>9.2} ms at {n} verts: ratio {:.2}",
+                    m / ms
+                );
+            }
         }
     }
     Ok(())

@@ -119,6 +119,7 @@ pub fn mesh_garment(garment: &Garment, opts: &MeshOptions) -> Result<ClothMesh> 
     }
     mesh.seam_pairs.sort_unstable();
     mesh.seam_pairs.dedup();
+    mesh.reorder_for_locality();
     mesh.validate()?;
     Ok(mesh)
 }

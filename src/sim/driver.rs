@@ -38,6 +38,19 @@ pub struct FrameStats {
     pub max_penetration_m: f64,
 }
 
+/// What dressing did ([`Simulation::dress`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DressStats {
+    /// Steps run with gravity off while the seams closed.
+    pub sew_steps: usize,
+    /// Steps run settling under gravity.
+    pub settle_steps: usize,
+    /// Widest seam gap at the end, m.
+    pub seam_gap_m: f64,
+    /// Deepest collider penetration in the last settling step, m.
+    pub max_penetration_m: f64,
+}
+
 impl Simulation {
     /// Meshes the scene's garments at `edge_m` (mesh garments are used as they are) and sets up
     /// the simulator with the scene's gravity and time step; `tune` may change the defaults.
@@ -122,6 +135,70 @@ impl Simulation {
             frame.steps.energy_j = stats.energy_j;
         }
         Ok(frame)
+    }
+
+    /// Dresses the garments before the animation, as a tailor would: colliders held at the
+    /// first frame and gravity off while the seams close (GarmentCode places panels flat around
+    /// the body, up to tens of centimetres apart; under gravity they would fall before the
+    /// seams close), then `settle_s` of draping under gravity, still on the first frame's
+    /// colliders. The state's time goes back to the start, with zero velocity. Stops sewing
+    /// once every seam pair is within `gap_m` or after `max_s` of simulated time.
+    pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
+        let t_start = self.state.t_s;
+        let gravity = self.sim.params.gravity_m_s2;
+        let dt = self.sim.params.dt_s;
+        let mut held: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); self.colliders.len()];
+        for (c, out) in self.colliders.iter().zip(held.iter_mut()) {
+            c.positions_at(t_start, out);
+        }
+        let frames: Vec<ColliderFrame<'_>> = self
+            .colliders
+            .iter()
+            .zip(&held)
+            .map(|(c, p)| ColliderFrame {
+                points: p,
+                triangles: &c.triangles,
+            })
+            .collect();
+        let mut out = DressStats::default();
+        let max_steps = (max_s / dt).ceil() as usize;
+        self.sim.params.gravity_m_s2 = Vector3::zeros();
+        let sewing: Result<()> = (|| {
+            while out.sew_steps < max_steps {
+                out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
+                if out.seam_gap_m <= gap_m {
+                    break;
+                }
+                let (next, st) = self.sim.step(&self.state, &frames, &frames)?;
+                self.state = next;
+                out.sew_steps += 1;
+                if out.sew_steps % 30 == 0 {
+                    tracing::info!(
+                        "dressing: sewing step {}: widest seam gap {:.1} mm, newton {}, cg {}, contacts {}, penetration {:.2} mm",
+                        out.sew_steps,
+                        out.seam_gap_m * 1e3,
+                        st.newton_iters,
+                        st.cg_iters,
+                        st.contacts,
+                        st.max_penetration_m * 1e3
+                    );
+                }
+            }
+            Ok(())
+        })();
+        self.sim.params.gravity_m_s2 = gravity;
+        sewing?;
+        let settle_steps = (settle_s / dt).ceil() as usize;
+        for _ in 0..settle_steps {
+            let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
+            self.state = next;
+            out.settle_steps += 1;
+            out.max_penetration_m = stats.max_penetration_m;
+        }
+        out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
+        self.state.t_s = t_start;
+        self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
+        Ok(out)
     }
 
     /// Positions of each garment part, in the order of `sim.model.parts`.

@@ -6,6 +6,7 @@ pub mod collide;
 pub mod driver;
 pub mod energy;
 pub mod model;
+pub mod scatter;
 pub mod sparse;
 pub mod step;
 

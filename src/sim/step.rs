@@ -16,8 +16,13 @@ use rayon::prelude::*;
 
 use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
 use super::energy::bending::{self, BendingHessian};
-use super::energy::{sewing, Mat12, Mat9, Vec12, Vec9};
+use super::energy::{sewing, Mat12, Vec12, Vec9};
 use super::model::ClothModel;
+use super::scatter::ColouredElements;
+
+/// Triangles (3 vertices, 9 blocks) and hinges (4 vertices, 16 blocks) for the coloured scatter.
+type MembraneSet = ColouredElements<3, 9>;
+type HingeSet = ColouredElements<4, 16>;
 use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg};
 use crate::error::{Error, Result};
 
@@ -30,8 +35,13 @@ pub struct SimParams {
     pub gravity_m_s2: Vector3<f64>,
     /// Sewing spring stiffness per seam vertex pair, N/m.
     pub sew_stiffness_n_m: f64,
-    /// Speed at which seam rest lengths shrink from their initial gap to zero, m/s.
+    /// Speed at which seam rest lengths shrink to zero, m/s (they never grow back).
     pub sew_speed_m_s: f64,
+    /// Most a seam spring may be stretched beyond its rest length, m: where a body or the cloth
+    /// blocks a seam, its rest length stops shrinking at gap − this, so the seam pulls with at
+    /// most `sew_stiffness_n_m` × this (5 N at the defaults) and cannot drag cloth through the
+    /// body, as a rest length shrinking on a fixed schedule would (50 N at a 5 cm lag).
+    pub sew_max_stretch_m: f64,
     /// Contact repulsion.
     pub collision: CollisionParams,
     /// Extra distance beyond d̂ within which contacts are tracked, m.
@@ -43,6 +53,11 @@ pub struct SimParams {
     pub air_damping_per_s: f64,
     /// Newton iterations at most per step.
     pub newton_max_iters: usize,
+    /// Iterate Newton to `newton_tol_m` (ground truth). When false (the default), a step ends
+    /// after its first Newton iteration whose full step (α = 1) decreases the energy, as in
+    /// Baraff & Witkin; further iterations run only when the line search or the per-iteration
+    /// move limit had to shorten the step.
+    pub newton_exact: bool,
     /// Newton stops when no vertex moves more than this, m.
     pub newton_tol_m: f64,
     /// Relative residual of the linear solve.
@@ -80,6 +95,7 @@ impl SimParams {
             gravity_m_s2: Vector3::new(0.0, -9.81, 0.0),
             sew_stiffness_n_m: 1000.0,
             sew_speed_m_s: 0.5,
+            sew_max_stretch_m: 5e-3,
             collision: CollisionParams {
                 dhat_m: dhat,
                 kappa: 2000.0,
@@ -89,8 +105,12 @@ impl SimParams {
             friction: 0.3,
             air_damping_per_s: 1.0,
             newton_max_iters: 8,
+            newton_exact: true,
             // 1 cm/s of velocity error: far below what shows in an animation.
             newton_tol_m: 3e-2 * crate::scene::DEFAULT_DT_S,
+            // 1e-2 costs a third of the iterations (bench: 25 vs 75 at 3K) but, with one Newton
+            // iteration per step, leaves stiff sewing springs short of closing (tests/simulator.rs
+            // sewing_closes_a_two_panel_tube stalls at 10 mm).
             cg_rel_tol: 1e-3,
             cg_max_iters: 200,
             max_halvings: 4,
@@ -186,27 +206,33 @@ pub struct Simulator {
     pub pins: Vec<Pin>,
     matrix: BlockCsr,
     pcg: Pcg,
-    mem_blocks: Vec<[usize; 9]>,
-    hinge_blocks: Vec<[usize; 16]>,
     free: Vec<bool>,
     grad: Vec<Vector3<f64>>,
     dx: Vec<Vector3<f64>>,
     rhs: Vec<Vector3<f64>>,
-    mem_local: Vec<(f64, Vec9, Mat9)>,
-    hinge_local: Vec<(f64, Vec12, Mat12)>,
+    /// Membranes and hinges in colours that share no vertex, with their matrix slots.
+    mem_set: MembraneSet,
+    hinge_set: HingeSet,
     detector: CollisionDetector,
     /// For vertices within one hop of a seam: every vertex at most two hops away through mesh
     /// edges and seam pairs (sorted).
     seam_ring: std::collections::HashMap<u32, Vec<u32>>,
     cholesky: Option<CholeskyPreconditioner>,
     last_cg_iters: usize,
-    /// Initial gap of each seam pair (rest lengths shrink from it), m.
-    seam_gap0_m: Vec<f64>,
-    /// Time at the end of the step being solved, s.
-    time_end_s: f64,
+    /// Rest length of each seam pair after the last successful step, m.
+    seam_rest_m: Vec<f64>,
+    /// Rest lengths of the step being solved, m.
+    seam_rest_step_m: Vec<f64>,
     /// Small meshes run on one thread: rayon's hand-offs cost more than their work.
     serial: Option<std::sync::Arc<rayon::ThreadPool>>,
+    /// Detection margin for cloth–collider contacts, m: at least `detection_margin_m`, widened
+    /// to 2.5× the largest Newton displacement of the previous step (at most 1 cm), so that
+    /// cloth hitting a body at speed can take its full Newton step.
+    obstacle_margin_m: f64,
 }
+
+/// Upper bound of the adaptive cloth–collider detection margin, m.
+const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
 
 /// Below this many vertices a step runs on a single thread.
 const SERIAL_BELOW_VERTICES: usize = 4000;
@@ -225,12 +251,6 @@ fn stack<const N: usize, const M: usize>(p: &[Vector3<f64>; N]) -> nalgebra::SVe
         out.fixed_rows_mut::<3>(3 * i).copy_from(q);
     }
     out
-}
-
-/// Pattern slots of every (row, column) block pair of an element's `N` vertices, row-major
-/// (`M` = `N`²).
-fn block_slots<const N: usize, const M: usize>(matrix: &BlockCsr, v: [u32; N]) -> [usize; M] {
-    std::array::from_fn(|k| matrix.find(v[k / N], v[k % N]).unwrap_or(usize::MAX))
 }
 
 /// Two-hop neighbourhoods (mesh edges + seam pairs) of the vertices within one hop of a seam.
@@ -269,28 +289,19 @@ impl Simulator {
     pub fn new(model: ClothModel, params: SimParams) -> Simulator {
         let n = model.num_vertices();
         let matrix = BlockCsr::with_pattern(n, model.coupled_pairs());
-        let mem_blocks = model
-            .membranes
-            .iter()
-            .map(|m| block_slots(&matrix, m.v))
-            .collect();
-        let hinge_blocks = model
-            .hinges
-            .iter()
-            .map(|h| block_slots(&matrix, h.v))
-            .collect();
         Simulator {
             free: vec![true; n],
             grad: vec![Vector3::zeros(); n],
             dx: vec![Vector3::zeros(); n],
             rhs: Vec::with_capacity(n),
-            mem_local: vec![(0.0, Vec9::zeros(), Mat9::zeros()); model.membranes.len()],
-            hinge_local: vec![(0.0, Vec12::zeros(), Mat12::zeros()); model.hinges.len()],
+            mem_set: MembraneSet::new(model.membranes.iter().map(|m| m.v).collect(), &matrix),
+            hinge_set: HingeSet::new(model.hinges.iter().map(|h| h.v).collect(), &matrix),
             detector: CollisionDetector::new(),
             seam_ring: seam_rings(&model),
             cholesky: None,
             last_cg_iters: usize::MAX,
-            seam_gap0_m: model
+            seam_rest_step_m: Vec::new(),
+            seam_rest_m: model
                 .mesh
                 .seam_pairs
                 .iter()
@@ -299,7 +310,6 @@ impl Simulator {
                         .norm()
                 })
                 .collect(),
-            time_end_s: 0.0,
             serial: (n < SERIAL_BELOW_VERTICES)
                 .then(|| {
                     rayon::ThreadPoolBuilder::new()
@@ -309,14 +319,23 @@ impl Simulator {
                         .map(std::sync::Arc::new)
                 })
                 .flatten(),
+            obstacle_margin_m: params.detection_margin_m,
             model,
             params,
             pins: Vec::new(),
             matrix,
             pcg: Pcg::default(),
-            mem_blocks,
-            hinge_blocks,
         }
+    }
+
+    /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
+    pub fn max_seam_gap_m(&self, x: &[Vector3<f64>]) -> f64 {
+        self.model
+            .mesh
+            .seam_pairs
+            .iter()
+            .map(|p| (x[p[0] as usize] - x[p[1] as usize]).norm())
+            .fold(0.0, f64::max)
     }
 
     /// The rest state: mesh positions, zero velocity, t = 0.
@@ -562,80 +581,49 @@ impl Simulator {
         let inv_h2 = 1.0 / (h * h);
         let mode = self.params.bending_hessian;
         let model = &self.model;
-        // Element contributions in parallel, then a sequential scatter.
-        self.mem_local
-            .par_iter_mut()
-            .zip(model.membranes.par_iter())
-            .zip(model.membrane_k.par_iter().zip(damping.mem.par_iter()))
-            .for_each(|((out, el), (k, (rows, c)))| {
-                let p = gather3(x, el.v);
-                let (mut e, mut g, mut hm) = el.energy_gradient_hessian(k, &p);
-                let d: Vec9 = stack(&p) - stack::<3, 9>(&gather3(x_n, el.v));
-                for q in 0..3 {
-                    let s = rows[q].dot(&d);
-                    e += c[q] * s * s / (2.0 * h);
-                    g += rows[q] * (c[q] * s / h);
-                    hm += rows[q] * rows[q].transpose() * (c[q] / h);
-                }
-                *out = (e, g, hm);
-            });
-        self.hinge_local
-            .par_iter_mut()
-            .zip(model.hinges.par_iter())
-            .zip(damping.hinge.par_iter())
-            .for_each(|((out, hg), (row, c))| {
-                let p = gather4(x, hg.v);
-                let (mut e, mut g, mut hm) = bending::energy_gradient_hessian(hg, &p, mode);
-                let d: Vec12 = stack(&p) - stack::<4, 12>(&gather4(x_n, hg.v));
-                let s = row.dot(&d);
-                e += c * s * s / (2.0 * h);
-                g += row * (c * s / h);
-                hm += row * row.transpose() * (c / h);
-                *out = (e, g, hm);
-            });
         let contact_local: Vec<(f64, Vec12, Mat12)> = contacts
             .par_iter()
             .map(|c| c.energy_gradient_hessian(x, &self.params.collision))
             .collect();
 
         self.matrix.clear();
-        let mut energy = 0.0;
         // Inertia plus air damping ½ (α/h) m ‖x − xₙ‖² = ½ h⁻² (αh) m ‖x − xₙ‖².
         let air = self.params.air_damping_per_s * h;
-        for i in 0..x.len() {
-            let m = model.mass_kg[i];
-            let (a, b) = (x[i] - x_tilde[i], x[i] - x_n[i]);
-            energy += 0.5 * m * inv_h2 * (a.norm_squared() + air * b.norm_squared());
-            self.grad[i] = (a + b * air) * (m * inv_h2);
-            let d = self.matrix.diag_index(i as u32);
-            self.matrix.blocks[d] += Matrix3::identity() * (m * inv_h2 * (1.0 + air));
-        }
-        for ((e, g, hm), (el, blocks)) in self
-            .mem_local
-            .iter()
-            .zip(model.membranes.iter().zip(&self.mem_blocks))
-        {
-            energy += e;
-            for a in 0..3 {
-                self.grad[el.v[a] as usize] += g.fixed_rows::<3>(3 * a);
-                for b in 0..3 {
-                    self.matrix.blocks[blocks[3 * a + b]] += hm.fixed_view::<3, 3>(3 * a, 3 * b);
-                }
+        let mut energy =
+            MembraneSet::for_each_vertex(&mut self.matrix, &mut self.grad, |i, g, d| {
+                let m = model.mass_kg[i];
+                let (a, b) = (x[i] - x_tilde[i], x[i] - x_n[i]);
+                *g = (a + b * air) * (m * inv_h2);
+                *d += Matrix3::identity() * (m * inv_h2 * (1.0 + air));
+                0.5 * m * inv_h2 * (a.norm_squared() + air * b.norm_squared())
+            });
+        // Elements by colour: those of one colour share no vertex, so their blocks are disjoint.
+        energy += self.mem_set.add(&mut self.matrix, &mut self.grad, |k| {
+            let el = &model.membranes[k];
+            let (rows, c) = &damping.mem[k];
+            let p = gather3(x, el.v);
+            let (mut e, mut g, mut hm) = el.energy_gradient_hessian(&model.membrane_k[k], &p);
+            let d: Vec9 = stack(&p) - stack::<3, 9>(&gather3(x_n, el.v));
+            for q in 0..3 {
+                let s = rows[q].dot(&d);
+                e += c[q] * s * s / (2.0 * h);
+                g.axpy(c[q] * s / h, &rows[q], 1.0);
+                hm.ger(c[q] / h, &rows[q], &rows[q], 1.0);
             }
-        }
-        for ((e, g, hm), (hg, blocks)) in self
-            .hinge_local
-            .iter()
-            .zip(model.hinges.iter().zip(&self.hinge_blocks))
-        {
-            energy += e;
-            for a in 0..4 {
-                self.grad[hg.v[a] as usize] += g.fixed_rows::<3>(3 * a);
-                for b in 0..4 {
-                    self.matrix.blocks[blocks[4 * a + b]] += hm.fixed_view::<3, 3>(3 * a, 3 * b);
-                }
-            }
-        }
+            (e, g, hm)
+        });
+        energy += self.hinge_set.add(&mut self.matrix, &mut self.grad, |k| {
+            let hg = &model.hinges[k];
+            let (row, c) = &damping.hinge[k];
+            let p = gather4(x, hg.v);
+            let (mut e, mut g, mut hm) = bending::energy_gradient_hessian(hg, &p, mode);
+            let d: Vec12 = stack(&p) - stack::<4, 12>(&gather4(x_n, hg.v));
+            let s = row.dot(&d);
+            e += c * s * s / (2.0 * h);
+            g.axpy(c * s / h, row, 1.0);
+            hm.ger(c / h, row, row, 1.0);
+            (e, g, hm)
+        });
         let k_sew = self.params.sew_stiffness_n_m;
         for (k, p) in model.mesh.seam_pairs.iter().enumerate() {
             let (i, j) = (p[0], p[1]);
@@ -676,9 +664,9 @@ impl Simulator {
         energy
     }
 
-    /// Rest length of seam pair `k` at the end of the current step.
+    /// Rest length of seam pair `k` in the step being solved.
     fn seam_rest_m(&self, k: usize) -> f64 {
-        (self.seam_gap0_m[k] - self.params.sew_speed_m_s * self.time_end_s).max(0.0)
+        self.seam_rest_step_m[k]
     }
 
     fn linear_solve(
@@ -736,6 +724,8 @@ impl Simulator {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
         let mut params = self.params.collision;
         params.dhat_m += self.params.detection_margin_m;
+        self.detector.obstacle_extra_m =
+            (self.obstacle_margin_m - self.params.detection_margin_m).max(0.0);
         let mut contacts = self.detector.find_contacts(
             x,
             &self.model.mesh.triangles,
@@ -757,6 +747,25 @@ impl Simulator {
                 Contact::EdgeEdge { a, b } => !a.iter().any(|&p| b.iter().any(|&q| near(p, q))),
             });
         }
+        if tracing::enabled!(tracing::Level::DEBUG) {
+            let mut kinds = [0usize; 4];
+            for c in &contacts {
+                kinds[match c {
+                    Contact::VertexObstacle { .. } => 0,
+                    Contact::EdgeObstacle { .. } => 1,
+                    Contact::VertexTriangle { .. } => 2,
+                    Contact::EdgeEdge { .. } => 3,
+                }] += 1;
+            }
+            tracing::debug!(
+                vertex_obstacle = kinds[0],
+                edge_obstacle = kinds[1],
+                vertex_triangle = kinds[2],
+                edge_edge = kinds[3],
+                penetration_mm = self.detector.max_penetration() * 1e3,
+                "contacts"
+            );
+        }
         contacts
     }
 
@@ -768,7 +777,19 @@ impl Simulator {
         stats: &mut StepStats,
     ) -> Result<SimState> {
         let n = self.model.num_vertices();
-        self.time_end_s = state.t_s + h;
+        let shrink = self.params.sew_speed_m_s * h;
+        let slack = self.params.sew_max_stretch_m;
+        self.seam_rest_step_m = self
+            .model
+            .mesh
+            .seam_pairs
+            .iter()
+            .zip(&self.seam_rest_m)
+            .map(|(p, &r)| {
+                let gap = (state.x[p[0] as usize] - state.x[p[1] as usize]).norm();
+                (r - shrink).max(r.min(gap - slack)).max(0.0)
+            })
+            .collect();
         let x_n = &state.x;
         let g = self.params.gravity_m_s2;
         let mut x_tilde: Vec<Vector3<f64>> = (0..n)
@@ -782,7 +803,16 @@ impl Simulator {
             x_tilde[pin.v as usize] = p;
         }
         let damping = self.damping_rows(x_n);
-        let max_move = 0.5 * self.params.detection_margin_m;
+        // Per Newton iteration no vertex moves more than half the margin its contacts were
+        // detected with: cloth–cloth pairs move relative to each other, so self-collision keeps
+        // the narrow margin.
+        let max_move = 0.5
+            * if self.params.collision.self_collision {
+                self.params.detection_margin_m
+            } else {
+                self.obstacle_margin_m.max(self.params.detection_margin_m)
+            };
+        let x_start = x.clone();
         let mut contacts = Vec::new();
         let mut energy = f64::NAN;
         self.dx.iter_mut().for_each(|d| *d = Vector3::zeros());
@@ -821,16 +851,37 @@ impl Simulator {
                 self.dx = dx;
                 break;
             }
-            let mut alpha = (max_move / longest).min(1.0);
+            // The move limit clips vertices one by one: a few vertices that want to travel far
+            // (a fold pushed out of a body) no longer shrink everybody else's step, which
+            // stalled whole garments at α ≈ 0.1 for every iteration. The clipped direction is
+            // still a descent direction when its slope is negative; otherwise scale uniformly.
+            let clip = |d: &Vector3<f64>| -> f64 {
+                let l = d.norm();
+                if l > max_move {
+                    max_move / l
+                } else {
+                    1.0
+                }
+            };
+            let mut step: Vec<Vector3<f64>> = dx.par_iter().map(|d| d * clip(d)).collect();
+            let mut clipped = longest > max_move;
+            let mut step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
+            if clipped && step_slope >= 0.0 {
+                let s = max_move / longest;
+                step.iter_mut().zip(&dx).for_each(|(o, d)| *o = d * s);
+                step_slope = slope * s;
+            }
+            let step_longest = longest.min(max_move);
+            let mut alpha = 1.0;
             let mut trial: Vec<Vector3<f64>> = x.clone();
             let mut accepted = false;
             for _ in 0..12 {
                 trial
                     .par_iter_mut()
-                    .zip(x.par_iter().zip(dx.par_iter()))
+                    .zip(x.par_iter().zip(step.par_iter()))
                     .for_each(|(t, (xi, di))| *t = xi + di * alpha);
                 let e = self.potential(&trial, x_n, &x_tilde, h, &damping, &contacts);
-                if e.is_finite() && e <= energy + 1e-4 * alpha * slope {
+                if e.is_finite() && e <= energy + 1e-4 * alpha * step_slope {
                     accepted = true;
                     energy = e;
                     break;
@@ -848,11 +899,13 @@ impl Simulator {
                 break;
             }
             x = trial;
-            let moved = longest * alpha;
+            let moved = step_longest * alpha;
+            clipped |= alpha < 1.0;
             tracing::trace!(
                 it,
                 longest,
                 alpha,
+                clipped,
                 cg = cg.iterations,
                 contacts = contacts.len(),
                 energy,
@@ -863,12 +916,23 @@ impl Simulator {
                 "newton"
             );
             // Warm start the next solve with what is left of this direction.
-            dx.iter_mut().for_each(|d| *d *= 1.0 - alpha);
+            dx.par_iter_mut()
+                .zip(step.par_iter())
+                .for_each(|(d, s)| *d -= s * alpha);
             self.dx = dx;
-            if moved < self.params.newton_tol_m {
+            if moved < self.params.newton_tol_m || (!self.params.newton_exact && !clipped) {
                 break;
             }
         }
+        let travelled = x
+            .iter()
+            .zip(&x_start)
+            .map(|(a, b)| (a - b).norm_squared())
+            .fold(0.0, f64::max)
+            .sqrt();
+        self.obstacle_margin_m = (2.5 * travelled)
+            .min(MAX_OBSTACLE_MARGIN_M)
+            .max(self.params.detection_margin_m);
         let mut v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
         self.apply_friction(&mut x, &mut v, &contacts, h);
         if let Some(i) = x
@@ -884,6 +948,7 @@ impl Simulator {
         }
         stats.contacts = contacts.len();
         stats.substeps += 1;
+        self.seam_rest_m.clone_from(&self.seam_rest_step_m);
         stats.energy_j = energy;
         stats.max_penetration_m = stats.max_penetration_m.max(self.detector.max_penetration());
         Ok(SimState {

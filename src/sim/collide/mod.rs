@@ -229,34 +229,63 @@ pub const SHARP_EDGE_DEG: f64 = 30.0;
 /// Edges of a triangle mesh whose adjacent face normals differ by more than `angle_deg`, plus
 /// boundary edges: the creases a cloth edge can catch on between its vertices.
 pub fn sharp_edges(pts: &[Vector3<f64>], tris: &[[u32; 3]], angle_deg: f64) -> Vec<[u32; 2]> {
-    let cos_max = angle_deg.to_radians().cos();
-    let normal = |t: &[u32; 3]| {
-        let [a, b, c] = tri_points(pts, t);
-        (b - a).cross(&(c - a)).try_normalize(1e-30)
-    };
-    let mut faces: std::collections::HashMap<[u32; 2], Vec<usize>> =
-        std::collections::HashMap::new();
-    for (k, t) in tris.iter().enumerate() {
-        for e in [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]] {
-            faces
-                .entry([e[0].min(e[1]), e[0].max(e[1])])
-                .or_default()
-                .push(k);
+    sharp_edges_of(pts, tris, &edge_faces(tris), angle_deg)
+}
+
+/// Every edge of a triangle mesh (sorted vertex pair, sorted list) with its first two adjacent
+/// faces; `u32::MAX` stands for a missing face (boundary edge). Non-manifold edges keep two.
+fn edge_faces(tris: &[[u32; 3]]) -> Vec<([u32; 2], [u32; 2])> {
+    let mut half: Vec<([u32; 2], u32)> = tris
+        .iter()
+        .enumerate()
+        .flat_map(|(k, t)| {
+            [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]]
+                .map(|e| ([e[0].min(e[1]), e[0].max(e[1])], k as u32))
+        })
+        .collect();
+    half.sort_unstable();
+    let mut out: Vec<([u32; 2], [u32; 2])> = Vec::with_capacity(half.len() / 2 + 1);
+    for (e, k) in half {
+        match out.last_mut() {
+            Some((last, f)) if *last == e => {
+                if f[1] == u32::MAX {
+                    f[1] = k;
+                } else {
+                    // Three or more faces: a non-manifold edge is always a crease.
+                    f[1] = u32::MAX - 1;
+                }
+            }
+            _ => out.push((e, [k, u32::MAX])),
         }
     }
-    let mut out: Vec<[u32; 2]> = faces
-        .into_iter()
-        .filter(|(_, f)| match f.as_slice() {
-            [a, b] => match (normal(&tris[*a]), normal(&tris[*b])) {
+    out
+}
+
+/// [`sharp_edges`] from a precomputed [`edge_faces`] table.
+fn sharp_edges_of(
+    pts: &[Vector3<f64>],
+    tris: &[[u32; 3]],
+    faces: &[([u32; 2], [u32; 2])],
+    angle_deg: f64,
+) -> Vec<[u32; 2]> {
+    let cos_max = angle_deg.to_radians().cos();
+    let normal = |t: u32| {
+        let [a, b, c] = tri_points(pts, &tris[t as usize]);
+        (b - a).cross(&(c - a)).try_normalize(1e-30)
+    };
+    faces
+        .iter()
+        .filter(|(_, f)| {
+            if f[1] >= u32::MAX - 1 {
+                return true;
+            }
+            match (normal(f[0]), normal(f[1])) {
                 (Some(n1), Some(n2)) => n1.dot(&n2) < cos_max,
                 _ => false,
-            },
-            _ => true,
+            }
         })
-        .map(|(e, _)| e)
-        .collect();
-    out.sort_unstable();
-    out
+        .map(|(e, _)| *e)
+        .collect()
 }
 
 fn edge_boxes(pts: &[Vector3<f64>], edges: &[[u32; 2]], r: f64) -> Vec<Aabb> {
@@ -372,6 +401,9 @@ fn classify_vertex(
 struct CachedBvh {
     key: Vec<u32>,
     bvh: Bvh,
+    /// Collider edges and their faces ([`edge_faces`]), for the key's triangles; filled on
+    /// first use.
+    edge_faces: Option<Vec<([u32; 2], [u32; 2])>>,
     refits: u32,
     valid: bool,
 }
@@ -383,6 +415,9 @@ impl CachedBvh {
             self.refits += 1;
         } else {
             self.bvh.rebuild(boxes);
+            if self.key != key {
+                self.edge_faces = None;
+            }
             self.key.clear();
             self.key.extend_from_slice(key);
             self.refits = 0;
@@ -398,6 +433,10 @@ impl CachedBvh {
 pub struct CollisionDetector {
     /// Refits between full rebuilds (0: rebuild on every call). Default 16.
     pub rebuild_every: u32,
+    /// Extra distance, beyond `dhat_m`, within which cloth–collider contacts are reported
+    /// (default 0). A solver whose vertices move fast against bodies widens this alone,
+    /// without widening the (denser) cloth–cloth search.
+    pub obstacle_extra_m: f64,
     colliders: Vec<CachedBvh>,
     cloth_tris: CachedBvh,
     cloth_edges: CachedBvh,
@@ -415,6 +454,7 @@ impl CollisionDetector {
     pub fn new() -> CollisionDetector {
         CollisionDetector {
             rebuild_every: 16,
+            obstacle_extra_m: 0.0,
             colliders: Vec::new(),
             cloth_tris: CachedBvh::default(),
             cloth_edges: CachedBvh::default(),
@@ -440,7 +480,8 @@ impl CollisionDetector {
         params: &CollisionParams,
     ) -> Vec<Contact> {
         let dhat = params.dhat_m.max(0.0);
-        let search = OBSTACLE_SEARCH_M.max(dhat);
+        let obstacle_dhat = dhat + self.obstacle_extra_m.max(0.0);
+        let search = OBSTACLE_SEARCH_M.max(obstacle_dhat);
         let rebuild_every = self.rebuild_every;
 
         self.colliders
@@ -461,12 +502,13 @@ impl CollisionDetector {
                 let mut depth: f64 = 0.0;
                 for (cache, (pts, tris)) in caches.iter().zip(colliders) {
                     let bvh = &cache.bvh;
-                    let d = classify_vertex(p, pts, tris, bvh, dhat, search, scratch, |t| {
-                        out.push(Contact::VertexObstacle {
-                            v: v as u32,
-                            tri: tri_points(pts, &tris[t as usize]),
-                        })
-                    });
+                    let d =
+                        classify_vertex(p, pts, tris, bvh, obstacle_dhat, search, scratch, |t| {
+                            out.push(Contact::VertexObstacle {
+                                v: v as u32,
+                                tri: tri_points(pts, &tris[t as usize]),
+                            })
+                        });
                     depth = depth.max(d);
                 }
                 (depth, out)
@@ -477,13 +519,17 @@ impl CollisionDetector {
 
         // Sharp collider edges (creases) against cloth edges.
         if dhat > 0.0 && !cloth_edges.is_empty() && colliders.iter().any(|(_, t)| !t.is_empty()) {
-            let cloth_edge_bvh = Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * dhat));
-            for (pts, tris) in colliders {
-                let sharp = sharp_edges(pts, tris, SHARP_EDGE_DEG);
+            let mut cloth_edge_bvh: Option<Bvh> = None;
+            for (cache, (pts, tris)) in self.colliders.iter_mut().zip(colliders) {
+                let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
+                let sharp = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
                 if sharp.is_empty() {
                     continue;
                 }
-                let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * dhat));
+                let cloth_edge_bvh = cloth_edge_bvh.get_or_insert_with(|| {
+                    Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * obstacle_dhat))
+                });
+                let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * obstacle_dhat));
                 contacts.extend(cloth_edge_bvh.pairs_with_filter_map(&body, |i, j| {
                     let a = cloth_edges[i as usize];
                     let e = sharp[j as usize];
@@ -491,7 +537,7 @@ impl CollisionDetector {
                     let d =
                         segment_segment(&cloth_x[a[0] as usize], &cloth_x[a[1] as usize], p0, p1)
                             .dist;
-                    (d < dhat).then_some(Contact::EdgeObstacle {
+                    (d < obstacle_dhat).then_some(Contact::EdgeObstacle {
                         a,
                         edge: [*p0, *p1],
                     })

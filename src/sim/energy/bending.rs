@@ -451,7 +451,11 @@ pub fn energy_gradient_hessian(
     let e = h.weight * d * d;
     let grad = g * (w2 * d);
     let hess = match mode {
-        BendingHessian::GaussNewton => g * g.transpose() * w2,
+        BendingHessian::GaussNewton => {
+            let mut hess = Mat12::zeros();
+            hess.ger(w2, &g, &g, 0.0);
+            hess
+        }
         BendingHessian::Projected => {
             let hth = lift_hessian(&f.hessian9(&geo));
             project_psd(&((g * g.transpose() + hth * d) * w2))
