@@ -6,14 +6,19 @@
 //! 1. [`io`] reads sewing patterns (GarmentCode JSON), meshes (OBJ, USD) and avatars (UsdSkel);
 //! 2. [`garment`] holds panels, seams and fabric; [`mesh`] meshes them at the coarse (20 mm) and
 //!    fine (2.5 mm) resolutions in one shared material space;
-//! 3. the simulator, corrector and mesh super-resolution stages follow in later modules;
+//! 3. [`sim`] simulates cloth; [`transfer`] moves states between the coarse and fine meshes;
+//!    [`msr`] turns meshes into coordinate maps and patches and back; [`data`] makes training
+//!    data (the corrector follows);
 //! 4. [`io`] writes time-sampled USD.
 
+pub mod data;
 pub mod error;
 pub mod garment;
 pub mod io;
 pub mod mesh;
+pub mod msr;
 pub mod scene;
 pub mod sim;
+pub mod transfer;
 
 pub use error::{Error, Result};

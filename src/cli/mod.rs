@@ -2,6 +2,7 @@
 
 mod bench;
 mod convert;
+mod dataset;
 mod inspect;
 mod mesh;
 mod samples;
@@ -39,6 +40,9 @@ enum Command {
     Simulate(simulate::Args),
     /// Benchmarks (the simulator, side by side with Newton 1.8).
     Bench(bench::Args),
+    /// Training data: a fine simulation, its coarse downsampling (M_int) and one coarse step
+    /// from each (M_c).
+    Dataset(dataset::Args),
 }
 
 /// Runs the command line; errors are printed by `main` with their causes.
@@ -63,6 +67,7 @@ pub fn run() -> anyhow::Result<ExitCode> {
         Command::Samples(a) => samples::run(a),
         Command::Simulate(a) => simulate::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Dataset(a) => dataset::run(a),
     }?;
     Ok(ExitCode::SUCCESS)
 }

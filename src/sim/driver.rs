@@ -99,32 +99,60 @@ impl Simulation {
         })
     }
 
+    /// One step of `dt` from `state` (at `state.t_s`) with the colliders interpolated over it;
+    /// `self.state` is untouched. The coarse side of data generation steps from M_int with it.
+    pub fn step_from(&mut self, state: &SimState) -> Result<(SimState, StepStats)> {
+        let dt = self.sim.params.dt_s;
+        let t0 = state.t_s;
+        for (k, buf) in self.buffers.iter_mut().enumerate() {
+            buf.resize(self.colliders.len(), Vec::new());
+            for (c, out) in self.colliders.iter().zip(buf.iter_mut()) {
+                c.positions_at(t0 + k as f64 * dt, out);
+            }
+        }
+        let frames = |k: usize| -> Vec<ColliderFrame<'_>> {
+            self.colliders
+                .iter()
+                .zip(&self.buffers[k])
+                .map(|(c, p)| ColliderFrame {
+                    points: p,
+                    triangles: &c.triangles,
+                })
+                .collect()
+        };
+        let (start, end) = (frames(0), frames(1));
+        let (mut next, stats) = self.sim.step(state, &start, &end)?;
+        next.t_s = t0 + dt;
+        Ok((next, stats))
+    }
+
+    /// Advances `self.state` by one step.
+    pub fn step(&mut self) -> Result<StepStats> {
+        let state = std::mem::replace(
+            &mut self.state,
+            SimState {
+                x: Vec::new(),
+                v: Vec::new(),
+                t_s: 0.0,
+            },
+        );
+        match self.step_from(&state) {
+            Ok((next, stats)) => {
+                self.state = next;
+                Ok(stats)
+            }
+            Err(e) => {
+                self.state = state;
+                Err(e)
+            }
+        }
+    }
+
     /// Runs one output frame (`steps_per_frame` steps); `on_step` sees each step's stats.
     pub fn advance_frame(&mut self, mut on_step: impl FnMut(&StepStats)) -> Result<FrameStats> {
         let mut frame = FrameStats::default();
-        let dt = self.sim.params.dt_s;
         for _ in 0..self.steps_per_frame {
-            let t0 = self.state.t_s;
-            for (k, buf) in self.buffers.iter_mut().enumerate() {
-                buf.resize(self.colliders.len(), Vec::new());
-                for (c, out) in self.colliders.iter().zip(buf.iter_mut()) {
-                    c.positions_at(t0 + k as f64 * dt, out);
-                }
-            }
-            let frames = |k: usize| -> Vec<ColliderFrame<'_>> {
-                self.colliders
-                    .iter()
-                    .zip(&self.buffers[k])
-                    .map(|(c, p)| ColliderFrame {
-                        points: p,
-                        triangles: &c.triangles,
-                    })
-                    .collect()
-            };
-            let (start, end) = (frames(0), frames(1));
-            let (next, stats) = self.sim.step(&self.state, &start, &end)?;
-            self.state = next;
-            self.state.t_s = t0 + dt;
+            let stats = self.step()?;
             on_step(&stats);
             frame.step_count += 1;
             frame.max_penetration_m = frame.max_penetration_m.max(stats.max_penetration_m);

@@ -328,6 +328,24 @@ impl Simulator {
         }
     }
 
+    /// Current rest length of every seam pair, m (they shrink as seams close).
+    pub fn seam_rest(&self) -> &[f64] {
+        &self.seam_rest_m
+    }
+
+    /// Sets the seam rest lengths (resuming a run, or following a state set from outside).
+    pub fn set_seam_rest(&mut self, rest: &[f64]) -> Result<()> {
+        if rest.len() != self.seam_rest_m.len() {
+            return Err(Error::Invalid(format!(
+                "{} seam rest lengths for {} seam pairs",
+                rest.len(),
+                self.seam_rest_m.len()
+            )));
+        }
+        self.seam_rest_m.copy_from_slice(rest);
+        Ok(())
+    }
+
     /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
     pub fn max_seam_gap_m(&self, x: &[Vector3<f64>]) -> f64 {
         self.model

@@ -1,0 +1,133 @@
+//! `clothsr dataset SCENE --coarse-mm 20 --fine-mm 2.5 --frames N -o DIR`: training data
+//! (the paper's §3.3.1) from a fine simulation; see [`clothsr::data`] for the format.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clothsr::data::{generate, Options, Variation};
+use clothsr::scene::Scene;
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Arguments of `dataset`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scene: USD, GarmentCode JSON or OBJ cloth.
+    scene: PathBuf,
+    /// Output directory (created; a run already there with the same settings is resumed).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Coarse edge length, millimetres.
+    #[arg(long, default_value_t = 20.0)]
+    coarse_mm: f64,
+    /// Fine edge length, millimetres (the ground truth).
+    #[arg(long, default_value_t = 2.5)]
+    fine_mm: f64,
+    /// Output frames (each `1/(fps·dt)` steps).
+    #[arg(long)]
+    frames: usize,
+    /// Extra colliders (OBJ, OBJ sequence, USD).
+    #[arg(long)]
+    collider: Vec<PathBuf>,
+    /// Avatar (USD, UsdSkel or point cache).
+    #[arg(long)]
+    avatar: Option<PathBuf>,
+    /// Fabric preset for patterns and meshes without one.
+    #[arg(long, default_value = "cotton")]
+    fabric: String,
+    /// Variation: move the garments by x,y,z metres (e.g. a drop height).
+    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    garment_offset: Option<Vec<f64>>,
+    /// Variation: move the colliders by x,y,z metres.
+    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    collider_offset: Option<Vec<f64>>,
+    /// Disable cloth self-collision.
+    #[arg(long)]
+    no_self_collision: bool,
+    /// Skip sewing and settling before frame 0.
+    #[arg(long)]
+    no_dress: bool,
+}
+
+fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
+    match v {
+        None => Ok([0.0; 3]),
+        Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
+        Some(v) => anyhow::bail!("expected three finite numbers x,y,z, got {v:?}"),
+    }
+}
+
+/// Runs `dataset`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.coarse_mm.is_finite() && args.fine_mm.is_finite() && args.fine_mm > 0.0,
+        "--coarse-mm and --fine-mm must be positive"
+    );
+    anyhow::ensure!(
+        args.coarse_mm > args.fine_mm,
+        "--coarse-mm ({}) must be larger than --fine-mm ({})",
+        args.coarse_mm,
+        args.fine_mm
+    );
+    anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
+    let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
+    for c in &args.collider {
+        scene.add_collider_file(c)?;
+    }
+    if let Some(a) = &args.avatar {
+        scene.add_collider_file(a)?;
+    }
+    let opts = Options {
+        coarse_edge_m: args.coarse_mm * 1e-3,
+        fine_edge_m: args.fine_mm * 1e-3,
+        frames: args.frames,
+        dress: !args.no_dress,
+        self_collision: !args.no_self_collision,
+        variation: Variation {
+            garment_offset_m: triple(&args.garment_offset)?,
+            collider_offset_m: triple(&args.collider_offset)?,
+        },
+    };
+    let bar = ProgressBar::new(args.frames as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} frames {per_sec} eta {eta} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t0 = Instant::now();
+    let mut resumed_at = None;
+    let m = generate(
+        &scene,
+        &args.scene.display().to_string(),
+        &opts,
+        &args.output,
+        |p| {
+            if resumed_at.is_none() {
+                resumed_at = Some(p.frames_done);
+                bar.set_position(p.frames_done as u64);
+                bar.reset_eta();
+                if p.frames_done > 0 {
+                    tracing::info!("resuming after frame {}", p.frames_done);
+                }
+            } else {
+                bar.set_position(p.frames_done as u64);
+            }
+            if bar.is_hidden() {
+                tracing::info!(
+                    "frame {}/{} ({:.1} s elapsed)",
+                    p.frames_done,
+                    p.frames,
+                    t0.elapsed().as_secs_f64()
+                );
+            }
+        },
+    )?;
+    bar.finish_and_clear();
+    tracing::info!(
+        "wrote {}: {} frames, coarse {} / fine {} vertices, {:.1} s",
+        args.output.display(),
+        m.frames_done,
+        m.coarse_vertices,
+        m.fine_vertices,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

@@ -1,0 +1,387 @@
+//! Training data (the paper's §3.3.1): a fine simulation (2.5 mm) is the ground truth M_f;
+//! every step is downsampled to the coarse mesh (20 mm) as M_int, the corrector's target; and
+//! every M_int is advanced by one coarse simulator step to M_c, the simulator's immediate error
+//! that the corrector learns to remove (§3.1.3).
+//!
+//! # Format (a directory)
+//! * `manifest.json`: [`Manifest`] — scene, variation, resolutions, dt, counts, git revision,
+//!   `frames_done`; rewritten atomically after every frame.
+//! * `meshes.safetensors`: for `coarse` and `fine`: `{r}_material` (N, 2) f64 metres,
+//!   `{r}_triangles` (T, 3) u32, `{r}_panel` (N) u32, `{r}_seams` (S, 2) u32; panel names in
+//!   the manifest. Coordinate maps are made from these on the fly ([`crate::msr`]).
+//! * `frames/frame_NNNNN.safetensors`, one per output frame k = 1.. (steps (k−1)·s+1 ..= k·s):
+//!   `int_x`, `int_v`, `coarse_x`, `coarse_v` (s, Nc, 3) f32 — M_int and M_c per step;
+//!   `fine_x`, `fine_v` (Nf, 3) f32 — M_f at the frame's end; and, to resume exactly,
+//!   `resume_fine_x`, `resume_fine_v` (Nf, 3) f64, `resume_fine_seam_rest`,
+//!   `resume_coarse_seam_rest` f64.
+//!
+//! A killed run continues from its last complete frame (frame files are written whole, then
+//! the manifest). All files are readable with `safetensors.numpy.load_file`.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::io::tensors::{TensorReader, TensorWriter};
+use crate::mesh::ClothMesh;
+use crate::scene::Scene;
+use crate::sim::driver::Simulation;
+use crate::sim::SimState;
+use crate::transfer::Transfer;
+
+/// Version of the on-disk format.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// How one training sequence differs from the scene as loaded.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Variation {
+    /// Garments (patterns and meshes) moved by this, m.
+    pub garment_offset_m: [f64; 3],
+    /// Colliders moved by this, m.
+    pub collider_offset_m: [f64; 3],
+}
+
+impl Variation {
+    /// Applies the variation to `scene`.
+    pub fn apply(&self, scene: &mut Scene) {
+        let g = Vector3::from(self.garment_offset_m);
+        for garment in &mut scene.garments {
+            for p in &mut garment.panels {
+                p.placement.translation_m += g;
+            }
+        }
+        for c in &mut scene.cloths {
+            c.mesh.positions.iter_mut().for_each(|p| *p += g);
+        }
+        let o = Vector3::from(self.collider_offset_m);
+        if o != Vector3::zeros() {
+            scene.colliders = std::mem::take(&mut scene.colliders)
+                .into_iter()
+                .map(|c| c.transformed(1.0, o))
+                .collect();
+        }
+    }
+}
+
+/// What a data set holds (`manifest.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// [`FORMAT_VERSION`].
+    pub format_version: u32,
+    /// The scene file, as given.
+    pub scene: String,
+    /// Applied to the scene.
+    pub variation: Variation,
+    /// Requested coarse / fine edge lengths, m.
+    pub coarse_edge_m: f64,
+    /// Requested fine edge length, m.
+    pub fine_edge_m: f64,
+    /// Mean edge of the meshes actually made, m.
+    pub coarse_mean_edge_m: f64,
+    /// Mean fine edge, m.
+    pub fine_mean_edge_m: f64,
+    /// Time step, s.
+    pub dt_s: f64,
+    /// Steps per output frame.
+    pub steps_per_frame: usize,
+    /// Output frames per second.
+    pub fps: f64,
+    /// Frames asked for.
+    pub frames_requested: usize,
+    /// Frames complete on disk.
+    pub frames_done: usize,
+    /// Coarse / fine vertex and triangle counts.
+    pub coarse_vertices: usize,
+    /// Fine vertices.
+    pub fine_vertices: usize,
+    /// Coarse triangles.
+    pub coarse_triangles: usize,
+    /// Fine triangles.
+    pub fine_triangles: usize,
+    /// Panel names (index = panel id in `meshes.safetensors`), the same at both resolutions.
+    pub panels: Vec<String>,
+    /// Fabric preset names per garment part.
+    pub fabrics: Vec<String>,
+    /// Whether garments were sewn and settled before frame 0.
+    pub dressed: bool,
+    /// The clothsr revision that made it.
+    pub git_revision: String,
+}
+
+/// Options of [`generate`].
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Coarse edge, m (20 mm).
+    pub coarse_edge_m: f64,
+    /// Fine edge, m (2.5 mm).
+    pub fine_edge_m: f64,
+    /// Output frames.
+    pub frames: usize,
+    /// Sew and settle before frame 0 when the garments have seams.
+    pub dress: bool,
+    /// Cloth self-collision.
+    pub self_collision: bool,
+    /// Scene variation.
+    pub variation: Variation,
+}
+
+/// Progress of a run.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    /// Frames complete.
+    pub frames_done: usize,
+    /// Frames asked for.
+    pub frames: usize,
+}
+
+fn frame_path(dir: &Path, k: usize) -> PathBuf {
+    dir.join("frames").join(format!("frame_{k:05}.safetensors"))
+}
+
+fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
+    x.iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
+}
+
+fn flat64(x: &[Vector3<f64>]) -> Vec<f64> {
+    x.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
+}
+
+fn unflat(v: &[f64]) -> Vec<Vector3<f64>> {
+    v.chunks_exact(3)
+        .map(|c| Vector3::new(c[0], c[1], c[2]))
+        .collect()
+}
+
+fn write_meshes(path: &Path, coarse: &ClothMesh, fine: &ClothMesh) -> Result<()> {
+    let mut w = TensorWriter::new();
+    for (r, m) in [("coarse", coarse), ("fine", fine)] {
+        let mat: Vec<f64> = m.material.iter().flat_map(|p| [p.x, p.y]).collect();
+        w.f64(&format!("{r}_material"), &[m.num_vertices(), 2], &mat);
+        w.u32(
+            &format!("{r}_triangles"),
+            &[m.triangles.len(), 3],
+            m.triangles.as_flattened(),
+        );
+        w.u32(
+            &format!("{r}_panel"),
+            &[m.num_vertices()],
+            &m.panel_of_vertex,
+        );
+        w.u32(
+            &format!("{r}_seams"),
+            &[m.seam_pairs.len(), 2],
+            m.seam_pairs.as_flattened(),
+        );
+    }
+    w.write(path)
+}
+
+/// Generates (or resumes) a data set in `dir` for `scene` (loaded from `scene_name`).
+pub fn generate(
+    scene: &Scene,
+    scene_name: &str,
+    opts: &Options,
+    dir: &Path,
+    mut progress: impl FnMut(Progress),
+) -> Result<Manifest> {
+    let mut scene = scene.clone();
+    opts.variation.apply(&mut scene);
+    let self_collision = opts.self_collision;
+    let mut fine = Simulation::new(&scene, opts.fine_edge_m, |p| {
+        p.collision.self_collision = self_collision
+    })?;
+    let mut coarse = Simulation::new(&scene, opts.coarse_edge_m, |p| {
+        p.collision.self_collision = self_collision
+    })?;
+    let (cm, fm) = (&coarse.sim.model.mesh, &fine.sim.model.mesh);
+    if cm.panel_names != fm.panel_names {
+        return Err(Error::Invalid(
+            "the coarse and fine meshes have different panels".into(),
+        ));
+    }
+    let transfer = Transfer::new(cm, fm)?;
+    let dressed = opts.dress && !fm.seam_pairs.is_empty();
+    let mut manifest = Manifest {
+        format_version: FORMAT_VERSION,
+        scene: scene_name.to_string(),
+        variation: opts.variation,
+        coarse_edge_m: opts.coarse_edge_m,
+        fine_edge_m: opts.fine_edge_m,
+        coarse_mean_edge_m: coarse.edge_m,
+        fine_mean_edge_m: fine.edge_m,
+        dt_s: fine.sim.params.dt_s,
+        steps_per_frame: fine.steps_per_frame,
+        fps: fine.fps,
+        frames_requested: opts.frames,
+        frames_done: 0,
+        coarse_vertices: cm.num_vertices(),
+        fine_vertices: fm.num_vertices(),
+        coarse_triangles: cm.triangles.len(),
+        fine_triangles: fm.triangles.len(),
+        panels: fm.panel_names.clone(),
+        fabrics: fine
+            .sim
+            .model
+            .parts
+            .iter()
+            .map(|p| p.fabric.name.clone())
+            .collect(),
+        dressed,
+        git_revision: env!("CLOTHSR_GIT_REVISION").to_string(),
+    };
+    let manifest_path = dir.join("manifest.json");
+    std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
+
+    // Resume when a compatible run is on disk.
+    let mut start_frame = 0;
+    if manifest_path.exists() {
+        let text =
+            std::fs::read_to_string(&manifest_path).map_err(|e| Error::io(&manifest_path, e))?;
+        let old: Manifest = serde_json::from_str(&text)
+            .map_err(|e| Error::bad_input(&manifest_path, e.to_string()))?;
+        let same = Manifest {
+            frames_done: old.frames_done,
+            frames_requested: old.frames_requested,
+            git_revision: old.git_revision.clone(),
+            ..manifest.clone()
+        };
+        if same != old {
+            return Err(Error::bad_input(
+                &manifest_path,
+                "a different data set is already here (scene, variation, resolutions or meshes \
+                 differ); choose another directory",
+            ));
+        }
+        start_frame = old.frames_done;
+    }
+    let int_of = |s: &SimState| SimState {
+        x: transfer.downsample(&s.x),
+        v: transfer.downsample(&s.v),
+        t_s: s.t_s,
+    };
+    if start_frame > 0 {
+        let path = frame_path(dir, start_frame);
+        let r = TensorReader::open(&path)?;
+        let x = unflat(&r.f64("resume_fine_x")?.1);
+        let v = unflat(&r.f64("resume_fine_v")?.1);
+        if x.len() != fm.num_vertices() || v.len() != x.len() {
+            return Err(Error::bad_input(
+                &path,
+                "resume state has the wrong vertex count",
+            ));
+        }
+        fine.state.x = x;
+        fine.state.v = v;
+        fine.state.t_s += (start_frame * fine.steps_per_frame) as f64 * fine.sim.params.dt_s;
+        fine.sim.set_seam_rest(&r.f64("resume_fine_seam_rest")?.1)?;
+        coarse
+            .sim
+            .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
+    } else {
+        if dressed {
+            fine.dress(2.0, 0.3, 1e-3)?;
+        }
+        let rest: Vec<f64> = {
+            let int = int_of(&fine.state);
+            coarse
+                .sim
+                .model
+                .mesh
+                .seam_pairs
+                .iter()
+                .zip(coarse.sim.seam_rest())
+                .map(|(p, r)| r.min((int.x[p[0] as usize] - int.x[p[1] as usize]).norm()))
+                .collect()
+        };
+        coarse.sim.set_seam_rest(&rest)?;
+        write_meshes(
+            &dir.join("meshes.safetensors"),
+            &coarse.sim.model.mesh,
+            &fine.sim.model.mesh,
+        )?;
+        crate::io::write_atomic(&manifest_path, &manifest_json(&manifest)?)?;
+    }
+    manifest.frames_done = start_frame;
+    progress(Progress {
+        frames_done: start_frame,
+        frames: opts.frames,
+    });
+    let (nc, s) = (coarse.sim.model.num_vertices(), fine.steps_per_frame);
+    let mut prev_int = int_of(&fine.state);
+    for k in start_frame + 1..=opts.frames {
+        let mut buf: [Vec<f32>; 4] = std::array::from_fn(|_| Vec::with_capacity(s * nc * 3));
+        for _ in 0..s {
+            fine.step()?;
+            let int = int_of(&fine.state);
+            let (c, _) = coarse.step_from(&prev_int)?;
+            buf[0].extend(flat32(&int.x));
+            buf[1].extend(flat32(&int.v));
+            buf[2].extend(flat32(&c.x));
+            buf[3].extend(flat32(&c.v));
+            prev_int = int;
+        }
+        let nf = fine.state.x.len();
+        let mut w = TensorWriter::new();
+        for (name, data) in ["int_x", "int_v", "coarse_x", "coarse_v"].iter().zip(&buf) {
+            w.f32(name, &[s, nc, 3], data);
+        }
+        w.f32("fine_x", &[nf, 3], &flat32(&fine.state.x))
+            .f32("fine_v", &[nf, 3], &flat32(&fine.state.v))
+            .f64("resume_fine_x", &[nf, 3], &flat64(&fine.state.x))
+            .f64("resume_fine_v", &[nf, 3], &flat64(&fine.state.v))
+            .f64(
+                "resume_fine_seam_rest",
+                &[fine.sim.seam_rest().len()],
+                fine.sim.seam_rest(),
+            )
+            .f64(
+                "resume_coarse_seam_rest",
+                &[coarse.sim.seam_rest().len()],
+                coarse.sim.seam_rest(),
+            );
+        w.write(&frame_path(dir, k))?;
+        manifest.frames_done = k;
+        crate::io::write_atomic(&manifest_path, &manifest_json(&manifest)?)?;
+        progress(Progress {
+            frames_done: k,
+            frames: opts.frames,
+        });
+    }
+    Ok(manifest)
+}
+
+fn manifest_json(m: &Manifest) -> Result<Vec<u8>> {
+    serde_json::to_vec_pretty(m).map_err(|e| Error::Invalid(format!("manifest: {e}")))
+}
+
+/// A data set's manifest.
+pub fn read_manifest(dir: &Path) -> Result<Manifest> {
+    let p = dir.join("manifest.json");
+    let text = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
+    serde_json::from_str(&text).map_err(|e| Error::bad_input(&p, e.to_string()))
+}
+
+/// One frame's arrays: (int_x, coarse_x) as (steps, Nc, 3) and fine_x as (Nf, 3), f32.
+pub fn read_frame_positions(dir: &Path, k: usize) -> Result<FramePositions> {
+    let r = TensorReader::open(&frame_path(dir, k))?;
+    Ok(FramePositions {
+        int_x: r.f32("int_x")?,
+        coarse_x: r.f32("coarse_x")?,
+        fine_x: r.f32("fine_x")?,
+    })
+}
+
+/// Positions stored for one frame, with their shapes.
+#[derive(Debug, Clone)]
+pub struct FramePositions {
+    /// M_int per step.
+    pub int_x: (Vec<usize>, Vec<f32>),
+    /// M_c per step.
+    pub coarse_x: (Vec<usize>, Vec<f32>),
+    /// M_f at the frame's end.
+    pub fine_x: (Vec<usize>, Vec<f32>),
+}
