@@ -360,33 +360,21 @@ impl Normalisation {
 
     /// Metres to normalised units, in place, on masked pixels.
     pub fn normalise(&self, map: &mut CoordMap) {
-        for c in 0..3 {
-            let mut ch = map.image.index_axis_mut(ndarray::Axis(0), c);
-            ndarray::Zip::from(&mut ch)
-                .and(&map.mask)
-                .for_each(|v, &m| {
-                    *v = if m {
-                        (*v - self.min[c]) / self.range[c]
-                    } else {
-                        0.0
-                    };
-                });
-        }
+        self.map_masked(map, |v, c| (v - self.min[c]) / self.range[c]);
     }
 
     /// Normalised units back to metres, in place, on masked pixels.
     pub fn denormalise(&self, map: &mut CoordMap) {
+        self.map_masked(map, |v, c| v * self.range[c] + self.min[c]);
+    }
+
+    /// Applies `f(value, channel)` to masked pixels and zeroes the others.
+    fn map_masked(&self, map: &mut CoordMap, f: impl Fn(f32, usize) -> f32) {
         for c in 0..3 {
             let mut ch = map.image.index_axis_mut(ndarray::Axis(0), c);
             ndarray::Zip::from(&mut ch)
                 .and(&map.mask)
-                .for_each(|v, &m| {
-                    *v = if m {
-                        *v * self.range[c] + self.min[c]
-                    } else {
-                        0.0
-                    };
-                });
+                .for_each(|v, &m| *v = if m { f(*v, c) } else { 0.0 });
         }
     }
 

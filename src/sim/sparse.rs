@@ -338,23 +338,29 @@ impl Pcg {
 mod tests {
     use super::*;
 
+    /// A 1D chain of `n` vertices: springs `k` between neighbours plus `mass` on the diagonal.
+    fn chain(n: u32, k: &Matrix3<f64>, mass: f64) -> BlockCsr {
+        let mut a = BlockCsr::with_pattern(n as usize, (0..n - 1).map(|i| (i, i + 1)));
+        for i in 0..n - 1 {
+            a.add(i, i, k);
+            a.add(i + 1, i + 1, k);
+            a.add(i, i + 1, &-k);
+            a.add(i + 1, i, &-k);
+        }
+        for i in 0..n {
+            a.add(i, i, &(Matrix3::identity() * mass));
+        }
+        a
+    }
+
     #[test]
     fn single_precision_products_of_a_large_matrix_still_solve_to_tolerance() {
         // A chain long enough for the f32 path; the true (f64) residual must meet the tolerance
         // up to the rounding of the blocks.
         let n = (SINGLE_PRECISION_FROM_BLOCKS / 3 + 10) as u32;
-        let mut a = BlockCsr::with_pattern(n as usize, (0..n - 1).map(|i| (i, i + 1)));
-        assert!(a.nnz_blocks() >= SINGLE_PRECISION_FROM_BLOCKS);
         let k = Matrix3::new(2.0, 0.3, 0.0, 0.3, 1.0, 0.1, 0.0, 0.1, 1.5);
-        for i in 0..n - 1 {
-            a.add(i, i, &k);
-            a.add(i + 1, i + 1, &k);
-            a.add(i, i + 1, &-k);
-            a.add(i + 1, i, &-k);
-        }
-        for i in 0..n {
-            a.add(i, i, &(Matrix3::identity() * 0.7));
-        }
+        let a = chain(n, &k, 0.7);
+        assert!(a.nnz_blocks() >= SINGLE_PRECISION_FROM_BLOCKS);
         let free = vec![true; n as usize];
         let b: Vec<Vector3<f64>> = (0..n)
             .map(|i| Vector3::new((i as f64 * 0.01).sin(), 1.0, (i % 7) as f64))
@@ -387,17 +393,11 @@ mod tests {
     fn pcg_solves_a_spd_system_with_extras_and_fixed_rows() {
         // A 1D chain Laplacian + mass, with one long-range extra coupling, vertex 0 fixed.
         let n = 50u32;
-        let mut a = BlockCsr::with_pattern(n as usize, (0..n - 1).map(|i| (i, i + 1)));
-        let k = Matrix3::from_diagonal(&Vector3::new(1.0, 2.0, 3.0));
-        for i in 0..n - 1 {
-            a.add(i, i, &k);
-            a.add(i + 1, i + 1, &k);
-            a.add(i, i + 1, &-k);
-            a.add(i + 1, i, &-k);
-        }
-        for i in 0..n {
-            a.add(i, i, &(Matrix3::identity() * 0.1));
-        }
+        let mut a = chain(
+            n,
+            &Matrix3::from_diagonal(&Vector3::new(1.0, 2.0, 3.0)),
+            0.1,
+        );
         let c = Matrix3::identity() * 0.5;
         a.add(3, 40, &-c);
         a.add(40, 3, &-c);
