@@ -9,7 +9,6 @@ mod samples;
 mod simulate;
 
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
@@ -45,8 +44,9 @@ enum Command {
     Dataset(dataset::Args),
 }
 
-/// Runs the command line; errors are printed by `main` with their causes.
-pub fn run() -> anyhow::Result<ExitCode> {
+/// Runs the command line and returns the exit code; errors are printed by `main` with their
+/// causes.
+pub fn run() -> anyhow::Result<i32> {
     let cli = Cli::parse();
     let default = match cli.verbose {
         0 => "info",
@@ -69,7 +69,7 @@ pub fn run() -> anyhow::Result<ExitCode> {
         Command::Bench(a) => bench::run(a),
         Command::Dataset(a) => dataset::run(a),
     }?;
-    Ok(ExitCode::SUCCESS)
+    Ok(0)
 }
 
 /// The fabric named on the command line.
