@@ -34,6 +34,7 @@ fn opts(frames: usize) -> Options {
         variation: Variation {
             garment_offset_m: [0.0, 0.01, 0.0],
             collider_offset_m: [0.0, 0.0, 0.0],
+            ..Variation::default()
         },
     }
 }

@@ -40,6 +40,12 @@ pub struct Args {
     /// Variation: move the colliders by x,y,z metres.
     #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
     collider_offset: Option<Vec<f64>>,
+    /// Variation: turn the garments about the vertical axis, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    garment_yaw_deg: f64,
+    /// Variation: start animated colliders (an avatar's clip) this many seconds in.
+    #[arg(long, default_value_t = 0.0)]
+    clip_start_s: f64,
     /// Disable cloth self-collision.
     #[arg(long)]
     no_self_collision: bool,
@@ -69,6 +75,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.fine_mm
     );
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
+    anyhow::ensure!(
+        args.garment_yaw_deg.is_finite()
+            && args.clip_start_s.is_finite()
+            && args.clip_start_s >= 0.0,
+        "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
+    );
     let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
     for c in &args.collider {
         scene.add_collider_file(c)?;
@@ -85,6 +97,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         variation: Variation {
             garment_offset_m: triple(&args.garment_offset)?,
             collider_offset_m: triple(&args.collider_offset)?,
+            garment_yaw_deg: args.garment_yaw_deg,
+            clip_start_s: args.clip_start_s,
         },
     };
     let bar = ProgressBar::new(args.frames as u64);

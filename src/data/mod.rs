@@ -41,11 +41,41 @@ pub struct Variation {
     pub garment_offset_m: [f64; 3],
     /// Colliders moved by this, m.
     pub collider_offset_m: [f64; 3],
+    /// Garments turned about the vertical (y) axis through the origin, degrees.
+    #[serde(default)]
+    pub garment_yaw_deg: f64,
+    /// Animated colliders start this far into their clip, s (another stretch of the motion).
+    #[serde(default)]
+    pub clip_start_s: f64,
 }
 
 impl Variation {
     /// Applies the variation to `scene`.
     pub fn apply(&self, scene: &mut Scene) {
+        if self.garment_yaw_deg != 0.0 {
+            let r = nalgebra::Rotation3::from_axis_angle(
+                &Vector3::y_axis(),
+                self.garment_yaw_deg.to_radians(),
+            );
+            for garment in &mut scene.garments {
+                for p in &mut garment.panels {
+                    let d = p.placement.rotation_xyz_deg.map(f64::to_radians);
+                    // R = Rz·Ry·Rx is nalgebra's from_euler_angles(roll = x, pitch = y, yaw = z).
+                    let old = nalgebra::Rotation3::from_euler_angles(d.x, d.y, d.z);
+                    let (x, y, z) = (r * old).euler_angles();
+                    p.placement.rotation_xyz_deg = Vector3::new(x, y, z).map(f64::to_degrees);
+                    p.placement.translation_m = r * p.placement.translation_m;
+                }
+            }
+            for c in &mut scene.cloths {
+                c.mesh.positions.iter_mut().for_each(|p| *p = r * *p);
+            }
+        }
+        if self.clip_start_s != 0.0 {
+            for c in &mut scene.colliders {
+                c.times_s.iter_mut().for_each(|t| *t -= self.clip_start_s);
+            }
+        }
         let g = Vector3::from(self.garment_offset_m);
         for garment in &mut scene.garments {
             for p in &mut garment.panels {
@@ -384,4 +414,45 @@ pub struct FramePositions {
     pub coarse_x: (Vec<usize>, Vec<f32>),
     /// M_f at the frame's end.
     pub fine_x: (Vec<usize>, Vec<f32>),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::garment::Fabric;
+    use crate::mesh::{mesh_garment, MeshOptions};
+    use crate::scene::samples::flat_sheet;
+
+    #[test]
+    fn yaw_turns_garments_about_the_vertical_and_clip_start_shifts_colliders() {
+        let mut g = flat_sheet(
+            "s",
+            0.2,
+            0.1,
+            Vector3::new(0.3, 1.0, 0.0),
+            Fabric::default(),
+        );
+        g.panels[0].placement.rotation_xyz_deg = Vector3::new(-90.0, 20.0, 10.0);
+        let mut scene = Scene {
+            garments: vec![g.clone()],
+            ..Scene::default()
+        };
+        let mut ball = crate::scene::Collider::sphere("b", Vector3::zeros(), 0.1, 1);
+        ball.times_s = vec![0.0, 1.0];
+        ball.frames.push(ball.frames[0].clone());
+        scene.colliders.push(ball);
+        let v = Variation {
+            garment_yaw_deg: 90.0,
+            clip_start_s: 0.5,
+            ..Variation::default()
+        };
+        v.apply(&mut scene);
+        let before = mesh_garment(&g, &MeshOptions::with_edge(0.05)).expect("mesh");
+        let after = mesh_garment(&scene.garments[0], &MeshOptions::with_edge(0.05)).expect("mesh");
+        let r = nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), 90f64.to_radians());
+        for (a, b) in after.positions.iter().zip(&before.positions) {
+            assert!((a - r * b).norm() < 1e-9, "{a:?} vs {:?}", r * b);
+        }
+        assert_eq!(scene.colliders[0].times_s, vec![-0.5, 0.5]);
+    }
 }
