@@ -269,10 +269,7 @@ pub fn generate(
     // Resume when a compatible run is on disk.
     let mut start_frame = 0;
     if manifest_path.exists() {
-        let text =
-            std::fs::read_to_string(&manifest_path).map_err(|e| Error::io(&manifest_path, e))?;
-        let old: Manifest = serde_json::from_str(&text)
-            .map_err(|e| Error::bad_input(&manifest_path, e.to_string()))?;
+        let old = read_manifest(dir)?;
         let same = Manifest {
             frames_done: old.frames_done,
             frames_requested: old.frames_requested,

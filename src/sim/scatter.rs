@@ -165,27 +165,26 @@ impl<const N: usize, const NN: usize> ColouredElements<N, NN> {
         }
         energy
     }
+}
 
-    /// Runs `f(i)` for every vertex in parallel with exclusive access to gradient entry i and
-    /// diagonal block i of `matrix`; returns the sum of what it returns.
-    pub fn for_each_vertex(
-        matrix: &mut BlockCsr,
-        grad: &mut [Vector3<f64>],
-        f: impl Fn(usize, &mut Vector3<f64>, &mut Matrix3<f64>) -> f64 + Sync,
-    ) -> f64 {
-        let n = matrix.n();
-        assert_eq!(grad.len(), n, "gradient of another mesh");
-        let slots: Vec<usize> = (0..n as u32).map(|i| matrix.diag_index(i)).collect();
-        let blocks = DisjointWriter::new(&mut matrix.blocks);
-        grad.par_iter_mut()
-            .enumerate()
-            .map(|(i, g)| {
-                // SAFETY: diagonal slots of distinct rows are distinct.
-                let d = unsafe { blocks.get(slots[i]) };
-                f(i, g, d)
-            })
-            .sum()
-    }
+/// Runs `f(i)` for every vertex in parallel with exclusive access to gradient entry i and
+/// diagonal block i of `matrix`; returns the sum of what it returns.
+pub fn for_each_vertex(
+    matrix: &mut BlockCsr,
+    grad: &mut [Vector3<f64>],
+    f: impl Fn(usize, &mut Vector3<f64>, &mut Matrix3<f64>) -> f64 + Sync,
+) -> f64 {
+    let (blocks, diag) = matrix.blocks_and_diag_mut();
+    assert_eq!(grad.len(), diag.len(), "gradient of another mesh");
+    let blocks = DisjointWriter::new(blocks);
+    grad.par_iter_mut()
+        .enumerate()
+        .map(|(i, g)| {
+            // SAFETY: diagonal slots of distinct rows are distinct.
+            let d = unsafe { blocks.get(diag[i]) };
+            f(i, g, d)
+        })
+        .sum()
 }
 
 /// Shared mutable access to a slice for writers that never touch the same entry at the same

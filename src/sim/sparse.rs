@@ -72,6 +72,11 @@ impl BlockCsr {
         self.diag[i as usize]
     }
 
+    /// The block values (mutable) together with every row's diagonal slot.
+    pub fn blocks_and_diag_mut(&mut self) -> (&mut [Matrix3<f64>], &[usize]) {
+        (&mut self.blocks, &self.diag)
+    }
+
     /// Zeroes all values and drops extra blocks.
     pub fn clear(&mut self) {
         self.blocks

@@ -18,7 +18,7 @@ use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
 use super::energy::bending::{self, BendingHessian};
 use super::energy::{sewing, Mat12, Vec12, Vec9};
 use super::model::ClothModel;
-use super::scatter::ColouredElements;
+use super::scatter::{for_each_vertex, ColouredElements};
 
 /// Triangles (3 vertices, 9 blocks) and hinges (4 vertices, 16 blocks) for the coloured scatter.
 type MembraneSet = ColouredElements<3, 9>;
@@ -402,20 +402,9 @@ impl Simulator {
     ) -> Result<(SimState, StepStats)> {
         let mut stats = StepStats::default();
         let h = self.params.dt_s;
-        let next = match self.serial.clone() {
-            Some(pool) => pool.install(|| {
-                self.advance(
-                    state,
-                    colliders_start,
-                    colliders_end,
-                    0.0,
-                    1.0,
-                    h,
-                    0,
-                    &mut stats,
-                )
-            })?,
-            None => self.advance(
+        let pool = self.serial.clone();
+        let mut run = || {
+            self.advance(
                 state,
                 colliders_start,
                 colliders_end,
@@ -424,7 +413,11 @@ impl Simulator {
                 h,
                 0,
                 &mut stats,
-            )?,
+            )
+        };
+        let next = match pool {
+            Some(pool) => pool.install(run)?,
+            None => run()?,
         };
         Ok((next, stats))
     }
@@ -607,14 +600,13 @@ impl Simulator {
         self.matrix.clear();
         // Inertia plus air damping ½ (α/h) m ‖x − xₙ‖² = ½ h⁻² (αh) m ‖x − xₙ‖².
         let air = self.params.air_damping_per_s * h;
-        let mut energy =
-            MembraneSet::for_each_vertex(&mut self.matrix, &mut self.grad, |i, g, d| {
-                let m = model.mass_kg[i];
-                let (a, b) = (x[i] - x_tilde[i], x[i] - x_n[i]);
-                *g = (a + b * air) * (m * inv_h2);
-                *d += Matrix3::identity() * (m * inv_h2 * (1.0 + air));
-                0.5 * m * inv_h2 * (a.norm_squared() + air * b.norm_squared())
-            });
+        let mut energy = for_each_vertex(&mut self.matrix, &mut self.grad, |i, g, d| {
+            let m = model.mass_kg[i];
+            let (a, b) = (x[i] - x_tilde[i], x[i] - x_n[i]);
+            *g = (a + b * air) * (m * inv_h2);
+            *d += Matrix3::identity() * (m * inv_h2 * (1.0 + air));
+            0.5 * m * inv_h2 * (a.norm_squared() + air * b.norm_squared())
+        });
         // Elements by colour: those of one colour share no vertex, so their blocks are disjoint.
         energy += self.mem_set.add(&mut self.matrix, &mut self.grad, |k| {
             let el = &model.membranes[k];

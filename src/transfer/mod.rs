@@ -25,9 +25,10 @@ pub struct TriLocator {
     cell_m: f64,
     nx: usize,
     ny: usize,
-    /// Triangle indices (into the mesh) per cell, row-major.
+    /// Indices into `tris` per cell, row-major.
     cells: Vec<Vec<u32>>,
-    /// Material corners of every triangle of the mesh (only this panel's are bucketed).
+    /// The panel's triangles (indices into the mesh) and their material corners.
+    tris: Vec<u32>,
     corners: Vec<[Vector2<f64>; 3]>,
 }
 
@@ -69,44 +70,41 @@ fn closest_barycentric(p: &Vector2<f64>, t: &[Vector2<f64>; 3]) -> [f64; 3] {
 impl TriLocator {
     /// Buckets the triangles of `mesh` whose vertices belong to `panel`.
     pub fn new(mesh: &ClothMesh, panel: u32) -> TriLocator {
-        let corners: Vec<[Vector2<f64>; 3]> = mesh
-            .triangles
-            .iter()
-            .map(|t| t.map(|v| mesh.material[v as usize]))
-            .collect();
-        let mine: Vec<u32> = (0..mesh.triangles.len() as u32)
+        let tris: Vec<u32> = (0..mesh.triangles.len() as u32)
             .filter(|&t| mesh.panel_of_vertex[mesh.triangles[t as usize][0] as usize] == panel)
+            .collect();
+        let corners: Vec<[Vector2<f64>; 3]> = tris
+            .iter()
+            .map(|&t| mesh.triangles[t as usize].map(|v| mesh.material[v as usize]))
             .collect();
         let (mut lo, mut hi) = (
             Vector2::repeat(f64::INFINITY),
             Vector2::repeat(f64::NEG_INFINITY),
         );
         let mut edge_sum = 0.0;
-        for &t in &mine {
-            let c = &corners[t as usize];
+        for c in &corners {
             for p in c {
                 lo = lo.inf(p);
                 hi = hi.sup(p);
             }
             edge_sum += (c[1] - c[0]).norm();
         }
-        if mine.is_empty() {
+        if corners.is_empty() {
             lo = Vector2::zeros();
             hi = Vector2::zeros();
         }
         // Cells about two edges wide: a handful of triangles each.
-        let cell_m = (2.0 * edge_sum / mine.len().max(1) as f64).max(1e-6);
+        let cell_m = (2.0 * edge_sum / corners.len().max(1) as f64).max(1e-6);
         let nx = (((hi.x - lo.x) / cell_m).floor() as usize + 1).min(4096);
         let ny = (((hi.y - lo.y) / cell_m).floor() as usize + 1).min(4096);
         let mut cells = vec![Vec::new(); nx * ny];
         let cell_of =
             |p: f64, o: f64, n: usize| (((p - o) / cell_m).floor().max(0.0) as usize).min(n - 1);
-        for &t in &mine {
-            let c = &corners[t as usize];
+        for (k, c) in corners.iter().enumerate() {
             let (a, b) = (c[0].inf(&c[1]).inf(&c[2]), c[0].sup(&c[1]).sup(&c[2]));
             for iy in cell_of(a.y, lo.y, ny)..=cell_of(b.y, lo.y, ny) {
                 for ix in cell_of(a.x, lo.x, nx)..=cell_of(b.x, lo.x, nx) {
-                    cells[iy * nx + ix].push(t);
+                    cells[iy * nx + ix].push(k as u32);
                 }
             }
         }
@@ -116,6 +114,7 @@ impl TriLocator {
             nx,
             ny,
             cells,
+            tris,
             corners,
         }
     }
@@ -141,7 +140,7 @@ impl TriLocator {
                         let b = barycentric(p, c);
                         let outside = -b.iter().copied().fold(0.0, f64::min);
                         if outside <= 1e-12 {
-                            return Some((t, b));
+                            return Some((self.tris[t as usize], b));
                         }
                         let w = closest_barycentric(p, c);
                         let q = c[0] * w[0] + c[1] * w[1] + c[2] * w[2];
@@ -159,14 +158,14 @@ impl TriLocator {
                 }
             }
         }
-        best.map(|(_, t)| {
-            let c = &self.corners[t as usize];
+        best.map(|(_, k)| {
+            let c = &self.corners[k as usize];
             let b = if clamp {
                 closest_barycentric(p, c)
             } else {
                 barycentric(p, c)
             };
-            (t, b)
+            (self.tris[k as usize], b)
         })
     }
 }
