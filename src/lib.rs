@@ -7,10 +7,11 @@
 //! 2. [`garment`] holds panels, seams and fabric; [`mesh`] meshes them at the coarse (20 mm) and
 //!    fine (2.5 mm) resolutions in one shared material space;
 //! 3. [`sim`] simulates cloth; [`transfer`] moves states between the coarse and fine meshes;
-//!    [`msr`] turns meshes into coordinate maps and patches and back; [`data`] makes training
-//!    data (the corrector follows);
+//!    [`data`] makes training data; [`corrector`] turns each coarse step M_c into M_int and the
+//!    simulator goes on from it; [`msr`] turns meshes into coordinate maps and patches and back;
 //! 4. [`io`] writes time-sampled USD.
 
+pub mod corrector;
 pub mod data;
 pub mod error;
 pub mod garment;

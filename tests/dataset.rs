@@ -36,6 +36,8 @@ fn opts(frames: usize) -> Options {
             collider_offset_m: [0.0, 0.0, 0.0],
             ..Variation::default()
         },
+        fast: false,
+        source: None,
     }
 }
 

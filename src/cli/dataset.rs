@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clothsr::data::{generate, Options, Variation};
+use anyhow::Context;
+use clothsr::data::{generate, Options, SceneSource, Variation};
 use clothsr::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -52,6 +53,14 @@ pub struct Args {
     /// Skip sewing and settling before frame 0.
     #[arg(long)]
     no_dress: bool,
+    /// One Newton iteration per step when its full step is accepted (Baraff & Witkin style),
+    /// at both resolutions; the corrector then runs beside the same fast solver.
+    #[arg(long)]
+    fast: bool,
+}
+
+fn absolute(p: &std::path::Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(p).with_context(|| format!("{}: cannot resolve the path", p.display()))
 }
 
 fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
@@ -100,6 +109,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             garment_yaw_deg: args.garment_yaw_deg,
             clip_start_s: args.clip_start_s,
         },
+        fast: args.fast,
+        source: Some(SceneSource {
+            scene: absolute(&args.scene)?,
+            colliders: args
+                .collider
+                .iter()
+                .map(|c| absolute(c))
+                .collect::<anyhow::Result<_>>()?,
+            avatar: args.avatar.as_deref().map(absolute).transpose()?,
+            fabric: args.fabric.clone(),
+        }),
     };
     let bar = ProgressBar::new(args.frames as u64);
     bar.set_style(

@@ -5,8 +5,10 @@ mod convert;
 mod dataset;
 mod inspect;
 mod mesh;
+mod rollout;
 mod samples;
 mod simulate;
+mod train;
 
 use std::path::{Path, PathBuf};
 
@@ -42,6 +44,11 @@ enum Command {
     /// Training data: a fine simulation, its coarse downsampling (M_int) and one coarse step
     /// from each (M_c).
     Dataset(dataset::Args),
+    /// Train a network (the corrector) on data sets.
+    Train(train::Args),
+    /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
+    /// alone and the corrector without interleaving.
+    Rollout(rollout::Args),
 }
 
 /// Runs the command line and returns the exit code; errors are printed by `main` with their
@@ -68,6 +75,8 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Simulate(a) => simulate::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Dataset(a) => dataset::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Rollout(a) => rollout::run(a),
     }?;
     Ok(0)
 }

@@ -138,6 +138,47 @@ pub struct Manifest {
     pub dressed: bool,
     /// The clothsr revision that made it.
     pub git_revision: String,
+    /// One Newton iteration per step when accepted ([`crate::sim::SimParams::newton_exact`]
+    /// off), for both resolutions; the corrector must run beside the same solver.
+    #[serde(default)]
+    pub fast: bool,
+    /// Cloth self-collision at both resolutions.
+    #[serde(default = "yes")]
+    pub self_collision: bool,
+    /// The files the scene was loaded from, when it came from files: training reloads it to
+    /// run the coarse simulator (rollouts).
+    #[serde(default)]
+    pub source: Option<SceneSource>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// Where a data set's scene came from, so that tools can load it again.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneSource {
+    /// The scene file (USD, GarmentCode JSON, OBJ), absolute.
+    pub scene: PathBuf,
+    /// Extra collider files, absolute.
+    pub colliders: Vec<PathBuf>,
+    /// The avatar file, absolute.
+    pub avatar: Option<PathBuf>,
+    /// Fabric preset for garments without one.
+    pub fabric: String,
+}
+
+impl SceneSource {
+    /// Loads the scene as the data set saw it before its variation.
+    pub fn load(&self) -> Result<Scene> {
+        let fabric = crate::garment::Fabric::preset(&self.fabric)
+            .ok_or_else(|| Error::Invalid(format!("unknown fabric preset '{}'", self.fabric)))?;
+        let mut scene = Scene::load(&self.scene, &fabric)?;
+        for c in self.colliders.iter().chain(&self.avatar) {
+            scene.add_collider_file(c)?;
+        }
+        Ok(scene)
+    }
 }
 
 /// Options of [`generate`].
@@ -155,6 +196,10 @@ pub struct Options {
     pub self_collision: bool,
     /// Scene variation.
     pub variation: Variation,
+    /// One Newton iteration per step when accepted (see [`Manifest::fast`]).
+    pub fast: bool,
+    /// The scene's files, recorded in the manifest when given.
+    pub source: Option<SceneSource>,
 }
 
 /// Progress of a run.
@@ -220,13 +265,9 @@ pub fn generate(
 ) -> Result<Manifest> {
     let mut scene = scene.clone();
     opts.variation.apply(&mut scene);
-    let self_collision = opts.self_collision;
-    let mut fine = Simulation::new(&scene, opts.fine_edge_m, |p| {
-        p.collision.self_collision = self_collision
-    })?;
-    let mut coarse = Simulation::new(&scene, opts.coarse_edge_m, |p| {
-        p.collision.self_collision = self_collision
-    })?;
+    let (self_collision, fast) = (opts.self_collision, opts.fast);
+    let mut fine = new_simulation(&scene, opts.fine_edge_m, self_collision, fast)?;
+    let mut coarse = new_simulation(&scene, opts.coarse_edge_m, self_collision, fast)?;
     let (cm, fm) = (&coarse.sim.model.mesh, &fine.sim.model.mesh);
     if cm.panel_names != fm.panel_names {
         return Err(Error::Invalid(
@@ -262,6 +303,9 @@ pub fn generate(
             .collect(),
         dressed,
         git_revision: env!("CLOTHSR_GIT_REVISION").to_string(),
+        fast,
+        self_collision,
+        source: opts.source.clone(),
     };
     let manifest_path = dir.join("manifest.json");
     std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
@@ -381,6 +425,50 @@ pub fn generate(
     Ok(manifest)
 }
 
+fn new_simulation(
+    scene: &Scene,
+    edge_m: f64,
+    self_collision: bool,
+    fast: bool,
+) -> Result<Simulation> {
+    Simulation::new(scene, edge_m, |p| {
+        p.collision.self_collision = self_collision;
+        p.newton_exact = !fast;
+    })
+}
+
+/// The coarse simulation a data set was made with: `scene` (as given to [`generate`], before
+/// the variation) with the manifest's variation, resolution and solver settings. Fails when
+/// the coarse mesh it makes differs from the one stored in `dir`. Seam rest lengths are those
+/// stored with frame `frame` (0: as meshed).
+pub fn coarse_simulation(scene: &Scene, dir: &Path, frame: usize) -> Result<Simulation> {
+    let m = read_manifest(dir)?;
+    let mut scene = scene.clone();
+    m.variation.apply(&mut scene);
+    let mut sim = new_simulation(&scene, m.coarse_edge_m, m.self_collision, m.fast)?;
+    let meshes_path = dir.join("meshes.safetensors");
+    let r = TensorReader::open(&meshes_path)?;
+    let (_, material) = r.f64("coarse_material")?;
+    let mesh = &sim.sim.model.mesh;
+    let same = material.len() == 2 * mesh.num_vertices()
+        && material
+            .chunks_exact(2)
+            .zip(&mesh.material)
+            .all(|(a, b)| (a[0] - b.x).abs() < 1e-9 && (a[1] - b.y).abs() < 1e-9);
+    if !same {
+        return Err(Error::bad_input(
+            &meshes_path,
+            "the scene meshes to a different coarse mesh than the one stored here",
+        ));
+    }
+    if frame > 0 {
+        let r = TensorReader::open(&frame_path(dir, frame))?;
+        sim.sim
+            .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
+    }
+    Ok(sim)
+}
+
 fn manifest_json(m: &Manifest) -> Result<Vec<u8>> {
     serde_json::to_vec_pretty(m).map_err(|e| Error::Invalid(format!("manifest: {e}")))
 }
@@ -399,6 +487,86 @@ pub fn read_frame_positions(dir: &Path, k: usize) -> Result<FramePositions> {
         int_x: r.f32("int_x")?,
         coarse_x: r.f32("coarse_x")?,
         fine_x: r.f32("fine_x")?,
+    })
+}
+
+/// The coarse mesh stored in a data set (positions are zero: the frames hold them), with the
+/// panel names of its manifest.
+pub fn read_coarse_mesh(dir: &Path, manifest: &Manifest) -> Result<ClothMesh> {
+    let path = dir.join("meshes.safetensors");
+    let r = TensorReader::open(&path)?;
+    let (_, material) = r.f64("coarse_material")?;
+    let (_, triangles) = r.u32("coarse_triangles")?;
+    let (_, panel_of_vertex) = r.u32("coarse_panel")?;
+    let (_, seams) = r.u32("coarse_seams")?;
+    let n = material.len() / 2;
+    let mesh = ClothMesh {
+        material: material
+            .chunks_exact(2)
+            .map(|c| nalgebra::Vector2::new(c[0], c[1]))
+            .collect(),
+        positions: vec![Vector3::zeros(); n],
+        triangles: triangles
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect(),
+        panel_of_vertex,
+        panel_names: manifest.panels.clone(),
+        seam_pairs: seams.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+    };
+    if n != manifest.coarse_vertices {
+        return Err(Error::bad_input(
+            &path,
+            format!(
+                "{n} coarse vertices, the manifest says {}",
+                manifest.coarse_vertices
+            ),
+        ));
+    }
+    mesh.validate().map_err(|e| e.in_file(&path))?;
+    Ok(mesh)
+}
+
+/// One frame's coarse arrays, each (steps, Nc, 3) f32 flattened: M_int and M_c per step.
+#[derive(Debug, Clone)]
+pub struct CoarseSteps {
+    /// M_int positions.
+    pub int_x: Vec<f32>,
+    /// M_int velocities.
+    pub int_v: Vec<f32>,
+    /// M_c positions.
+    pub coarse_x: Vec<f32>,
+    /// M_c velocities.
+    pub coarse_v: Vec<f32>,
+}
+
+/// Reads frame `k`'s coarse arrays, checking their shapes against the manifest and that every
+/// value is finite.
+pub fn read_coarse_steps(dir: &Path, manifest: &Manifest, k: usize) -> Result<CoarseSteps> {
+    let path = frame_path(dir, k);
+    let r = TensorReader::open(&path)?;
+    let want = vec![manifest.steps_per_frame, manifest.coarse_vertices, 3];
+    let get = |name: &str| -> Result<Vec<f32>> {
+        let (shape, v) = r.f32(name)?;
+        if shape != want {
+            return Err(Error::bad_input(
+                &path,
+                format!("'{name}' has shape {shape:?}, expected {want:?}"),
+            ));
+        }
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(Error::bad_input(
+                &path,
+                format!("'{name}' holds a non-finite value at {i}"),
+            ));
+        }
+        Ok(v)
+    };
+    Ok(CoarseSteps {
+        int_x: get("int_x")?,
+        int_v: get("int_v")?,
+        coarse_x: get("coarse_x")?,
+        coarse_v: get("coarse_v")?,
     })
 }
 

@@ -1,0 +1,189 @@
+//! `clothsr train corrector --data DIR… -o MODEL`: trains the corrector on data sets made by
+//! `clothsr dataset` (see [`clothsr::corrector::training`]).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clothsr::corrector::data::Sequence;
+use clothsr::corrector::training::{train, Progress, TrainSet, TrainingConfig};
+use clothsr::corrector::CorrectorConfig;
+use clothsr::data::coarse_simulation;
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Arguments of `train`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum What {
+    /// The GNN corrector (M_c → M_int).
+    Corrector(CorrectorArgs),
+}
+
+/// Arguments of `train corrector`.
+#[derive(Debug, clap::Args)]
+pub struct CorrectorArgs {
+    /// Data set directories (`clothsr dataset`); repeat for several sequences.
+    #[arg(long, required = true)]
+    data: Vec<PathBuf>,
+    /// Output model directory (an interrupted run there with the same settings resumes).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Train on frames 1..=N of each data set only (keep the rest for evaluation).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Phase-1 optimiser steps.
+    #[arg(long, default_value_t = 5000)]
+    steps: usize,
+    /// Samples per step.
+    #[arg(long, default_value_t = 4)]
+    batch: usize,
+    /// Learning rate at the first step.
+    #[arg(long, default_value_t = 1e-4)]
+    lr_start: f64,
+    /// Learning rate at the last phase-1 step (exponential decay).
+    #[arg(long, default_value_t = 1e-6)]
+    lr_end: f64,
+    /// Training noise, as a multiple of the data's RMS per-step position correction.
+    #[arg(long, default_value_t = 0.3)]
+    noise_ratio: f64,
+    /// Vertices per random sub-mesh patch (0: whole meshes).
+    #[arg(long, default_value_t = 0)]
+    patch_nodes: usize,
+    /// Phase-2 window-rollout optimiser steps (0: skip phase 2).
+    #[arg(long, default_value_t = 0)]
+    rollout_iters: usize,
+    /// Phase-2 window, steps.
+    #[arg(long, default_value_t = 8)]
+    window: usize,
+    /// Phase-2 learning rate.
+    #[arg(long, default_value_t = 1e-5)]
+    rollout_lr: f64,
+    /// Stop phase 2 once the mean loss of the last 20 windows is below this (0: never).
+    #[arg(long, default_value_t = 0.0)]
+    rollout_stop_loss: f64,
+    /// Latent width of every MLP.
+    #[arg(long, default_value_t = 64)]
+    latent: usize,
+    /// Message-passing blocks.
+    #[arg(long, default_value_t = 8)]
+    mp_steps: usize,
+    /// GATv2-style attention on the edge aggregation.
+    #[arg(long)]
+    attention: bool,
+    /// Random seed.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+}
+
+/// Runs `train`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.what {
+        What::Corrector(a) => corrector(a),
+    }
+}
+
+fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        a.steps > 0 || a.rollout_iters > 0,
+        "nothing to train: --steps and --rollout-iters are 0"
+    );
+    anyhow::ensure!(
+        a.latent > 0 && a.mp_steps > 0,
+        "--latent and --mp-steps must be at least 1"
+    );
+    let cfg = TrainingConfig::new(
+        CorrectorConfig::new()
+            .with_latent(a.latent)
+            .with_steps(a.mp_steps)
+            .with_attention(a.attention),
+    )
+    .with_steps(a.steps)
+    .with_batch(a.batch)
+    .with_lr_start(a.lr_start)
+    .with_lr_end(a.lr_end)
+    .with_noise_ratio(a.noise_ratio)
+    .with_patch_nodes(a.patch_nodes)
+    .with_rollout_iters(a.rollout_iters)
+    .with_window(a.window)
+    .with_rollout_lr(a.rollout_lr)
+    .with_rollout_stop_loss(a.rollout_stop_loss)
+    .with_seed(a.seed);
+    let mut sets = Vec::new();
+    for dir in &a.data {
+        let m = clothsr::data::read_manifest(dir)?;
+        let frames = a.frames.map(|n| 1..=n.min(m.frames_done));
+        let seq = Sequence::load(dir, frames)?;
+        let sim = if a.rollout_iters > 0 {
+            let source = m.source.as_ref().with_context(|| {
+                format!(
+                    "{}: phase 2 runs the coarse simulator, but this data set does not record \
+                     its scene files (made by an older clothsr)",
+                    dir.join("manifest.json").display()
+                )
+            })?;
+            let scene = source
+                .load()
+                .with_context(|| format!("loading the scene of {}", dir.display()))?;
+            let sim = coarse_simulation(&scene, dir, 1)?;
+            let t0 = sim.state.t_s;
+            Some((sim, t0))
+        } else {
+            None
+        };
+        tracing::info!(
+            "{}: {} steps, {} coarse vertices, {} edges",
+            dir.display(),
+            seq.steps.len(),
+            seq.graph.num_nodes,
+            seq.graph.num_edges()
+        );
+        sets.push(TrainSet { seq, sim });
+    }
+    let bar = ProgressBar::new(a.steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template("phase {msg} {bar:30} {pos}/{len} {per_sec} eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut phase = 1;
+    let mut recent = Vec::new();
+    let summary = train(&cfg, &mut sets, &a.output, |p: &Progress| {
+        if p.phase != phase {
+            phase = p.phase;
+            bar.set_length(p.total as u64);
+            bar.reset();
+            recent.clear();
+        }
+        recent.push(p.loss);
+        if recent.len() > 50 {
+            recent.remove(0);
+        }
+        let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+        bar.set_position(p.step as u64);
+        bar.set_message(format!("{} loss {mean:.4}", p.phase));
+        if bar.is_hidden() && p.step.is_multiple_of(250) {
+            tracing::info!(
+                "phase {} step {}/{}: loss {mean:.4}",
+                p.phase,
+                p.step,
+                p.total
+            );
+        }
+    })?;
+    bar.finish_and_clear();
+    tracing::info!(
+        "wrote {}: phase 1 loss {:.4} → {:.4}; phase 2 ({} windows) {:.4} → {:.4}; noise σ {:.4} mm; {:.0} s",
+        a.output.display(),
+        summary.phase1_first_last.0,
+        summary.phase1_first_last.1,
+        summary.phase2_iters,
+        summary.phase2_first_last.0,
+        summary.phase2_first_last.1,
+        summary.noise_std_m * 1e3,
+        summary.seconds
+    );
+    Ok(())
+}

@@ -1,0 +1,114 @@
+//! Training and evaluation samples for the corrector, read from data sets made by
+//! [`crate::data::generate`]: per simulator step, M_c (one coarse step from the previous M_int)
+//! and M_int (the downsampled fine simulation). The target is the velocity correction
+//! p̄ = v_int − v_c, which also moves M_c onto M_int: x_c + h·p̄ = x_int, since both came from
+//! the same M_int by x = x₀ + h·v.
+
+use std::ops::RangeInclusive;
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+
+use super::graph::MeshGraph;
+use crate::data::{read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
+use crate::error::{Error, Result};
+use crate::mesh::ClothMesh;
+
+/// One simulator step of a sequence: flattened (N·3) f32 arrays.
+#[derive(Debug, Clone)]
+pub struct Step {
+    /// M_c positions, m.
+    pub coarse_x: Vec<f32>,
+    /// M_c velocities, m/s.
+    pub coarse_v: Vec<f32>,
+    /// M_int positions, m.
+    pub int_x: Vec<f32>,
+    /// M_int velocities, m/s.
+    pub int_v: Vec<f32>,
+}
+
+/// A data set's coarse sequence in memory.
+#[derive(Debug, Clone)]
+pub struct Sequence {
+    /// The data set directory.
+    pub dir: PathBuf,
+    /// Its manifest.
+    pub manifest: Manifest,
+    /// The coarse mesh (positions zero).
+    pub mesh: ClothMesh,
+    /// Its graph.
+    pub graph: MeshGraph,
+    /// First frame loaded (1-based); `steps[0]` is this frame's first step.
+    pub first_frame: usize,
+    /// Steps in order.
+    pub steps: Vec<Step>,
+}
+
+/// Flattened f32 → vectors.
+pub fn vectors(v: &[f32]) -> Vec<Vector3<f64>> {
+    v.chunks_exact(3)
+        .map(|c| Vector3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2])))
+        .collect()
+}
+
+impl Sequence {
+    /// Loads frames `frames` (1-based, inclusive; `None`: all complete frames) of the data set
+    /// in `dir`.
+    pub fn load(dir: &Path, frames: Option<RangeInclusive<usize>>) -> Result<Sequence> {
+        let manifest = read_manifest(dir)?;
+        let frames = frames.unwrap_or(1..=manifest.frames_done);
+        if frames.is_empty() || *frames.start() == 0 || *frames.end() > manifest.frames_done {
+            return Err(Error::bad_input(
+                dir.join("manifest.json"),
+                format!(
+                    "frames {}..={} asked for, the data set has 1..={}",
+                    frames.start(),
+                    frames.end(),
+                    manifest.frames_done
+                ),
+            ));
+        }
+        let mesh = read_coarse_mesh(dir, &manifest)?;
+        let graph = MeshGraph::new(&mesh);
+        let (n3, s) = (3 * manifest.coarse_vertices, manifest.steps_per_frame);
+        let mut steps = Vec::with_capacity(frames.clone().count() * s);
+        for k in frames.clone() {
+            let f = read_coarse_steps(dir, &manifest, k)?;
+            for i in 0..s {
+                let r = i * n3..(i + 1) * n3;
+                steps.push(Step {
+                    coarse_x: f.coarse_x[r.clone()].to_vec(),
+                    coarse_v: f.coarse_v[r.clone()].to_vec(),
+                    int_x: f.int_x[r.clone()].to_vec(),
+                    int_v: f.int_v[r].to_vec(),
+                });
+            }
+        }
+        Ok(Sequence {
+            dir: dir.to_path_buf(),
+            manifest,
+            mesh,
+            graph,
+            first_frame: *frames.start(),
+            steps,
+        })
+    }
+
+    /// Simulated time at the end of `steps[i]`, s, relative to the data set's first frame.
+    pub fn step_time_s(&self, i: usize) -> f64 {
+        ((self.first_frame - 1) * self.manifest.steps_per_frame + i + 1) as f64 * self.manifest.dt_s
+    }
+
+    /// Root mean square of the per-step position correction h·|p̄| over all steps, m.
+    pub fn rms_correction_m(&self) -> f64 {
+        let h = self.manifest.dt_s;
+        let (mut sum, mut count) = (0.0, 0usize);
+        for s in &self.steps {
+            for (a, b) in s.int_v.iter().zip(&s.coarse_v) {
+                sum += (f64::from(a - b) * h).powi(2);
+                count += 1;
+            }
+        }
+        (3.0 * sum / count.max(1) as f64).sqrt()
+    }
+}

@@ -1,0 +1,262 @@
+//! The corrector's graph (the paper's §3.1.2): the coarse mesh's vertices are the nodes, its
+//! edges (both directions) and its seam pairs are the edges. No collision edges.
+//!
+//! Features, per node (`NODE_FEATURES`): the velocity q_i (3, m/s), a mesh-boundary flag and a
+//! seam flag. Per directed edge i → j (`EDGE_FEATURES`): the material-space offset
+//! u_ij = u_i − u_j (2, m) and its norm, the world-space offset x_ij = x_i − x_j (3, m) and its
+//! norm, and a flag for seam edges (whose two ends lie on different panels, so u_ij is set to
+//! zero: sewn vertices should coincide).
+
+use std::collections::{HashMap, VecDeque};
+
+use nalgebra::{Vector2, Vector3};
+
+use crate::mesh::ClothMesh;
+
+/// Features per node: velocity (3), boundary flag, seam flag.
+pub const NODE_FEATURES: usize = 5;
+/// Features per directed edge: u_ij (2), |u_ij|, x_ij (3), |x_ij|, seam flag.
+pub const EDGE_FEATURES: usize = 8;
+/// Node features that are 0/1 flags (not normalised): their column indices.
+pub const NODE_FLAGS: [usize; 2] = [3, 4];
+/// Edge features that are 0/1 flags (not normalised).
+pub const EDGE_FLAGS: [usize; 1] = [7];
+
+/// The static graph of a coarse mesh: directed edges and per-vertex flags.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeshGraph {
+    /// Number of nodes (vertices).
+    pub num_nodes: usize,
+    /// Sender (source) vertex of each directed edge.
+    pub senders: Vec<u32>,
+    /// Receiver vertex of each directed edge; messages are summed at receivers.
+    pub receivers: Vec<u32>,
+    seam_edge: Vec<bool>,
+    boundary: Vec<bool>,
+    seam_vertex: Vec<bool>,
+    material: Vec<Vector2<f64>>,
+}
+
+impl MeshGraph {
+    /// The graph of `mesh`: every mesh edge in both directions, then every seam pair in both
+    /// directions.
+    pub fn new(mesh: &ClothMesh) -> MeshGraph {
+        let n = mesh.num_vertices();
+        let mut count: HashMap<[u32; 2], u8> = HashMap::new();
+        for t in &mesh.triangles {
+            for [a, b] in [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]] {
+                *count.entry([a.min(b), a.max(b)]).or_default() += 1;
+            }
+        }
+        let mut boundary = vec![false; n];
+        for (e, c) in &count {
+            if *c == 1 {
+                boundary[e[0] as usize] = true;
+                boundary[e[1] as usize] = true;
+            }
+        }
+        let mut seam_vertex = vec![false; n];
+        let (mut senders, mut receivers, mut seam_edge) = (Vec::new(), Vec::new(), Vec::new());
+        let mut push = |a: u32, b: u32, seam: bool| {
+            senders.extend([a, b]);
+            receivers.extend([b, a]);
+            seam_edge.extend([seam, seam]);
+        };
+        for [a, b] in mesh.edges() {
+            push(a, b, false);
+        }
+        for &[a, b] in &mesh.seam_pairs {
+            if a != b {
+                seam_vertex[a as usize] = true;
+                seam_vertex[b as usize] = true;
+                push(a, b, true);
+            }
+        }
+        MeshGraph {
+            num_nodes: n,
+            senders,
+            receivers,
+            seam_edge,
+            boundary,
+            seam_vertex,
+            material: mesh.material.clone(),
+        }
+    }
+
+    /// Number of directed edges.
+    pub fn num_edges(&self) -> usize {
+        self.senders.len()
+    }
+
+    /// Appends the node features for velocities `v` (one per node): [num_nodes, NODE_FEATURES]
+    /// row-major.
+    pub fn node_features(&self, v: &[Vector3<f64>], out: &mut Vec<f32>) {
+        debug_assert_eq!(v.len(), self.num_nodes);
+        for (i, q) in v.iter().enumerate() {
+            out.extend([
+                q.x as f32,
+                q.y as f32,
+                q.z as f32,
+                f32::from(u8::from(self.boundary[i])),
+                f32::from(u8::from(self.seam_vertex[i])),
+            ]);
+        }
+    }
+
+    /// Appends the edge features for positions `x`: [num_edges, EDGE_FEATURES] row-major.
+    pub fn edge_features(&self, x: &[Vector3<f64>], out: &mut Vec<f32>) {
+        debug_assert_eq!(x.len(), self.num_nodes);
+        for k in 0..self.num_edges() {
+            let (i, j) = (self.senders[k] as usize, self.receivers[k] as usize);
+            let u = if self.seam_edge[k] {
+                Vector2::zeros()
+            } else {
+                self.material[i] - self.material[j]
+            };
+            let d = x[i] - x[j];
+            out.extend([
+                u.x as f32,
+                u.y as f32,
+                u.norm() as f32,
+                d.x as f32,
+                d.y as f32,
+                d.z as f32,
+                d.norm() as f32,
+                f32::from(u8::from(self.seam_edge[k])),
+            ]);
+        }
+    }
+
+    /// Vertices within `hops` graph steps of `centre`, in breadth-first order, with their hop
+    /// distance, stopping once `max_nodes` are found.
+    pub fn ball(&self, centre: u32, hops: usize, max_nodes: usize) -> Vec<(u32, usize)> {
+        let mut adjacency: Vec<Vec<u32>> = vec![Vec::new(); self.num_nodes];
+        for (&s, &r) in self.senders.iter().zip(&self.receivers) {
+            adjacency[r as usize].push(s);
+        }
+        let mut dist = vec![usize::MAX; self.num_nodes];
+        let mut order = Vec::new();
+        let mut queue = VecDeque::from([centre]);
+        dist[centre as usize] = 0;
+        while let Some(v) = queue.pop_front() {
+            order.push((v, dist[v as usize]));
+            if order.len() >= max_nodes {
+                break;
+            }
+            if dist[v as usize] >= hops {
+                continue;
+            }
+            for &w in &adjacency[v as usize] {
+                if dist[w as usize] == usize::MAX {
+                    dist[w as usize] = dist[v as usize] + 1;
+                    queue.push_back(w);
+                }
+            }
+        }
+        order
+    }
+
+    /// The sub-graph induced by `nodes` (old indices; their order gives the new indices) and
+    /// the map old → new. Flags keep their values from the whole mesh: a vertex cut off at
+    /// the patch's rim is not a mesh boundary.
+    pub fn subgraph(&self, nodes: &[u32]) -> MeshGraph {
+        let mut new_index = vec![u32::MAX; self.num_nodes];
+        for (k, &v) in nodes.iter().enumerate() {
+            new_index[v as usize] = k as u32;
+        }
+        let (mut senders, mut receivers, mut seam_edge) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..self.num_edges() {
+            let (s, r) = (
+                new_index[self.senders[k] as usize],
+                new_index[self.receivers[k] as usize],
+            );
+            if s != u32::MAX && r != u32::MAX {
+                senders.push(s);
+                receivers.push(r);
+                seam_edge.push(self.seam_edge[k]);
+            }
+        }
+        let pick = |f: &Vec<bool>| nodes.iter().map(|&v| f[v as usize]).collect();
+        MeshGraph {
+            num_nodes: nodes.len(),
+            senders,
+            receivers,
+            seam_edge,
+            boundary: pick(&self.boundary),
+            seam_vertex: pick(&self.seam_vertex),
+            material: nodes.iter().map(|&v| self.material[v as usize]).collect(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::garment::Fabric;
+    use crate::mesh::{mesh_garment, MeshOptions};
+    use crate::scene::samples::flat_sheet;
+
+    fn sheet() -> ClothMesh {
+        let g = flat_sheet("s", 0.2, 0.1, Vector3::zeros(), Fabric::default());
+        mesh_garment(&g, &MeshOptions::with_edge(0.05)).expect("mesh")
+    }
+
+    #[test]
+    fn edges_go_both_ways_and_boundary_is_the_outline() {
+        let m = sheet();
+        let g = MeshGraph::new(&m);
+        assert_eq!(g.num_edges(), 2 * m.edges().len());
+        for k in 0..g.num_edges() / 2 {
+            assert_eq!(g.senders[2 * k], g.receivers[2 * k + 1]);
+            assert_eq!(g.receivers[2 * k], g.senders[2 * k + 1]);
+        }
+        // On a flat 0.2 × 0.1 sheet the boundary vertices are those on its rectangle.
+        let (lo, hi) = m.material.iter().fold(
+            (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN)),
+            |(lo, hi), p| (lo.inf(p), hi.sup(p)),
+        );
+        for (i, p) in m.material.iter().enumerate() {
+            let on_rim = [p.x - lo.x, hi.x - p.x, p.y - lo.y, hi.y - p.y]
+                .iter()
+                .any(|d| d.abs() < 1e-9);
+            assert_eq!(g.boundary[i], on_rim, "vertex {i} at {p:?}");
+        }
+    }
+
+    #[test]
+    fn edge_features_are_offsets_and_norms() {
+        let m = sheet();
+        let g = MeshGraph::new(&m);
+        let mut f = Vec::new();
+        g.edge_features(&m.positions, &mut f);
+        assert_eq!(f.len(), g.num_edges() * EDGE_FEATURES);
+        let k = 3;
+        let (i, j) = (g.senders[k] as usize, g.receivers[k] as usize);
+        let d = m.positions[i] - m.positions[j];
+        let row = &f[k * EDGE_FEATURES..(k + 1) * EDGE_FEATURES];
+        assert!((row[3] as f64 - d.x).abs() < 1e-6 && (row[6] as f64 - d.norm()).abs() < 1e-6);
+        // Flat sheet: world length equals material length.
+        assert!((row[2] - row[6]).abs() < 1e-6);
+    }
+
+    #[test]
+    fn ball_and_subgraph_keep_only_inner_edges() {
+        let m = sheet();
+        let g = MeshGraph::new(&m);
+        let ball = g.ball(0, 2, usize::MAX);
+        assert_eq!(ball[0], (0, 0));
+        assert!(ball.iter().all(|&(_, d)| d <= 2));
+        let nodes: Vec<u32> = ball.iter().map(|&(v, _)| v).collect();
+        let sub = g.subgraph(&nodes);
+        assert_eq!(sub.num_nodes, nodes.len());
+        assert!(sub.num_edges() > 0 && sub.num_edges() < g.num_edges());
+        for (&s, &r) in sub.senders.iter().zip(&sub.receivers) {
+            let (a, b) = (nodes[s as usize], nodes[r as usize]);
+            assert!(g
+                .senders
+                .iter()
+                .zip(&g.receivers)
+                .any(|(&x, &y)| x == a && y == b));
+        }
+    }
+}

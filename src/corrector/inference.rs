@@ -1,0 +1,164 @@
+//! The trained corrector at run time (the paper's §3.1.2–3.1.3): after every coarse simulator
+//! step, M_c → M_int by q′ = q + p, x′ = x + h·p, and the simulator goes on from M_int.
+//!
+//! A model directory holds `config.json` ([`super::training::TrainingConfig`], which includes
+//! the network's [`CorrectorConfig`]), `normalisation.json` and `model.bpk` (burnpack weights).
+
+use std::path::{Path, PathBuf};
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::tensor::Device;
+use nalgebra::Vector3;
+
+use super::graph::MeshGraph;
+use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
+use super::normalise::Normalisation;
+use super::training::TrainingConfig;
+use crate::error::{Error, Result};
+use crate::mesh::ClothMesh;
+use crate::sim::SimState;
+
+/// The weights file in a model directory.
+pub const WEIGHTS_FILE: &str = "model.bpk";
+/// The training configuration file in a model directory.
+pub const CONFIG_FILE: &str = "config.json";
+/// The normalisation statistics file in a model directory.
+pub const NORMALISATION_FILE: &str = "normalisation.json";
+
+/// Normalised network inputs for positions `x` and velocities `v` on `graph`: node rows
+/// `[n, NODE_FEATURES]`, edge rows `[e, EDGE_FEATURES]`.
+pub fn features(
+    graph: &MeshGraph,
+    x: &[Vector3<f64>],
+    v: &[Vector3<f64>],
+    norm: &Normalisation,
+) -> (Vec<f32>, Vec<f32>) {
+    let (mut nodes, mut edges) = (Vec::new(), Vec::new());
+    graph.node_features(v, &mut nodes);
+    graph.edge_features(x, &mut edges);
+    norm.nodes.apply(&mut nodes);
+    norm.edges.apply(&mut edges);
+    (nodes, edges)
+}
+
+/// The device networks run on: burn's pure-Rust `flex` CPU backend (the fastest CPU backend
+/// measured here, `../shared/RECIPES.md`).
+pub fn default_device() -> Device {
+    Device::flex()
+}
+
+/// A loaded corrector for one coarse mesh.
+#[derive(Debug)]
+pub struct Corrector {
+    net: CorrectorNet,
+    norm: Normalisation,
+    graph: MeshGraph,
+    device: Device,
+    /// The network's sizes.
+    pub config: CorrectorConfig,
+    /// Where it was loaded from.
+    pub dir: PathBuf,
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| Error::bad_input(path, e.to_string()))
+}
+
+/// Loads the network and statistics saved in `dir` onto `device`.
+pub fn load_net(
+    dir: &Path,
+    device: &Device,
+) -> Result<(CorrectorNet, Normalisation, TrainingConfig)> {
+    let config_path = dir.join(CONFIG_FILE);
+    if !config_path.exists() {
+        return Err(Error::bad_input(
+            dir,
+            "not a corrector model directory (no config.json); train one with \
+             'clothsr train corrector'",
+        ));
+    }
+    let config = TrainingConfig::load(&config_path)
+        .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+    let norm: Normalisation = read_json(&dir.join(NORMALISATION_FILE))?;
+    let weights = dir.join(WEIGHTS_FILE);
+    let net = config
+        .model
+        .init(device)
+        .try_load_file(&weights)
+        .map_err(|e| Error::bad_input(&weights, format!("cannot load the weights: {e}")))?;
+    Ok((net, norm, config))
+}
+
+impl Corrector {
+    /// Loads the model in `dir` for `mesh` (the coarse simulation mesh).
+    pub fn load(dir: &Path, mesh: &ClothMesh) -> Result<Corrector> {
+        let device = default_device();
+        let (net, norm, config) = load_net(dir, &device)?;
+        Ok(Corrector {
+            net,
+            norm,
+            graph: MeshGraph::new(mesh),
+            device,
+            config: config.model,
+            dir: dir.to_path_buf(),
+        })
+    }
+
+    /// A corrector from an in-memory network (training uses it for rollouts).
+    pub fn from_parts(
+        net: CorrectorNet,
+        norm: Normalisation,
+        config: CorrectorConfig,
+        mesh: &ClothMesh,
+        device: Device,
+    ) -> Corrector {
+        Corrector {
+            net,
+            norm,
+            graph: MeshGraph::new(mesh),
+            device,
+            config,
+            dir: PathBuf::new(),
+        }
+    }
+
+    /// The predicted velocity correction p for M_c = (x, v), m/s per vertex.
+    pub fn predict(&self, x: &[Vector3<f64>], v: &[Vector3<f64>]) -> Result<Vec<Vector3<f64>>> {
+        if x.len() != self.graph.num_nodes || v.len() != x.len() {
+            return Err(Error::Invalid(format!(
+                "the corrector was set up for {} vertices, the state has {}",
+                self.graph.num_nodes,
+                x.len()
+            )));
+        }
+        let (nodes, edges) = features(&self.graph, x, v, &self.norm);
+        let g = GraphTensors::of(&self.graph, nodes, edges, &self.device);
+        let out = self.net.forward(&g).into_data();
+        let mut p: Vec<f32> = out
+            .try_to_vec::<f32>()
+            .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
+        self.norm.targets.invert(&mut p);
+        let p: Vec<Vector3<f64>> = p
+            .chunks_exact(3)
+            .map(|c| Vector3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2])))
+            .collect();
+        if p.iter().any(|c| !c.iter().all(|x| x.is_finite())) {
+            return Err(Error::Simulation(
+                "the corrector produced a non-finite correction".into(),
+            ));
+        }
+        Ok(p)
+    }
+
+    /// Corrects M_c in place into M_int: q′ = q + p, x′ = x + h·p.
+    pub fn correct(&self, state: &mut SimState, dt_s: f64) -> Result<()> {
+        let p = self.predict(&state.x, &state.v)?;
+        for ((x, v), p) in state.x.iter_mut().zip(state.v.iter_mut()).zip(&p) {
+            *v += p;
+            *x += p * dt_s;
+        }
+        Ok(())
+    }
+}

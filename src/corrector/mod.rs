@@ -1,0 +1,24 @@
+//! The corrector (the paper's §3.1.2–3.1.3, §3.3.2): a MeshGraphNets-style graph network that
+//! turns the coarse simulator's step M_c into M_int, the coarse mesh whose low-frequency shape
+//! matches the downsampled fine simulation, by a velocity correction p: q′ = q + p,
+//! x′ = x + h·p. The simulator then advances from M_int (interleaving).
+//!
+//! * [`graph`]: the coarse mesh as a graph, node and edge features;
+//! * [`normalise`]: data-set statistics;
+//! * [`model`]: the burn network (encode–process–decode, optional attention);
+//! * [`data`]: samples from data sets made by [`crate::data`];
+//! * [`training`]: one-step training with noise and patches, then window rollout training;
+//! * [`inference`]: the [`Corrector`] the simulation loop calls after every step;
+//! * [`rollout`]: rollout errors against the ground truth, with the paper's ablations.
+
+pub mod data;
+pub mod graph;
+pub mod inference;
+pub mod model;
+pub mod normalise;
+pub mod rollout;
+pub mod training;
+
+pub use inference::Corrector;
+pub use model::{CorrectorConfig, CorrectorNet};
+pub use training::{train, TrainingConfig};

@@ -1,0 +1,153 @@
+//! Rollout evaluation of the corrector against a data set's M_int ground truth (the paper's
+//! Fig. 8, 11 and 13): from the ground-truth M_int at the sequence's first step, three coarse
+//! sequences are run side by side for the same number of steps:
+//!
+//! * **sim alone**: the coarse simulator on its own;
+//! * **interleaved** (the method): simulator step → corrector → the next step starts from the
+//!   corrected mesh (§3.1.3);
+//! * **not interleaved** (Fig. 13's ablation): the simulator runs on its own and the corrector
+//!   is applied to each of its steps for output only.
+//!
+//! Errors are mean vertex distances to M_int at every frame end, mm.
+
+use std::time::Instant;
+
+use super::data::{vectors, Sequence};
+use super::inference::Corrector;
+use crate::error::{Error, Result};
+use crate::sim::driver::Simulation;
+use crate::sim::SimState;
+use nalgebra::Vector3;
+
+/// Per-frame errors of the three variants, mm.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RolloutErrors {
+    /// Frame number (1-based, in the data set).
+    pub frame: Vec<usize>,
+    /// Coarse simulation alone.
+    pub sim_alone_mm: Vec<f64>,
+    /// Simulator and corrector interleaved.
+    pub interleaved_mm: Vec<f64>,
+    /// Corrector applied to the free-running simulation.
+    pub not_interleaved_mm: Vec<f64>,
+    /// Mean coarse simulator step, ms (interleaved run).
+    pub sim_step_ms: f64,
+    /// Mean corrector call, ms.
+    pub corrector_ms: f64,
+}
+
+fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    1e3 * a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len().max(1) as f64
+}
+
+impl RolloutErrors {
+    /// Mean over frames of each variant: (sim alone, interleaved, not interleaved), mm.
+    pub fn means(&self) -> (f64, f64, f64) {
+        let m = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (
+            m(&self.sim_alone_mm),
+            m(&self.interleaved_mm),
+            m(&self.not_interleaved_mm),
+        )
+    }
+
+    /// Least-squares slope of the interleaved error over frames, mm per 100 frames (the
+    /// growth trend).
+    pub fn interleaved_trend_mm_per_100(&self) -> f64 {
+        let n = self.interleaved_mm.len() as f64;
+        if n < 2.0 {
+            return 0.0;
+        }
+        let xs: Vec<f64> = (0..self.interleaved_mm.len()).map(|i| i as f64).collect();
+        let (mx, my) = (
+            xs.iter().sum::<f64>() / n,
+            self.interleaved_mm.iter().sum::<f64>() / n,
+        );
+        let cov: f64 = xs
+            .iter()
+            .zip(&self.interleaved_mm)
+            .map(|(x, y)| (x - mx) * (y - my))
+            .sum();
+        let var: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+        100.0 * cov / var
+    }
+
+    /// CSV: `frame,sim_alone_mm,interleaved_mm,not_interleaved_mm`.
+    pub fn csv(&self) -> String {
+        let mut s = String::from("frame,sim_alone_mm,interleaved_mm,not_interleaved_mm\n");
+        for i in 0..self.frame.len() {
+            s += &format!(
+                "{},{:.4},{:.4},{:.4}\n",
+                self.frame[i],
+                self.sim_alone_mm[i],
+                self.interleaved_mm[i],
+                self.not_interleaved_mm[i]
+            );
+        }
+        s
+    }
+}
+
+/// Runs the three variants over `frames` frames of `seq` (from its first stored step) with
+/// `sim` (the data set's coarse simulation, [`crate::data::coarse_simulation`], whose time at
+/// the data set's frame 0 is `t0_s`); `on_frame` sees each frame's errors.
+pub fn evaluate(
+    seq: &Sequence,
+    sim: &mut Simulation,
+    t0_s: f64,
+    corrector: &Corrector,
+    frames: usize,
+    mut on_frame: impl FnMut(usize, f64, f64, f64),
+) -> Result<RolloutErrors> {
+    let s = seq.manifest.steps_per_frame;
+    let h = seq.manifest.dt_s;
+    let steps = frames * s;
+    if steps + 1 > seq.steps.len() {
+        return Err(Error::bad_input(
+            &seq.dir,
+            format!(
+                "{frames} frames asked for, the loaded sequence has {} steps after its first",
+                seq.steps.len().saturating_sub(1)
+            ),
+        ));
+    }
+    let first = &seq.steps[0];
+    let start = SimState {
+        x: vectors(&first.int_x),
+        v: vectors(&first.int_v),
+        t_s: t0_s + seq.step_time_s(0),
+    };
+    let (mut alone, mut inter) = (start.clone(), start);
+    let mut out = RolloutErrors::default();
+    let (mut sim_s, mut corr_s) = (0.0, 0.0);
+    for i in 1..=steps {
+        alone = sim.step_from(&alone)?.0;
+        let t = Instant::now();
+        let mut c = sim.step_from(&inter)?.0;
+        sim_s += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        corrector.correct(&mut c, h)?;
+        corr_s += t.elapsed().as_secs_f64();
+        inter = c;
+        // The data set's frame ends are its steps s, 2s, …; step 0 here is its step 1.
+        if (i + 1) % s == 0 {
+            let gt = vectors(&seq.steps[i].int_x);
+            let mut fixed = alone.clone();
+            corrector.correct(&mut fixed, h)?;
+            let e = (
+                mean_distance_mm(&alone.x, &gt),
+                mean_distance_mm(&inter.x, &gt),
+                mean_distance_mm(&fixed.x, &gt),
+            );
+            let frame = seq.first_frame + i / s;
+            out.frame.push(frame);
+            out.sim_alone_mm.push(e.0);
+            out.interleaved_mm.push(e.1);
+            out.not_interleaved_mm.push(e.2);
+            on_frame(frame, e.0, e.1, e.2);
+        }
+    }
+    out.sim_step_ms = 1e3 * sim_s / steps as f64;
+    out.corrector_ms = 1e3 * corr_s / steps as f64;
+    Ok(out)
+}

@@ -1,0 +1,641 @@
+//! Training the corrector (the paper's §3.3.2, §3.3.4).
+//!
+//! * **Phase 1**, one-step supervision: L = |p − p̄| (normalised units, mean over vertices and
+//!   components) with Adam and an exponential learning-rate decay from `lr_start` to `lr_end`
+//!   over `steps`. GNS-style training noise (Sanchez-Gonzalez et al. 2020): M_c's positions are
+//!   perturbed by δ ~ N(0, σ²), its velocities by δ/h (as if the step had ended there) and the
+//!   target becomes the correction that still lands on M_int. Optional random overlapping
+//!   sub-mesh patches (breadth-first balls of `patch_nodes` vertices; the loss skips each
+//!   patch's two outer rings, whose neighbourhoods are cut).
+//! * **Phase 2**, window rollout training (Kim et al. 2019): from a random ground-truth M_int
+//!   roll out `window` steps of the real coarse simulator interleaved with the corrector; the
+//!   loss is the mean over the window of |p_i − p̄_i|, with p̄_i = (x_int,i − x_c,i)/h the
+//!   correction that brings the rollout back onto the ground truth. Gradients flow through the
+//!   network at every step (the simulator's output is data).
+//!
+//! The output directory holds `config.json`, `normalisation.json`, `model.bpk`, `log.csv`
+//! (phase, step, learning rate, loss, elapsed seconds) and, while training, `checkpoint/`
+//! (weights, optimiser state, position), from which an interrupted run resumes.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
+use nalgebra::Vector3;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+use super::data::{vectors, Sequence};
+use super::graph::MeshGraph;
+use super::inference::{default_device, features, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
+use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
+use super::normalise::{Normalisation, NormalisationBuilder};
+use crate::error::{Error, Result};
+use crate::io::write_atomic;
+use crate::sim::driver::Simulation;
+use crate::sim::SimState;
+
+/// How to train (saved as `config.json`, with the network's sizes).
+#[derive(Config, Debug, PartialEq)]
+pub struct TrainingConfig {
+    /// The network.
+    pub model: CorrectorConfig,
+    /// Phase-1 optimiser steps (the paper: 400K on a GPU).
+    #[config(default = 5000)]
+    pub steps: usize,
+    /// Samples (whole meshes or patches) per step.
+    #[config(default = 4)]
+    pub batch: usize,
+    /// Learning rate at the first step.
+    #[config(default = 1e-4)]
+    pub lr_start: f64,
+    /// Learning rate at the last phase-1 step (exponential decay).
+    #[config(default = 1e-6)]
+    pub lr_end: f64,
+    /// Training-noise standard deviation as a multiple of the data's RMS per-step position
+    /// correction h·|p̄| (0: no noise).
+    #[config(default = 0.3)]
+    pub noise_ratio: f64,
+    /// Vertices per random sub-mesh patch (0: whole meshes).
+    #[config(default = 0)]
+    pub patch_nodes: usize,
+    /// Phase-2 (window rollout) optimiser steps; 0 skips phase 2.
+    #[config(default = 0)]
+    pub rollout_iters: usize,
+    /// Phase-2 window ω, simulator steps.
+    #[config(default = 8)]
+    pub window: usize,
+    /// Phase-2 learning rate.
+    #[config(default = 1e-5)]
+    pub rollout_lr: f64,
+    /// Phase 2 stops early once the mean window loss of the last 20 windows is below this
+    /// (0: run all `rollout_iters`).
+    #[config(default = 0.0)]
+    pub rollout_stop_loss: f64,
+    /// Checkpoint every this many optimiser steps.
+    #[config(default = 250)]
+    pub checkpoint_every: usize,
+    /// Random seed.
+    #[config(default = 7)]
+    pub seed: u64,
+}
+
+/// A training sequence and, for phase 2, the coarse simulation it was made with
+/// ([`crate::data::coarse_simulation`]).
+pub struct TrainSet {
+    /// The sequence.
+    pub seq: Sequence,
+    /// The coarse simulator (phase 2 only) and its time at the data set's frame 0, s.
+    pub sim: Option<(Simulation, f64)>,
+}
+
+/// Progress, reported after each optimiser step.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    /// 1 or 2.
+    pub phase: u8,
+    /// Steps done in this phase.
+    pub step: usize,
+    /// Steps in this phase.
+    pub total: usize,
+    /// Loss of the last step.
+    pub loss: f64,
+}
+
+/// What training did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Summary {
+    /// Mean phase-1 loss over the first 50 steps run and the last 50.
+    pub phase1_first_last: (f64, f64),
+    /// Mean phase-2 loss over the first 20 windows run and the last 20.
+    pub phase2_first_last: (f64, f64),
+    /// Phase-2 windows run.
+    pub phase2_iters: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// Training-noise standard deviation used, m.
+    pub noise_std_m: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+struct Position {
+    phase1_done: usize,
+    phase2_done: usize,
+}
+
+const CHECKPOINT_DIR: &str = "checkpoint";
+
+/// One graph sample, raw (unnormalised) inputs and targets plus a loss mask.
+struct Sample {
+    graph: MeshGraph,
+    nodes: Vec<f32>,
+    edges: Vec<f32>,
+    targets: Vec<f32>,
+    mask: Vec<f32>,
+}
+
+fn flat(v: &[Vector3<f64>]) -> Vec<f32> {
+    v.iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
+}
+
+/// A batch of samples concatenated into one graph, normalised, on `device`.
+fn batch_tensors(
+    samples: &[Sample],
+    norm: &Normalisation,
+    device: &Device,
+) -> (GraphTensors, Tensor<2>, Tensor<2>, f32) {
+    let (mut nodes, mut edges, mut targets, mut mask) = (vec![], vec![], vec![], vec![]);
+    let (mut senders, mut receivers) = (vec![], vec![]);
+    let mut offset = 0u32;
+    for s in samples {
+        nodes.extend_from_slice(&s.nodes);
+        edges.extend_from_slice(&s.edges);
+        targets.extend_from_slice(&s.targets);
+        mask.extend_from_slice(&s.mask);
+        senders.extend(s.graph.senders.iter().map(|i| i + offset));
+        receivers.extend(s.graph.receivers.iter().map(|i| i + offset));
+        offset += s.graph.num_nodes as u32;
+    }
+    norm.nodes.apply(&mut nodes);
+    norm.edges.apply(&mut edges);
+    norm.targets.apply(&mut targets);
+    let n = offset as usize;
+    let weight: f32 = mask.iter().sum::<f32>().max(1.0) * 3.0;
+    (
+        GraphTensors::new(nodes, edges, &senders, &receivers, device),
+        Tensor::from_data(TensorData::new(targets, [n, 3]), device),
+        Tensor::from_data(TensorData::new(mask, [n, 1]), device),
+        weight,
+    )
+}
+
+/// Masked L1 loss: Σ mask·|pred − target| / weight, `pred`/`target` `[N, 3]`, `mask` `[N, 1]`.
+fn l1(pred: Tensor<2>, target: Tensor<2>, mask: Tensor<2>, weight: f32) -> Tensor<1> {
+    ((pred - target).abs() * mask).sum() / weight
+}
+
+struct Trainer<'a> {
+    cfg: &'a TrainingConfig,
+    out: PathBuf,
+    device: Device,
+    net: CorrectorNet,
+    optim: burn::optim::ModuleOptimizer,
+    norm: Normalisation,
+    noise_std_m: f64,
+    position: Position,
+    log: std::fs::File,
+    t0: Instant,
+    rng: StdRng,
+}
+
+fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
+    let bad = |m: &str| Err(Error::Invalid(format!("training configuration: {m}")));
+    if sets.is_empty() || sets.iter().all(|s| s.seq.steps.is_empty()) {
+        return bad("no training data");
+    }
+    if cfg.batch == 0 || cfg.window == 0 {
+        return bad("batch and window must be at least 1");
+    }
+    let rates = [cfg.lr_start, cfg.lr_end, cfg.rollout_lr];
+    if rates.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+        return bad("learning rates must be positive");
+    }
+    if !(cfg.noise_ratio.is_finite() && cfg.noise_ratio >= 0.0) {
+        return bad("noise_ratio must not be negative");
+    }
+    if cfg.rollout_iters > 0
+        && !sets
+            .iter()
+            .any(|s| s.sim.is_some() && s.seq.steps.len() > cfg.window)
+    {
+        return bad("phase 2 needs a coarse simulator and a sequence longer than the window");
+    }
+    Ok(())
+}
+
+/// Trains a corrector on `sets` into `out` (resuming from `out/checkpoint` when the
+/// configuration there is the same); `progress` sees every optimiser step.
+pub fn train(
+    cfg: &TrainingConfig,
+    sets: &mut [TrainSet],
+    out: &Path,
+    mut progress: impl FnMut(&Progress),
+) -> Result<Summary> {
+    check(cfg, sets)?;
+    std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    let config_path = out.join(CONFIG_FILE);
+    let state_path = out.join(CHECKPOINT_DIR).join("state.json");
+    let mut position = Position::default();
+    let resuming = state_path.exists();
+    if resuming {
+        let old = TrainingConfig::load(&config_path)
+            .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+        if &old != cfg {
+            return Err(Error::bad_input(
+                &config_path,
+                "a training run with another configuration is here; choose another output",
+            ));
+        }
+        let text = std::fs::read_to_string(&state_path).map_err(|e| Error::io(&state_path, e))?;
+        position = serde_json::from_str(&text)
+            .map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
+    } else if config_path.exists() {
+        return Err(Error::bad_input(
+            &config_path,
+            "a finished model is already here; choose another output",
+        ));
+    }
+    let norm_path = out.join(NORMALISATION_FILE);
+    let norm = if resuming {
+        let text = std::fs::read_to_string(&norm_path).map_err(|e| Error::io(&norm_path, e))?;
+        serde_json::from_str(&text).map_err(|e| Error::bad_input(&norm_path, e.to_string()))?
+    } else {
+        let norm = fit_normalisation(sets);
+        write_json(&norm_path, &norm)?;
+        write_json(&config_path, cfg)?;
+        norm
+    };
+    let rms: f64 = sets.iter().map(|s| s.seq.rms_correction_m()).sum::<f64>() / sets.len() as f64;
+    let device = default_device().autodiff();
+    let mut net = cfg.model.init(&device);
+    let mut optim = AdamConfig::new().init();
+    if resuming {
+        let dir = out.join(CHECKPOINT_DIR);
+        net = net
+            .try_load_file(dir.join(WEIGHTS_FILE))
+            .map_err(|e| Error::bad_input(dir.join(WEIGHTS_FILE), e.to_string()))?;
+        optim = optim
+            .load(dir.join("optim.bpk"))
+            .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+        tracing::info!(
+            "resuming: phase 1 at step {}, phase 2 at window {}",
+            position.phase1_done,
+            position.phase2_done
+        );
+    }
+    let log_path = out.join("log.csv");
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)
+        .map_err(|e| Error::io(&log_path, e))?;
+    if !resuming {
+        writeln!(log, "phase,step,lr,loss,seconds").map_err(|e| Error::io(&log_path, e))?;
+    }
+    let mut t = Trainer {
+        cfg,
+        out: out.to_path_buf(),
+        rng: StdRng::seed_from_u64(
+            cfg.seed ^ (position.phase1_done as u64) << 20 ^ position.phase2_done as u64,
+        ),
+        device,
+        net,
+        optim,
+        norm,
+        noise_std_m: cfg.noise_ratio * rms,
+        position,
+        log,
+        t0: Instant::now(),
+    };
+    let mut summary = Summary {
+        noise_std_m: t.noise_std_m,
+        ..Summary::default()
+    };
+    summary.phase1_first_last = t.phase1(sets, &mut progress)?;
+    let (first_last, iters) = t.phase2(sets, &mut progress)?;
+    summary.phase2_first_last = first_last;
+    summary.phase2_iters = iters;
+    save_model(out, cfg, &t.norm, &t.net)?;
+    std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    summary.seconds = t.t0.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+/// Writes a model directory: `config.json`, `normalisation.json` and `model.bpk` (each
+/// written whole, then renamed into place).
+pub fn save_model(
+    dir: &Path,
+    cfg: &TrainingConfig,
+    norm: &Normalisation,
+    net: &CorrectorNet,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    write_json(&dir.join(NORMALISATION_FILE), norm)?;
+    write_json(&dir.join(CONFIG_FILE), cfg)?;
+    let weights = dir.join(WEIGHTS_FILE);
+    let tmp = dir.join("model.bpk.tmp");
+    net.valid()
+        .save_file(&tmp)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", tmp.display())))?;
+    std::fs::rename(&tmp, &weights).map_err(|e| Error::io(&weights, e))
+}
+
+fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_vec_pretty(value)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    write_atomic(path, &text)
+}
+
+/// Statistics of the clean (noise-free) inputs and targets of every step.
+pub fn fit_normalisation(sets: &[TrainSet]) -> Normalisation {
+    let mut b = NormalisationBuilder::default();
+    for s in sets {
+        for st in &s.seq.steps {
+            let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
+            let (mut nodes, mut edges) = (Vec::new(), Vec::new());
+            s.seq.graph.node_features(&v, &mut nodes);
+            s.seq.graph.edge_features(&x, &mut edges);
+            let targets: Vec<f32> = st
+                .int_v
+                .iter()
+                .zip(&st.coarse_v)
+                .map(|(a, b)| a - b)
+                .collect();
+            b.add(&nodes, &edges, &targets);
+        }
+    }
+    b.build()
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+fn first_last(losses: &[f64], k: usize) -> (f64, f64) {
+    (
+        mean(&losses[..k.min(losses.len())]),
+        mean(&losses[losses.len().saturating_sub(k)..]),
+    )
+}
+
+impl Trainer<'_> {
+    fn sample(&mut self, sets: &[TrainSet]) -> Sample {
+        let total: usize = sets.iter().map(|s| s.seq.steps.len()).sum();
+        let mut pick = self.rng.random_range(0..total);
+        let set = sets
+            .iter()
+            .find(|s| {
+                if pick < s.seq.steps.len() {
+                    true
+                } else {
+                    pick -= s.seq.steps.len();
+                    false
+                }
+            })
+            .unwrap_or(&sets[0]);
+        let (seq, st) = (&set.seq, &set.seq.steps[pick.min(set.seq.steps.len() - 1)]);
+        let h = seq.manifest.dt_s;
+        let mut x = vectors(&st.coarse_x);
+        let mut v = vectors(&st.coarse_v);
+        let x_int = vectors(&st.int_x);
+        if self.noise_std_m > 0.0 {
+            if let Ok(normal) = Normal::new(0.0, self.noise_std_m) {
+                for (x, v) in x.iter_mut().zip(v.iter_mut()) {
+                    let d = Vector3::from_fn(|_, _| normal.sample(&mut self.rng));
+                    *x += d;
+                    *v += d / h;
+                }
+            }
+        }
+        // p̄ = (x_int − x̃_c)/h; without noise this is v_int − v_c.
+        let targets: Vec<Vector3<f64>> = x_int.iter().zip(&x).map(|(a, b)| (a - b) / h).collect();
+        let n = seq.graph.num_nodes;
+        let (graph, nodes_idx, mask) = if self.cfg.patch_nodes > 0 && self.cfg.patch_nodes < n {
+            let centre = self.rng.random_range(0..n) as u32;
+            let ball = seq.graph.ball(centre, usize::MAX, self.cfg.patch_nodes);
+            let rim = ball.last().map_or(0, |b| b.1);
+            let idx: Vec<u32> = ball.iter().map(|b| b.0).collect();
+            let mask = ball
+                .iter()
+                .map(|b| if b.1 + 2 <= rim { 1.0 } else { 0.0 })
+                .collect();
+            (seq.graph.subgraph(&idx), idx, mask)
+        } else {
+            (seq.graph.clone(), (0..n as u32).collect(), vec![1.0; n])
+        };
+        let take = |a: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+            nodes_idx.iter().map(|&i| a[i as usize]).collect()
+        };
+        let (xs, vs, ts) = (take(&x), take(&v), take(&targets));
+        let (mut nodes, mut edges) = (Vec::new(), Vec::new());
+        graph.node_features(&vs, &mut nodes);
+        graph.edge_features(&xs, &mut edges);
+        Sample {
+            graph,
+            nodes,
+            edges,
+            targets: flat(&ts),
+            mask,
+        }
+    }
+
+    fn log(&mut self, phase: u8, step: usize, lr: f64, loss: f64) -> Result<()> {
+        let path = self.out.join("log.csv");
+        writeln!(
+            self.log,
+            "{phase},{step},{lr:.3e},{loss:.6},{:.1}",
+            self.t0.elapsed().as_secs_f64()
+        )
+        .map_err(|e| Error::io(path, e))
+    }
+
+    fn checkpoint(&self) -> Result<()> {
+        let dir = self.out.join(CHECKPOINT_DIR);
+        let (w, o) = (dir.join("model.bpk.tmp"), dir.join("optim.bpk.tmp"));
+        self.net
+            .clone()
+            .save_file(&w)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
+        self.optim
+            .save(&o)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))?;
+        std::fs::rename(&w, dir.join(WEIGHTS_FILE)).map_err(|e| Error::io(&w, e))?;
+        std::fs::rename(&o, dir.join("optim.bpk")).map_err(|e| Error::io(&o, e))?;
+        write_json(&dir.join("state.json"), &self.position)
+    }
+
+    fn phase1(
+        &mut self,
+        sets: &[TrainSet],
+        progress: &mut impl FnMut(&Progress),
+    ) -> Result<(f64, f64)> {
+        let cfg = self.cfg;
+        let mut losses = Vec::new();
+        let mut window = Vec::new();
+        while self.position.phase1_done < cfg.steps {
+            let step = self.position.phase1_done;
+            let lr = cfg.lr_start
+                * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
+            let samples: Vec<Sample> = (0..cfg.batch).map(|_| self.sample(sets)).collect();
+            let (g, target, mask, weight) = batch_tensors(&samples, &self.norm, &self.device);
+            let pred = self.net.forward(&g);
+            let loss = l1(pred, target, mask, weight);
+            let value = f64::from(loss.clone().into_scalar::<f32>());
+            if !value.is_finite() {
+                return Err(Error::Simulation(format!(
+                    "corrector training diverged at phase-1 step {step} (loss {value})"
+                )));
+            }
+            let grads = GradientsParams::from_grads(loss.backward(), &self.net);
+            self.net = self.optim.step(lr, self.net.clone(), grads);
+            self.position.phase1_done += 1;
+            losses.push(value);
+            window.push(value);
+            if window.len() == 25 || self.position.phase1_done == cfg.steps {
+                self.log(1, self.position.phase1_done, lr, mean(&window))?;
+                window.clear();
+            }
+            if self
+                .position
+                .phase1_done
+                .is_multiple_of(cfg.checkpoint_every.max(1))
+            {
+                self.checkpoint()?;
+            }
+            progress(&Progress {
+                phase: 1,
+                step: self.position.phase1_done,
+                total: cfg.steps,
+                loss: value,
+            });
+        }
+        Ok(first_last(&losses, 50))
+    }
+
+    fn phase2(
+        &mut self,
+        sets: &mut [TrainSet],
+        progress: &mut impl FnMut(&Progress),
+    ) -> Result<((f64, f64), usize)> {
+        let cfg = self.cfg;
+        let usable: Vec<usize> = (0..sets.len())
+            .filter(|&k| sets[k].sim.is_some() && sets[k].seq.steps.len() > cfg.window)
+            .collect();
+        let mut losses = Vec::new();
+        while self.position.phase2_done < cfg.rollout_iters && !usable.is_empty() {
+            let k = usable[self.rng.random_range(0..usable.len())];
+            let set = &mut sets[k];
+            let start = self.rng.random_range(0..set.seq.steps.len() - cfg.window);
+            let value = rollout_window(
+                &mut self.net,
+                &mut self.optim,
+                &self.norm,
+                set,
+                start,
+                cfg.window,
+                cfg.rollout_lr,
+                &self.device,
+            )?;
+            self.position.phase2_done += 1;
+            losses.push(value);
+            let it = self.position.phase2_done;
+            if it.is_multiple_of(10) || it == cfg.rollout_iters {
+                let recent = mean(&losses[losses.len().saturating_sub(10)..]);
+                self.log(2, it, cfg.rollout_lr, recent)?;
+            }
+            if it.is_multiple_of(cfg.checkpoint_every.max(1).div_ceil(10)) {
+                self.checkpoint()?;
+            }
+            progress(&Progress {
+                phase: 2,
+                step: it,
+                total: cfg.rollout_iters,
+                loss: value,
+            });
+            if cfg.rollout_stop_loss > 0.0
+                && losses.len() >= 20
+                && mean(&losses[losses.len() - 20..]) < cfg.rollout_stop_loss
+            {
+                tracing::info!(
+                    "phase 2: window loss below {} after {it} windows",
+                    cfg.rollout_stop_loss
+                );
+                break;
+            }
+        }
+        Ok((first_last(&losses, 20), losses.len()))
+    }
+}
+
+/// One phase-2 update: rolls out `window` interleaved steps from the ground-truth M_int at
+/// `set.seq.steps[start]` and steps the optimiser on the mean window loss.
+#[allow(clippy::too_many_arguments)]
+fn rollout_window(
+    net: &mut CorrectorNet,
+    optim: &mut burn::optim::ModuleOptimizer,
+    norm: &Normalisation,
+    set: &mut TrainSet,
+    start: usize,
+    window: usize,
+    lr: f64,
+    device: &Device,
+) -> Result<f64> {
+    let seq = &set.seq;
+    let Some((sim, t0)) = set.sim.as_mut() else {
+        return Err(Error::Invalid("phase 2 needs a coarse simulator".into()));
+    };
+    let h = seq.manifest.dt_s;
+    let st = &seq.steps[start];
+    let mut state = SimState {
+        x: vectors(&st.int_x),
+        v: vectors(&st.int_v),
+        t_s: *t0 + seq.step_time_s(start),
+    };
+    let mut total: Option<Tensor<1>> = None;
+    let n = seq.graph.num_nodes;
+    for w in 1..=window {
+        let (mut c, _) = sim.step_from(&state)?;
+        let x_gt = vectors(&seq.steps[start + w].int_x);
+        let target: Vec<f32> = flat(
+            &x_gt
+                .iter()
+                .zip(&c.x)
+                .map(|(a, b)| (a - b) / h)
+                .collect::<Vec<_>>(),
+        );
+        let (nodes, edges) = features(&seq.graph, &c.x, &c.v, norm);
+        let g = GraphTensors::of(&seq.graph, nodes, edges, device);
+        let pred = net.forward(&g); // [n, 3], normalised
+        let mut p: Vec<f32> = pred
+            .clone()
+            .into_data()
+            .try_to_vec::<f32>()
+            .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
+        norm.targets.invert(&mut p);
+        let mut t = target;
+        norm.targets.apply(&mut t);
+        let target = Tensor::<2>::from_data(TensorData::new(t, [n, 3]), device);
+        let loss = (pred - target).abs().mean();
+        total = Some(match total {
+            None => loss,
+            Some(acc) => acc + loss,
+        });
+        for ((x, v), p) in c.x.iter_mut().zip(c.v.iter_mut()).zip(p.chunks_exact(3)) {
+            let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            *v += p;
+            *x += p * h;
+        }
+        state = c;
+    }
+    let Some(total) = total else {
+        return Ok(0.0);
+    };
+    let loss = total / window as f32;
+    let value = f64::from(loss.clone().into_scalar::<f32>());
+    if !value.is_finite() {
+        return Err(Error::Simulation(format!(
+            "corrector rollout training diverged (loss {value})"
+        )));
+    }
+    let grads = GradientsParams::from_grads(loss.backward(), &*net);
+    *net = optim.step(lr, net.clone(), grads);
+    Ok(value)
+}

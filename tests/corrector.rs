@@ -1,0 +1,253 @@
+//! `clothsr::corrector`: the GNN corrector on a tiny data set — training lowers the loss,
+//! save → load gives identical outputs, batching graphs changes nothing, a zero input gives a
+//! finite correction, window rollout training and the rollout evaluation run beside the real
+//! coarse simulator.
+
+use clothsr::corrector::data::{vectors, Sequence};
+use clothsr::corrector::graph::MeshGraph;
+use clothsr::corrector::inference::{default_device, features, Corrector};
+use clothsr::corrector::model::GraphTensors;
+use clothsr::corrector::rollout::evaluate;
+use clothsr::corrector::training::{fit_normalisation, save_model, train, TrainSet};
+use clothsr::corrector::{CorrectorConfig, TrainingConfig};
+use clothsr::data::{coarse_simulation, generate, Options, Variation};
+use clothsr::garment::Fabric;
+use clothsr::scene::samples::flat_sheet;
+use clothsr::scene::{Collider, Scene};
+use nalgebra::Vector3;
+
+fn scene() -> Scene {
+    let mut s = Scene {
+        garments: vec![flat_sheet(
+            "sheet",
+            0.3,
+            0.3,
+            Vector3::new(0.0, 0.17, 0.0),
+            Fabric::preset("silk").expect("preset"),
+        )],
+        ..Scene::default()
+    };
+    s.colliders
+        .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
+    s
+}
+
+/// A 4-frame data set at 40 mm / 15 mm (coarse ~80 vertices), made once per test binary.
+fn dataset() -> std::path::PathBuf {
+    static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    let dir = DIR.get_or_init(|| {
+        let dir = tempfile::tempdir().expect("tmp");
+        let opts = Options {
+            coarse_edge_m: 0.04,
+            fine_edge_m: 0.015,
+            frames: 4,
+            dress: false,
+            self_collision: false,
+            variation: Variation::default(),
+            fast: true,
+            source: None,
+        };
+        generate(&scene(), "test", &opts, dir.path(), |_| {}).expect("generate");
+        dir
+    });
+    dir.path().to_path_buf()
+}
+
+fn tiny_config() -> TrainingConfig {
+    TrainingConfig::new(CorrectorConfig::new().with_latent(16).with_steps(2))
+        .with_steps(60)
+        .with_batch(2)
+        .with_lr_start(3e-3)
+        .with_lr_end(1e-3)
+        .with_checkpoint_every(25)
+}
+
+#[test]
+fn training_lowers_the_loss_and_the_saved_model_loads() {
+    let seq = Sequence::load(&dataset(), None).expect("load");
+    assert_eq!(seq.steps.len(), 4 * seq.manifest.steps_per_frame);
+    let out = tempfile::tempdir().expect("tmp");
+    let model = out.path().join("model");
+    let mut sets = vec![TrainSet {
+        seq: seq.clone(),
+        sim: None,
+    }];
+    let mut losses = Vec::new();
+    let cfg = tiny_config().with_steps(300).with_noise_ratio(0.0);
+    let summary = train(&cfg, &mut sets, &model, |p| losses.push(p.loss)).expect("train");
+    assert_eq!(losses.len(), 300);
+    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+    let last: f64 = losses[290..].iter().sum::<f64>() / 10.0;
+    assert!(last < 0.8 * first, "loss {first} → {last}");
+    assert_eq!(summary.noise_std_m, 0.0);
+    for f in ["config.json", "normalisation.json", "model.bpk", "log.csv"] {
+        assert!(model.join(f).exists(), "{f}");
+    }
+    assert!(!model.join("checkpoint").exists());
+    let log = std::fs::read_to_string(model.join("log.csv")).expect("log");
+    assert!(log.starts_with("phase,step,lr,loss,seconds") && log.lines().count() >= 3);
+
+    // Training again into a finished model directory is refused, naming the file.
+    let e = train(&cfg, &mut sets, &model, |_| {}).expect_err("finished");
+    assert!(e.to_string().contains("config.json"), "{e}");
+
+    // The loaded corrector moves M_c towards M_int on average over the training steps.
+    let c = Corrector::load(&model, &seq.mesh).expect("load");
+    let (mut before, mut after) = (0.0, 0.0);
+    for st in &seq.steps {
+        let mut state = clothsr::sim::SimState {
+            x: vectors(&st.coarse_x),
+            v: vectors(&st.coarse_v),
+            t_s: 0.0,
+        };
+        let gt = vectors(&st.int_x);
+        before += dist(&state.x, &gt);
+        c.correct(&mut state, seq.manifest.dt_s).expect("correct");
+        after += dist(&state.x, &gt);
+    }
+    assert!(
+        after < before,
+        "corrector error {after} vs uncorrected {before}"
+    );
+}
+
+fn dist(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum()
+}
+
+#[test]
+fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
+    let seq = Sequence::load(&dataset(), Some(1..=1)).expect("load");
+    let sets = vec![TrainSet {
+        seq: seq.clone(),
+        sim: None,
+    }];
+    let norm = fit_normalisation(&sets);
+    for attention in [false, true] {
+        let cfg = TrainingConfig::new(
+            CorrectorConfig::new()
+                .with_latent(16)
+                .with_steps(3)
+                .with_attention(attention),
+        );
+        let device = default_device();
+        let net = cfg.model.init(&device);
+        let dir = tempfile::tempdir().expect("tmp");
+        save_model(dir.path(), &cfg, &norm, &net).expect("save");
+        let loaded = Corrector::load(dir.path(), &seq.mesh).expect("load");
+        let st = &seq.steps[3];
+        let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
+        // Direct forward pass of the in-memory network.
+        let (nodes, edges) = features(&seq.graph, &x, &v, &norm);
+        let g = GraphTensors::of(&seq.graph, nodes.clone(), edges.clone(), &device);
+        let direct: Vec<f32> = net
+            .forward(&g)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("vec");
+        assert_eq!(direct.len(), 3 * seq.graph.num_nodes);
+        let mut expect = direct.clone();
+        norm.targets.invert(&mut expect);
+        let p = loaded.predict(&x, &v).expect("predict");
+        for (a, b) in p.iter().flat_map(|p| p.iter().copied()).zip(&expect) {
+            assert_eq!(a as f32, *b, "attention {attention}");
+        }
+        // Two graphs in one batch give each graph's own output.
+        let n = seq.graph.num_nodes as u32;
+        let senders: Vec<u32> = seq
+            .graph
+            .senders
+            .iter()
+            .copied()
+            .chain(seq.graph.senders.iter().map(|s| s + n))
+            .collect();
+        let receivers: Vec<u32> = seq
+            .graph
+            .receivers
+            .iter()
+            .copied()
+            .chain(seq.graph.receivers.iter().map(|s| s + n))
+            .collect();
+        let both = GraphTensors::new(
+            [nodes.clone(), nodes].concat(),
+            [edges.clone(), edges].concat(),
+            &senders,
+            &receivers,
+            &device,
+        );
+        let batched: Vec<f32> = net
+            .forward(&both)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("vec");
+        for (k, b) in batched.iter().enumerate() {
+            let a = direct[k % direct.len()];
+            assert!((a - b).abs() <= 1e-5 * (1.0 + a.abs()), "{k}: {a} vs {b}");
+        }
+        // A mesh collapsed to a point at rest still gets a finite correction.
+        let zeros = vec![Vector3::zeros(); x.len()];
+        let p = loaded.predict(&zeros, &zeros).expect("predict zeros");
+        assert!(p.iter().all(|p| p.iter().all(|c| c.is_finite())));
+    }
+}
+
+#[test]
+fn graph_of_a_data_set_mesh_matches_its_edges() {
+    let seq = Sequence::load(&dataset(), Some(1..=1)).expect("load");
+    let g = MeshGraph::new(&seq.mesh);
+    assert_eq!(g.num_edges(), 2 * seq.mesh.edges().len());
+    assert_eq!(g, seq.graph);
+}
+
+#[test]
+fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
+    let dir = dataset();
+    let seq = Sequence::load(&dir, None).expect("load");
+    let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let t0 = sim.state.t_s;
+    let mut sets = vec![TrainSet {
+        seq: seq.clone(),
+        sim: Some((sim, t0)),
+    }];
+    let cfg = tiny_config()
+        .with_steps(20)
+        .with_rollout_iters(4)
+        .with_window(3)
+        .with_rollout_lr(1e-3);
+    let out = tempfile::tempdir().expect("tmp");
+    let s = train(&cfg, &mut sets, out.path(), |_| {}).expect("train");
+    assert_eq!(s.phase2_iters, 4);
+    assert!(s.noise_std_m > 0.0);
+    assert!(s.phase2_first_last.0.is_finite() && s.phase2_first_last.1.is_finite());
+
+    let corrector = Corrector::load(out.path(), &seq.mesh).expect("load");
+    let mut sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let e = evaluate(&seq, &mut sim, t0, &corrector, 3, |_, _, _, _| {}).expect("evaluate");
+    assert_eq!(e.frame, vec![1, 2, 3]);
+    for v in [&e.sim_alone_mm, &e.interleaved_mm, &e.not_interleaved_mm] {
+        assert_eq!(v.len(), 3);
+        assert!(v.iter().all(|x| x.is_finite() && *x >= 0.0));
+    }
+    // The simulator alone starts on the ground truth, so its first-frame error is small
+    // (sub-millimetre) but not zero: resolutions differ.
+    assert!(
+        e.sim_alone_mm[0] > 0.0 && e.sim_alone_mm[0] < 5.0,
+        "{:?}",
+        e.sim_alone_mm
+    );
+    assert!(e.csv().lines().count() == 4);
+
+    // A scene that meshes differently is refused, naming the stored meshes.
+    let mut other = scene();
+    other.garments[0] = flat_sheet(
+        "sheet",
+        0.2,
+        0.3,
+        Vector3::new(0.0, 0.17, 0.0),
+        Fabric::preset("silk").expect("preset"),
+    );
+    let err = coarse_simulation(&other, &dir, 1)
+        .err()
+        .expect("different mesh");
+    assert!(err.to_string().contains("meshes.safetensors"), "{err}");
+}
