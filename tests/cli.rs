@@ -130,3 +130,99 @@ fn a_missing_python_environment_says_what_to_run() {
         "{err}"
     );
 }
+
+/// Issue 5: `dataset` → `train corrector` (both phases, the second reloading the scene the
+/// manifest names) → `rollout`, on a coarse sample; offsets with minus signs parse.
+#[test]
+fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
+    let (data, model, csv) = (
+        dir.path().join("data"),
+        dir.path().join("model"),
+        dir.path().join("rollout.csv"),
+    );
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = clothsr().args(args).output().expect("run");
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let s = |x: &str| std::ffi::OsString::from(x);
+    run(&[
+        s("dataset"),
+        sample.clone().into_os_string(),
+        s("--coarse-mm"),
+        s("80"),
+        s("--fine-mm"),
+        s("40"),
+        s("--frames"),
+        s("3"),
+        s("--fast"),
+        s("--no-self-collision"),
+        s("--garment-offset"),
+        s("-0.01,-0.005,0.01"),
+        s("-o"),
+        data.clone().into_os_string(),
+    ]
+    .iter()
+    .map(|a| a.as_os_str())
+    .collect::<Vec<_>>());
+    let manifest = std::fs::read_to_string(data.join("manifest.json")).expect("manifest");
+    assert!(manifest.contains("-0.005") && manifest.contains("\"fast\": true"));
+    run(&[
+        s("train"),
+        s("corrector"),
+        s("--data"),
+        data.clone().into_os_string(),
+        s("-o"),
+        model.clone().into_os_string(),
+        s("--steps"),
+        s("5"),
+        s("--batch"),
+        s("1"),
+        s("--latent"),
+        s("8"),
+        s("--mp-steps"),
+        s("1"),
+        s("--rollout-iters"),
+        s("2"),
+        s("--window"),
+        s("2"),
+    ]
+    .iter()
+    .map(|a| a.as_os_str())
+    .collect::<Vec<_>>());
+    assert!(model.join("model.bpk").exists());
+    let report = run(&[
+        s("rollout"),
+        s("--model"),
+        model.clone().into_os_string(),
+        s("--data"),
+        data.clone().into_os_string(),
+        s("--frames"),
+        s("1"),
+        s("--csv"),
+        csv.clone().into_os_string(),
+    ]
+    .iter()
+    .map(|a| a.as_os_str())
+    .collect::<Vec<_>>());
+    assert!(report.contains("mean error, interleaved"), "{report}");
+    assert_eq!(std::fs::read_to_string(&csv).expect("csv").lines().count(), 2);
+
+    // A directory that is not a model: exit code 2 and the directory named.
+    let out = clothsr()
+        .args(["rollout", "--model"])
+        .arg(&data)
+        .arg("--data")
+        .arg(&data)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("not a corrector model directory"), "{err}");
+}

@@ -36,10 +36,10 @@ pub struct Args {
     #[arg(long, default_value = "cotton")]
     fabric: String,
     /// Variation: move the garments by x,y,z metres (e.g. a drop height).
-    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
     garment_offset: Option<Vec<f64>>,
     /// Variation: move the colliders by x,y,z metres.
-    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
     collider_offset: Option<Vec<f64>>,
     /// Variation: turn the garments about the vertical axis, degrees.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]

@@ -31,7 +31,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1.0)]
     collider_scale: f64,
     /// Offset (x,y,z metres) applied to the --collider files after scaling.
-    #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
     collider_offset: Option<Vec<f64>>,
     /// Avatar (USD, UsdSkel or point cache).
     #[arg(long)]

@@ -69,13 +69,14 @@ impl Mlp {
 
     /// `[n, input] → [n, output]`.
     pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
-        let last = self.layers.len() - 1;
+        self.after_first(self.layers[0].forward(x))
+    }
+
+    /// The MLP from the first layer's output (pre-activation) on.
+    fn after_first(&self, x: Tensor<2>) -> Tensor<2> {
         let mut x = x;
-        for (k, layer) in self.layers.iter().enumerate() {
-            x = layer.forward(x);
-            if k < last {
-                x = relu(x);
-            }
+        for layer in &self.layers[1..] {
+            x = layer.forward(relu(x));
         }
         match &self.norm {
             Some(norm) => norm.forward(x),
@@ -85,9 +86,15 @@ impl Mlp {
 }
 
 /// One message-passing block.
+///
+/// The edge MLP's first layer acts on the concatenation [e_ij, v_i, v_j]; it is computed as
+/// W_e·e_ij + (W_s·v)_i + (W_r·v)_j, applying W_s and W_r once per node rather than once per
+/// edge (the same function with fewer operations: a mesh has ~6 directed edges per vertex).
 #[derive(Module, Debug)]
 pub struct Block {
     edge: Mlp,
+    edge_sender: Linear,
+    edge_receiver: Linear,
     node: Mlp,
     score: Option<Linear>,
 }
@@ -147,11 +154,16 @@ impl Block {
         receivers: &Tensor<1, Int>,
     ) -> (Tensor<2>, Tensor<2>) {
         let [n, latent] = nodes.dims();
-        let v_i = nodes.clone().select(0, senders.clone()); // [E, L]
-        let v_j = nodes.clone().select(0, receivers.clone()); // [E, L]
-        let e_new = self
-            .edge
-            .forward(Tensor::cat(vec![edges.clone(), v_i, v_j], 1)); // [E, L]
+        let from_i = self
+            .edge_sender
+            .forward(nodes.clone())
+            .select(0, senders.clone()); // [E, L]
+        let from_j = self
+            .edge_receiver
+            .forward(nodes.clone())
+            .select(0, receivers.clone()); // [E, L]
+        let first = self.edge.layers[0].forward(edges.clone()) + from_i + from_j; // [E, L]
+        let e_new = self.edge.after_first(first); // [E, L]
         let device = nodes.device();
         let messages = match &self.score {
             None => e_new.clone(),
@@ -201,7 +213,9 @@ impl CorrectorConfig {
             encode_edges: Mlp::new(EDGE_FEATURES, l, h, l, true, device),
             blocks: (0..self.steps)
                 .map(|_| Block {
-                    edge: Mlp::new(3 * l, l, h, l, true, device),
+                    edge: Mlp::new(l, l, h, l, true, device),
+                    edge_sender: LinearConfig::new(l, l).with_bias(false).init(device),
+                    edge_receiver: LinearConfig::new(l, l).with_bias(false).init(device),
                     node: Mlp::new(2 * l, l, h, l, true, device),
                     score: self.attention.then(|| LinearConfig::new(l, 1).init(device)),
                 })

@@ -45,6 +45,7 @@ pub struct MomentsBuilder {
     sum: Vec<f64>,
     sum_sq: Vec<f64>,
     flags: Vec<usize>,
+    centred: bool,
 }
 
 impl MomentsBuilder {
@@ -55,7 +56,15 @@ impl MomentsBuilder {
             sum: vec![0.0; width],
             sum_sq: vec![0.0; width],
             flags: flags.to_vec(),
+            centred: true,
         }
+    }
+
+    /// Scale only: the mean stays 0 and the scale is the root mean square, so that zero maps
+    /// to zero.
+    pub fn uncentred(mut self) -> MomentsBuilder {
+        self.centred = false;
+        self
     }
 
     /// Adds row-major rows.
@@ -79,7 +88,7 @@ impl MomentsBuilder {
                 std.push(1.0);
                 continue;
             }
-            let m = self.sum[k] / n;
+            let m = if self.centred { self.sum[k] / n } else { 0.0 };
             let var = (self.sum_sq[k] / n - m * m).max(0.0);
             mean.push(m as f32);
             std.push(var.sqrt().max(MIN_STD) as f32);
@@ -95,7 +104,11 @@ pub struct Normalisation {
     pub nodes: Moments,
     /// Edge features.
     pub edges: Moments,
-    /// Targets: velocity corrections p̄, m/s.
+    /// Targets: velocity corrections p̄, m/s. Scaled but not shifted (mean 0): a network
+    /// output of zero is then no correction, rather than the data set's mean correction
+    /// applied everywhere. Interleaving feeds every correction back into the simulation, so
+    /// a constant bias on states unlike the training data (free fall, say) would accumulate
+    /// into drift.
     pub targets: Moments,
 }
 
@@ -112,7 +125,7 @@ impl Default for NormalisationBuilder {
         NormalisationBuilder {
             nodes: MomentsBuilder::new(NODE_FEATURES, &NODE_FLAGS),
             edges: MomentsBuilder::new(EDGE_FEATURES, &EDGE_FLAGS),
-            targets: MomentsBuilder::new(3, &[]),
+            targets: MomentsBuilder::new(3, &[]).uncentred(),
         }
     }
 }
@@ -161,5 +174,12 @@ mod tests {
         assert!(x.chunks(3).zip(rows.chunks(3)).all(|(a, b)| a[2] == b[2]));
         m.invert(&mut x);
         assert!(x.iter().zip(&rows).all(|(a, b)| (a - b).abs() < 1e-4));
+
+        // Uncentred: mean 0, scale = RMS (of 3 and 4: 3.5355).
+        let mut u = MomentsBuilder::new(1, &[]).uncentred();
+        u.add(&[3.0, -4.0]);
+        let m = u.build();
+        assert_eq!(m.mean, vec![0.0]);
+        assert!((m.std[0] - 12.5f32.sqrt()).abs() < 1e-5, "{:?}", m.std);
     }
 }
