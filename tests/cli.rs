@@ -212,7 +212,10 @@ fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
     .map(|a| a.as_os_str())
     .collect::<Vec<_>>());
     assert!(report.contains("mean error, interleaved"), "{report}");
-    assert_eq!(std::fs::read_to_string(&csv).expect("csv").lines().count(), 2);
+    assert_eq!(
+        std::fs::read_to_string(&csv).expect("csv").lines().count(),
+        2
+    );
 
     // A directory that is not a model: exit code 2 and the directory named.
     let out = clothsr()

@@ -32,7 +32,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let m = read_manifest(&args.data)?;
     let frames = args.frames.unwrap_or(m.frames_done.saturating_sub(1));
     anyhow::ensure!(frames > 0, "the data set has too few frames to roll out");
-    let seq = Sequence::load(&args.data, Some(1..=(frames + 1).min(m.frames_done)))?;
     let source = m.source.as_ref().with_context(|| {
         format!(
             "{}: the data set does not record its scene files",
@@ -42,6 +41,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = source.load()?;
     let mut sim = coarse_simulation(&scene, &args.data, 1)?;
     let t0 = sim.state.t_s;
+    let seq = Sequence::load(
+        &args.data,
+        Some(1..=(frames + 1).min(m.frames_done)),
+        &sim.colliders,
+        t0,
+    )?;
     let corrector = Corrector::load(&args.model, &seq.mesh)?;
     let e = evaluate(&seq, &mut sim, t0, &corrector, frames, |f, a, b, c| {
         if f.is_multiple_of(10) {

@@ -116,24 +116,20 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     for dir in &a.data {
         let m = clothsr::data::read_manifest(dir)?;
         let frames = a.frames.map(|n| 1..=n.min(m.frames_done));
-        let seq = Sequence::load(dir, frames)?;
-        let sim = if a.rollout_iters > 0 {
-            let source = m.source.as_ref().with_context(|| {
-                format!(
-                    "{}: phase 2 runs the coarse simulator, but this data set does not record \
-                     its scene files (made by an older clothsr)",
-                    dir.join("manifest.json").display()
-                )
-            })?;
-            let scene = source
-                .load()
-                .with_context(|| format!("loading the scene of {}", dir.display()))?;
-            let sim = coarse_simulation(&scene, dir, 1)?;
-            let t0 = sim.state.t_s;
-            Some((sim, t0))
-        } else {
-            None
-        };
+        let source = m.source.as_ref().with_context(|| {
+            format!(
+                "{}: the corrector needs the data set's colliders, but this data set does not \
+                 record its scene files (made by an older clothsr)",
+                dir.join("manifest.json").display()
+            )
+        })?;
+        let scene = source
+            .load()
+            .with_context(|| format!("loading the scene of {}", dir.display()))?;
+        let sim = coarse_simulation(&scene, dir, 1)?;
+        let t0 = sim.state.t_s;
+        let seq = Sequence::load(dir, frames, &sim.colliders, t0)?;
+        let sim = (a.rollout_iters > 0).then_some((sim, t0));
         tracing::info!(
             "{}: {} steps, {} coarse vertices, {} edges",
             dir.display(),

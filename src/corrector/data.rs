@@ -9,10 +9,11 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
 
-use super::graph::MeshGraph;
+use super::graph::{body_proximity, MeshGraph};
 use crate::data::{read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
+use crate::scene::Collider;
 
 /// One simulator step of a sequence: flattened (N·3) f32 arrays.
 #[derive(Debug, Clone)]
@@ -25,6 +26,8 @@ pub struct Step {
     pub int_x: Vec<f32>,
     /// M_int velocities, m/s.
     pub int_v: Vec<f32>,
+    /// Body proximity of M_c's vertices ([`super::graph::body_proximity`]).
+    pub body: Vec<f32>,
 }
 
 /// A data set's coarse sequence in memory.
@@ -53,8 +56,14 @@ pub fn vectors(v: &[f32]) -> Vec<Vector3<f64>> {
 
 impl Sequence {
     /// Loads frames `frames` (1-based, inclusive; `None`: all complete frames) of the data set
-    /// in `dir`.
-    pub fn load(dir: &Path, frames: Option<RangeInclusive<usize>>) -> Result<Sequence> {
+    /// in `dir`, with the data set's colliders (those of
+    /// [`crate::data::coarse_simulation`]) and the simulation's time at its frame 0, s.
+    pub fn load(
+        dir: &Path,
+        frames: Option<RangeInclusive<usize>>,
+        colliders: &[Collider],
+        t0_s: f64,
+    ) -> Result<Sequence> {
         let manifest = read_manifest(dir)?;
         let frames = frames.unwrap_or(1..=manifest.frames_done);
         if frames.is_empty() || *frames.start() == 0 || *frames.end() > manifest.frames_done {
@@ -76,8 +85,11 @@ impl Sequence {
             let f = read_coarse_steps(dir, &manifest, k)?;
             for i in 0..s {
                 let r = i * n3..(i + 1) * n3;
+                let coarse_x = f.coarse_x[r.clone()].to_vec();
+                let t_s = t0_s + ((k - 1) * s + i + 1) as f64 * manifest.dt_s;
                 steps.push(Step {
-                    coarse_x: f.coarse_x[r.clone()].to_vec(),
+                    body: body_proximity(&vectors(&coarse_x), colliders, t_s),
+                    coarse_x,
                     coarse_v: f.coarse_v[r.clone()].to_vec(),
                     int_x: f.int_x[r.clone()].to_vec(),
                     int_v: f.int_v[r].to_vec(),

@@ -1,8 +1,13 @@
 //! The corrector's graph (the paper's §3.1.2): the coarse mesh's vertices are the nodes, its
 //! edges (both directions) and its seam pairs are the edges. No collision edges.
 //!
-//! Features, per node (`NODE_FEATURES`): the velocity q_i (3, m/s), a mesh-boundary flag and a
-//! seam flag. Per directed edge i → j (`EDGE_FEATURES`): the material-space offset
+//! Features, per node (`NODE_FEATURES`): the velocity q_i (3, m/s), a mesh-boundary flag, a
+//! seam flag and the body proximity max(0, 1 − d_i/`BODY_RADIUS_M`), d_i the distance to the
+//! nearest collider surface. The paper's corrector sees no colliders; without this feature a
+//! vertex one step into free fall and a vertex resting on a body one step after the coarse
+//! simulator pulled it down carry the same inputs (v ≈ −g·h) and need opposite corrections
+//! (none, and +g·h): a corrector trained on draping then holds a falling sheet in the air.
+//! Per directed edge i → j (`EDGE_FEATURES`): the material-space offset
 //! u_ij = u_i − u_j (2, m) and its norm, the world-space offset x_ij = x_i − x_j (3, m) and its
 //! norm, and a flag for seam edges (whose two ends lie on different panels, so u_ij is set to
 //! zero: sewn vertices should coincide).
@@ -12,13 +17,50 @@ use std::collections::{HashMap, VecDeque};
 use nalgebra::{Vector2, Vector3};
 
 use crate::mesh::ClothMesh;
+use crate::scene::Collider;
+use crate::sim::collide::bvh::{Aabb, Bvh};
+use crate::sim::collide::distance::point_triangle;
 
-/// Features per node: velocity (3), boundary flag, seam flag.
-pub const NODE_FEATURES: usize = 5;
+/// Body proximity of every point of `x` to `colliders` at time `t_s`:
+/// max(0, 1 − d/`BODY_RADIUS_M`), d the distance to the nearest collider triangle.
+pub fn body_proximity(x: &[Vector3<f64>], colliders: &[Collider], t_s: f64) -> Vec<f32> {
+    let mut nearest = vec![BODY_RADIUS_M; x.len()];
+    let mut points = Vec::new();
+    for c in colliders {
+        c.positions_at(t_s, &mut points);
+        let boxes: Vec<Aabb> = c
+            .triangles
+            .iter()
+            .map(|t| Aabb::from_points(t.iter().map(|&v| &points[v as usize])))
+            .collect();
+        if boxes.is_empty() {
+            continue;
+        }
+        let bvh = Bvh::build(&boxes);
+        for (p, best) in x.iter().zip(nearest.iter_mut()) {
+            let hit = bvh.nearest(p, *best, |i| {
+                let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
+                point_triangle(p, &a, &b, &c).dist
+            });
+            if let Some((_, d)) = hit {
+                *best = best.min(d);
+            }
+        }
+    }
+    nearest
+        .iter()
+        .map(|d| (1.0 - d / BODY_RADIUS_M).max(0.0) as f32)
+        .collect()
+}
+
+/// Features per node: velocity (3), boundary flag, seam flag, body proximity.
+pub const NODE_FEATURES: usize = 6;
 /// Features per directed edge: u_ij (2), |u_ij|, x_ij (3), |x_ij|, seam flag.
 pub const EDGE_FEATURES: usize = 8;
 /// Node features that are 0/1 flags (not normalised): their column indices.
-pub const NODE_FLAGS: [usize; 2] = [3, 4];
+pub const NODE_FLAGS: [usize; 3] = [3, 4, 5];
+/// Distance from a collider at which the body-proximity feature reaches 0, m.
+pub const BODY_RADIUS_M: f64 = 0.05;
 /// Edge features that are 0/1 flags (not normalised).
 pub const EDGE_FLAGS: [usize; 1] = [7];
 
@@ -88,10 +130,11 @@ impl MeshGraph {
         self.senders.len()
     }
 
-    /// Appends the node features for velocities `v` (one per node): [num_nodes, NODE_FEATURES]
-    /// row-major.
-    pub fn node_features(&self, v: &[Vector3<f64>], out: &mut Vec<f32>) {
+    /// Appends the node features for velocities `v` and body proximities `body` (one each
+    /// per node, [`body_proximity`]): [num_nodes, NODE_FEATURES] row-major.
+    pub fn node_features(&self, v: &[Vector3<f64>], body: &[f32], out: &mut Vec<f32>) {
         debug_assert_eq!(v.len(), self.num_nodes);
+        debug_assert_eq!(body.len(), self.num_nodes);
         for (i, q) in v.iter().enumerate() {
             out.extend([
                 q.x as f32,
@@ -99,6 +142,7 @@ impl MeshGraph {
                 q.z as f32,
                 f32::from(u8::from(self.boundary[i])),
                 f32::from(u8::from(self.seam_vertex[i])),
+                body[i],
             ]);
         }
     }
@@ -237,6 +281,22 @@ mod tests {
         assert!((row[3] as f64 - d.x).abs() < 1e-6 && (row[6] as f64 - d.norm()).abs() < 1e-6);
         // Flat sheet: world length equals material length.
         assert!((row[2] - row[6]).abs() < 1e-6);
+    }
+
+    #[test]
+    fn body_proximity_is_one_at_the_surface_and_zero_beyond_the_radius() {
+        let ball = Collider::sphere("b", Vector3::zeros(), 0.1, 4);
+        let x = [
+            Vector3::new(0.0, 0.1, 0.0),
+            Vector3::new(0.0, 0.1 + 0.5 * BODY_RADIUS_M, 0.0),
+            Vector3::new(0.0, 0.0, 0.1 + 2.0 * BODY_RADIUS_M),
+        ];
+        let p = body_proximity(&x, &[ball], 0.0);
+        assert!(p[0] > 0.97, "{p:?}");
+        // Halfway out (the faceted sphere lies up to ~1 mm inside the true one).
+        assert!((p[1] - 0.5).abs() < 0.03, "{p:?}");
+        assert_eq!(p[2], 0.0);
+        assert_eq!(body_proximity(&x, &[], 0.0), vec![0.0; 3]);
     }
 
     #[test]

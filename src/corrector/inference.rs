@@ -11,12 +11,13 @@ use burn::module::Module;
 use burn::tensor::Device;
 use nalgebra::Vector3;
 
-use super::graph::MeshGraph;
+use super::graph::{body_proximity, MeshGraph};
 use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
+use crate::scene::Collider;
 use crate::sim::SimState;
 
 /// The weights file in a model directory.
@@ -26,16 +27,17 @@ pub const CONFIG_FILE: &str = "config.json";
 /// The normalisation statistics file in a model directory.
 pub const NORMALISATION_FILE: &str = "normalisation.json";
 
-/// Normalised network inputs for positions `x` and velocities `v` on `graph`: node rows
-/// `[n, NODE_FEATURES]`, edge rows `[e, EDGE_FEATURES]`.
+/// Normalised network inputs for positions `x`, velocities `v` and body proximities `body`
+/// on `graph`: node rows `[n, NODE_FEATURES]`, edge rows `[e, EDGE_FEATURES]`.
 pub fn features(
     graph: &MeshGraph,
     x: &[Vector3<f64>],
     v: &[Vector3<f64>],
+    body: &[f32],
     norm: &Normalisation,
 ) -> (Vec<f32>, Vec<f32>) {
     let (mut nodes, mut edges) = (Vec::new(), Vec::new());
-    graph.node_features(v, &mut nodes);
+    graph.node_features(v, body, &mut nodes);
     graph.edge_features(x, &mut edges);
     norm.nodes.apply(&mut nodes);
     norm.edges.apply(&mut edges);
@@ -124,16 +126,22 @@ impl Corrector {
         }
     }
 
-    /// The predicted velocity correction p for M_c = (x, v), m/s per vertex.
-    pub fn predict(&self, x: &[Vector3<f64>], v: &[Vector3<f64>]) -> Result<Vec<Vector3<f64>>> {
-        if x.len() != self.graph.num_nodes || v.len() != x.len() {
+    /// The predicted velocity correction p for M_c = (x, v) with body proximities `body`
+    /// ([`body_proximity`]), m/s per vertex.
+    pub fn predict(
+        &self,
+        x: &[Vector3<f64>],
+        v: &[Vector3<f64>],
+        body: &[f32],
+    ) -> Result<Vec<Vector3<f64>>> {
+        if x.len() != self.graph.num_nodes || v.len() != x.len() || body.len() != x.len() {
             return Err(Error::Invalid(format!(
                 "the corrector was set up for {} vertices, the state has {}",
                 self.graph.num_nodes,
                 x.len()
             )));
         }
-        let (nodes, edges) = features(&self.graph, x, v, &self.norm);
+        let (nodes, edges) = features(&self.graph, x, v, body, &self.norm);
         let g = GraphTensors::of(&self.graph, nodes, edges, &self.device);
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
@@ -152,9 +160,11 @@ impl Corrector {
         Ok(p)
     }
 
-    /// Corrects M_c in place into M_int: q′ = q + p, x′ = x + h·p.
-    pub fn correct(&self, state: &mut SimState, dt_s: f64) -> Result<()> {
-        let p = self.predict(&state.x, &state.v)?;
+    /// Corrects M_c in place into M_int: q′ = q + p, x′ = x + h·p; `colliders` are the
+    /// simulation's, taken at `state.t_s`.
+    pub fn correct(&self, state: &mut SimState, dt_s: f64, colliders: &[Collider]) -> Result<()> {
+        let body = body_proximity(&state.x, colliders, state.t_s);
+        let p = self.predict(&state.x, &state.v, &body)?;
         for ((x, v), p) in state.x.iter_mut().zip(state.v.iter_mut()).zip(&p) {
             *v += p;
             *x += p * dt_s;

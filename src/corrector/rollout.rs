@@ -126,14 +126,14 @@ pub fn evaluate(
         let mut c = sim.step_from(&inter)?.0;
         sim_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        corrector.correct(&mut c, h)?;
+        corrector.correct(&mut c, h, &sim.colliders)?;
         corr_s += t.elapsed().as_secs_f64();
         inter = c;
         // The data set's frame ends are its steps s, 2s, …; step 0 here is its step 1.
         if (i + 1) % s == 0 {
             let gt = vectors(&seq.steps[i].int_x);
             let mut fixed = alone.clone();
-            corrector.correct(&mut fixed, h)?;
+            corrector.correct(&mut fixed, h, &sim.colliders)?;
             let e = (
                 mean_distance_mm(&alone.x, &gt),
                 mean_distance_mm(&inter.x, &gt),

@@ -32,7 +32,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use super::data::{vectors, Sequence};
-use super::graph::MeshGraph;
+use super::graph::{body_proximity, MeshGraph};
 use super::inference::{default_device, features, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
 use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
@@ -351,7 +351,7 @@ pub fn fit_normalisation(sets: &[TrainSet]) -> Normalisation {
         for st in &s.seq.steps {
             let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
             let (mut nodes, mut edges) = (Vec::new(), Vec::new());
-            s.seq.graph.node_features(&v, &mut nodes);
+            s.seq.graph.node_features(&v, &st.body, &mut nodes);
             s.seq.graph.edge_features(&x, &mut edges);
             let targets: Vec<f32> = st
                 .int_v
@@ -425,8 +425,9 @@ impl Trainer<'_> {
             nodes_idx.iter().map(|&i| a[i as usize]).collect()
         };
         let (xs, vs, ts) = (take(&x), take(&v), take(&targets));
+        let body: Vec<f32> = nodes_idx.iter().map(|&i| st.body[i as usize]).collect();
         let (mut nodes, mut edges) = (Vec::new(), Vec::new());
-        graph.node_features(&vs, &mut nodes);
+        graph.node_features(&vs, &body, &mut nodes);
         graph.edge_features(&xs, &mut edges);
         Sample {
             graph,
@@ -601,7 +602,8 @@ fn rollout_window(
                 .map(|(a, b)| (a - b) / h)
                 .collect::<Vec<_>>(),
         );
-        let (nodes, edges) = features(&seq.graph, &c.x, &c.v, norm);
+        let body = body_proximity(&c.x, &sim.colliders, c.t_s);
+        let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &body, norm);
         let g = GraphTensors::of(&seq.graph, nodes, edges, device);
         let pred = net.forward(&g); // [n, 3], normalised
         let mut p: Vec<f32> = pred
