@@ -19,9 +19,12 @@ pub struct Args {
     /// Data set directory (`clothsr dataset`) with the ground truth; not one trained on.
     #[arg(long)]
     data: PathBuf,
-    /// Frames to roll out (default: all the data set has).
+    /// Frames to roll out (default: all the data set has after the start).
     #[arg(long)]
     frames: Option<usize>,
+    /// Start from the ground truth at the first step of this frame (1-based).
+    #[arg(long, default_value_t = 1)]
+    start_frame: usize,
     /// Write per-frame errors as CSV here.
     #[arg(long)]
     csv: Option<PathBuf>,
@@ -30,8 +33,16 @@ pub struct Args {
 /// Runs `rollout`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let m = read_manifest(&args.data)?;
-    let frames = args.frames.unwrap_or(m.frames_done.saturating_sub(1));
-    anyhow::ensure!(frames > 0, "the data set has too few frames to roll out");
+    anyhow::ensure!(args.start_frame >= 1, "--start-frame counts from 1");
+    let frames = args
+        .frames
+        .unwrap_or(m.frames_done.saturating_sub(args.start_frame));
+    anyhow::ensure!(
+        frames > 0 && args.start_frame + frames <= m.frames_done,
+        "the data set has {} frames: too few to roll out {frames} from frame {}",
+        m.frames_done,
+        args.start_frame
+    );
     let source = m.source.as_ref().with_context(|| {
         format!(
             "{}: the data set does not record its scene files",
@@ -39,11 +50,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
     })?;
     let scene = source.load()?;
-    let mut sim = coarse_simulation(&scene, &args.data, 1)?;
+    let mut sim = coarse_simulation(&scene, &args.data, args.start_frame)?;
     let t0 = sim.state.t_s;
     let seq = Sequence::load(
         &args.data,
-        Some(1..=(frames + 1).min(m.frames_done)),
+        Some(args.start_frame..=args.start_frame + frames),
         &sim.colliders,
         t0,
     )?;
