@@ -1,5 +1,6 @@
 //! The command line on real files: `inspect` and `mesh` on every shared pattern, the samples.
 
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -142,7 +143,7 @@ fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
         dir.path().join("model"),
         dir.path().join("rollout.csv"),
     );
-    let run = |args: &[&std::ffi::OsStr]| {
+    let run = |args: Vec<OsString>| {
         let out = clothsr().args(args).output().expect("run");
         assert!(
             out.status.success(),
@@ -151,66 +152,56 @@ fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
         );
         String::from_utf8_lossy(&out.stdout).to_string()
     };
-    let s = |x: &str| std::ffi::OsString::from(x);
-    run(&[
-        s("dataset"),
-        sample.clone().into_os_string(),
-        s("--coarse-mm"),
-        s("80"),
-        s("--fine-mm"),
-        s("40"),
-        s("--frames"),
-        s("3"),
-        s("--fast"),
-        s("--no-self-collision"),
-        s("--garment-offset"),
-        s("-0.01,-0.005,0.01"),
-        s("-o"),
-        data.clone().into_os_string(),
-    ]
-    .iter()
-    .map(|a| a.as_os_str())
-    .collect::<Vec<_>>());
+    run(vec![
+        "dataset".into(),
+        sample.clone().into(),
+        "--coarse-mm".into(),
+        "80".into(),
+        "--fine-mm".into(),
+        "40".into(),
+        "--frames".into(),
+        "3".into(),
+        "--fast".into(),
+        "--no-self-collision".into(),
+        "--garment-offset".into(),
+        "-0.01,-0.005,0.01".into(),
+        "-o".into(),
+        data.clone().into(),
+    ]);
     let manifest = std::fs::read_to_string(data.join("manifest.json")).expect("manifest");
     assert!(manifest.contains("-0.005") && manifest.contains("\"fast\": true"));
-    run(&[
-        s("train"),
-        s("corrector"),
-        s("--data"),
-        data.clone().into_os_string(),
-        s("-o"),
-        model.clone().into_os_string(),
-        s("--steps"),
-        s("5"),
-        s("--batch"),
-        s("1"),
-        s("--latent"),
-        s("8"),
-        s("--mp-steps"),
-        s("1"),
-        s("--rollout-iters"),
-        s("2"),
-        s("--window"),
-        s("2"),
-    ]
-    .iter()
-    .map(|a| a.as_os_str())
-    .collect::<Vec<_>>());
+    run(vec![
+        "train".into(),
+        "corrector".into(),
+        "--data".into(),
+        data.clone().into(),
+        "-o".into(),
+        model.clone().into(),
+        "--steps".into(),
+        "5".into(),
+        "--batch".into(),
+        "1".into(),
+        "--latent".into(),
+        "8".into(),
+        "--mp-steps".into(),
+        "1".into(),
+        "--rollout-iters".into(),
+        "2".into(),
+        "--window".into(),
+        "2".into(),
+    ]);
     assert!(model.join("model.bpk").exists());
-    let report = run(&[
-        s("rollout"),
-        s("--model"),
-        model.clone().into_os_string(),
-        s("--data"),
-        data.clone().into_os_string(),
-        s("--frames"),
-        s("1"),
-        s("--csv"),
-        csv.clone().into_os_string(),
-    ]
-    .iter()
-    .map(|a| a.as_os_str())
-    .collect::<Vec<_>>());
+    let report = run(vec![
+        "rollout".into(),
+        "--model".into(),
+        model.clone().into(),
+        "--data".into(),
+        data.clone().into(),
+        "--frames".into(),
+        "1".into(),
+        "--csv".into(),
+        csv.clone().into(),
+    ]);
     assert!(report.contains("mean error, interleaved"), "{report}");
     assert_eq!(
         std::fs::read_to_string(&csv).expect("csv").lines().count(),
