@@ -144,7 +144,7 @@ fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
         dir.path().join("rollout.csv"),
     );
     let run = |args: Vec<OsString>| {
-        let out = clothsr().args(args).output().expect("run");
+        let out = clothsr().args(&args).output().expect("run");
         assert!(
             out.status.success(),
             "{args:?}: {}",
