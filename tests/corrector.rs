@@ -15,6 +15,7 @@ use clothsr::garment::Fabric;
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::{Collider, Scene};
 use nalgebra::Vector3;
+use std::ops::ControlFlow;
 
 fn scene() -> Scene {
     let mut s = Scene {
@@ -78,12 +79,21 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
         sim: None,
     }];
     let mut losses = Vec::new();
-    let cfg = tiny_config().with_steps(300).with_noise_ratio(0.0);
-    let summary = train(&cfg, &mut sets, &model, |p| losses.push(p.loss)).expect("train");
+    let cfg = TrainingConfig::new(CorrectorConfig::new().with_latent(32).with_steps(2))
+        .with_steps(300)
+        .with_batch(2)
+        .with_lr_start(3e-3)
+        .with_lr_end(1e-3)
+        .with_noise_ratio(0.0);
+    let summary = train(&cfg, &mut sets, &model, |p| {
+        losses.push(p.loss);
+        ControlFlow::Continue(())
+    })
+    .expect("train");
     assert_eq!(losses.len(), 300);
     let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
     let last: f64 = losses[290..].iter().sum::<f64>() / 10.0;
-    assert!(last < 0.95 * first, "loss {first} → {last}");
+    assert!(last < 0.8 * first, "loss {first} → {last}");
     assert_eq!(summary.noise_std_m, 0.0);
     for f in ["config.json", "normalisation.json", "model.bpk", "log.csv"] {
         assert!(model.join(f).exists(), "{f}");
@@ -93,7 +103,7 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
     assert!(log.starts_with("phase,step,lr,loss,seconds") && log.lines().count() >= 3);
 
     // Training again into a finished model directory is refused, naming the file.
-    let e = train(&cfg, &mut sets, &model, |_| {}).expect_err("finished");
+    let e = train(&cfg, &mut sets, &model, |_| ControlFlow::Continue(())).expect_err("finished");
     assert!(e.to_string().contains("config.json"), "{e}");
 
     // The loaded corrector moves M_c towards M_int on average over the training steps.
@@ -226,7 +236,7 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         .with_window(3)
         .with_rollout_lr(1e-3);
     let out = tempfile::tempdir().expect("tmp");
-    let s = train(&cfg, &mut sets, out.path(), |_| {}).expect("train");
+    let s = train(&cfg, &mut sets, out.path(), |_| ControlFlow::Continue(())).expect("train");
     assert_eq!(s.phase2_iters, 4);
     assert!(s.noise_std_m > 0.0);
     assert!(s.phase2_first_last.0.is_finite() && s.phase2_first_last.1.is_finite());
@@ -261,4 +271,42 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         .err()
         .expect("different mesh");
     assert!(err.to_string().contains("meshes.safetensors"), "{err}");
+}
+
+#[test]
+fn an_interrupted_training_run_resumes_from_its_checkpoint() {
+    let seq = load(None);
+    let mut sets = vec![TrainSet { seq, sim: None }];
+    let cfg = tiny_config().with_steps(40).with_checkpoint_every(10);
+    let out = tempfile::tempdir().expect("tmp");
+    let s = train(&cfg, &mut sets, out.path(), |p| {
+        if p.step == 25 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("first part");
+    assert!(s.interrupted);
+    assert!(!out.path().join("model.bpk").exists());
+    assert!(out.path().join("checkpoint/state.json").exists());
+    // Another configuration is refused, naming the config file.
+    let e = train(&cfg.clone().with_steps(41), &mut sets, out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("other config");
+    assert!(e.to_string().contains("config.json"), "{e}");
+    let mut steps = Vec::new();
+    let s = train(&cfg, &mut sets, out.path(), |p| {
+        steps.push(p.step);
+        ControlFlow::Continue(())
+    })
+    .expect("resume");
+    assert!(!s.interrupted);
+    assert_eq!(steps, (26..=40).collect::<Vec<_>>());
+    assert!(out.path().join("model.bpk").exists());
+    assert!(!out.path().join("checkpoint").exists());
+    let log = std::fs::read_to_string(out.path().join("log.csv")).expect("log");
+    assert_eq!(log.matches("phase,step").count(), 1, "{log}");
+    assert!(log.lines().any(|l| l.starts_with("1,40,")), "{log}");
 }

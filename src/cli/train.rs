@@ -168,6 +168,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
                 p.total
             );
         }
+        std::ops::ControlFlow::Continue(())
     })?;
     bar.finish_and_clear();
     tracing::info!(

@@ -18,6 +18,7 @@
 //! (weights, optimiser state, position), from which an interrupted run resumes.
 
 use std::io::Write;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -121,6 +122,8 @@ pub struct Summary {
     pub seconds: f64,
     /// Training-noise standard deviation used, m.
     pub noise_std_m: f64,
+    /// Stopped by the progress callback before the end; resumable from the checkpoint.
+    pub interrupted: bool,
 }
 
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
@@ -194,6 +197,7 @@ struct Trainer<'a> {
     log: std::fs::File,
     t0: Instant,
     rng: StdRng,
+    stopped: bool,
 }
 
 fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
@@ -222,12 +226,14 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
 }
 
 /// Trains a corrector on `sets` into `out` (resuming from `out/checkpoint` when the
-/// configuration there is the same); `progress` sees every optimiser step.
+/// configuration there is the same); `progress` sees every optimiser step and may stop the
+/// run (`ControlFlow::Break`): the position is then checkpointed and the summary says
+/// `interrupted`, and a later call with the same arguments resumes.
 pub fn train(
     cfg: &TrainingConfig,
     sets: &mut [TrainSet],
     out: &Path,
-    mut progress: impl FnMut(&Progress),
+    mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Summary> {
     check(cfg, sets)?;
     std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
@@ -265,6 +271,7 @@ pub fn train(
     };
     let rms: f64 = sets.iter().map(|s| s.seq.rms_correction_m()).sum::<f64>() / sets.len() as f64;
     let device = default_device().autodiff();
+    device.seed(cfg.seed);
     let mut net = cfg.model.init(&device);
     let mut optim = AdamConfig::new().init();
     if resuming {
@@ -304,18 +311,25 @@ pub fn train(
         position,
         log,
         t0: Instant::now(),
+        stopped: false,
     };
     let mut summary = Summary {
         noise_std_m: t.noise_std_m,
         ..Summary::default()
     };
     summary.phase1_first_last = t.phase1(sets, &mut progress)?;
-    let (first_last, iters) = t.phase2(sets, &mut progress)?;
-    summary.phase2_first_last = first_last;
-    summary.phase2_iters = iters;
+    if !t.stopped {
+        let (first_last, iters) = t.phase2(sets, &mut progress)?;
+        summary.phase2_first_last = first_last;
+        summary.phase2_iters = iters;
+    }
+    summary.seconds = t.t0.elapsed().as_secs_f64();
+    if t.stopped {
+        summary.interrupted = true;
+        return Ok(summary);
+    }
     save_model(out, cfg, &t.norm, &t.net)?;
     std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
-    summary.seconds = t.t0.elapsed().as_secs_f64();
     Ok(summary)
 }
 
@@ -466,7 +480,7 @@ impl Trainer<'_> {
     fn phase1(
         &mut self,
         sets: &[TrainSet],
-        progress: &mut impl FnMut(&Progress),
+        progress: &mut impl FnMut(&Progress) -> ControlFlow<()>,
     ) -> Result<(f64, f64)> {
         let cfg = self.cfg;
         let mut losses = Vec::new();
@@ -501,12 +515,17 @@ impl Trainer<'_> {
             {
                 self.checkpoint()?;
             }
-            progress(&Progress {
+            let flow = progress(&Progress {
                 phase: 1,
                 step: self.position.phase1_done,
                 total: cfg.steps,
                 loss: value,
             });
+            if flow.is_break() {
+                self.checkpoint()?;
+                self.stopped = true;
+                break;
+            }
         }
         Ok(first_last(&losses, 50))
     }
@@ -514,7 +533,7 @@ impl Trainer<'_> {
     fn phase2(
         &mut self,
         sets: &mut [TrainSet],
-        progress: &mut impl FnMut(&Progress),
+        progress: &mut impl FnMut(&Progress) -> ControlFlow<()>,
     ) -> Result<((f64, f64), usize)> {
         let cfg = self.cfg;
         let usable: Vec<usize> = (0..sets.len())
@@ -545,12 +564,17 @@ impl Trainer<'_> {
             if it.is_multiple_of(cfg.checkpoint_every.max(1).div_ceil(10)) {
                 self.checkpoint()?;
             }
-            progress(&Progress {
+            let flow = progress(&Progress {
                 phase: 2,
                 step: it,
                 total: cfg.rollout_iters,
                 loss: value,
             });
+            if flow.is_break() {
+                self.checkpoint()?;
+                self.stopped = true;
+                break;
+            }
             if cfg.rollout_stop_loss > 0.0
                 && losses.len() >= 20
                 && mean(&losses[losses.len() - 20..]) < cfg.rollout_stop_loss
