@@ -149,7 +149,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                 .with_steps(3)
                 .with_attention(attention),
         );
-        let device = default_device();
+        let device = default_device().expect("device");
         let net = cfg.model.init(&device);
         let dir = tempfile::tempdir().expect("tmp");
         save_model(dir.path(), &cfg, &norm, &net).expect("save");

@@ -44,10 +44,23 @@ pub fn features(
     (nodes, edges)
 }
 
-/// The device networks run on: burn's pure-Rust `flex` CPU backend (the fastest CPU backend
-/// measured here, `../shared/RECIPES.md`).
-pub fn default_device() -> Device {
-    Device::flex()
+/// The device networks run on, chosen at run time by `CLOTHSR_DEVICE`: `flex` (the default:
+/// burn's pure-Rust CPU backend, the fastest CPU backend measured here,
+/// `../shared/RECIPES.md`), or `cuda` / `wgpu` in builds with those cargo features.
+pub fn default_device() -> Result<Device> {
+    let name = std::env::var("CLOTHSR_DEVICE").unwrap_or_else(|_| "flex".into());
+    match name.as_str() {
+        "flex" | "" => Ok(Device::flex()),
+        #[cfg(feature = "cuda")]
+        "cuda" => Ok(Device::cuda(0)),
+        #[cfg(feature = "wgpu")]
+        "wgpu" => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice)),
+        other => Err(Error::Invalid(format!(
+            "CLOTHSR_DEVICE={other}: this build knows flex{}{}",
+            if cfg!(feature = "cuda") { ", cuda" } else { "" },
+            if cfg!(feature = "wgpu") { ", wgpu" } else { "" },
+        ))),
+    }
 }
 
 /// A loaded corrector for one coarse mesh.
@@ -96,7 +109,7 @@ pub fn load_net(
 impl Corrector {
     /// Loads the model in `dir` for `mesh` (the coarse simulation mesh).
     pub fn load(dir: &Path, mesh: &ClothMesh) -> Result<Corrector> {
-        let device = default_device();
+        let device = default_device()?;
         let (net, norm, config) = load_net(dir, &device)?;
         Ok(Corrector {
             net,

@@ -270,7 +270,7 @@ pub fn train(
         norm
     };
     let rms: f64 = sets.iter().map(|s| s.seq.rms_correction_m()).sum::<f64>() / sets.len() as f64;
-    let device = default_device().autodiff();
+    let device = default_device()?.autodiff();
     device.seed(cfg.seed);
     let mut net = cfg.model.init(&device);
     let mut optim = AdamConfig::new().init();
