@@ -37,6 +37,7 @@ fn opts(frames: usize) -> Options {
             ..Variation::default()
         },
         fast: false,
+        match_contact_thickness: false,
         source: None,
     }
 }

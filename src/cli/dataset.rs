@@ -57,6 +57,10 @@ pub struct Args {
     /// at both resolutions; the corrector then runs beside the same fast solver.
     #[arg(long)]
     fast: bool,
+    /// Keep the coarse mesh's own contact thickness d̂ (15 % of its edge) instead of the fine
+    /// simulation's.
+    #[arg(long)]
+    coarse_contact_thickness: bool,
 }
 
 fn absolute(p: &std::path::Path) -> anyhow::Result<PathBuf> {
@@ -110,6 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             clip_start_s: args.clip_start_s,
         },
         fast: args.fast,
+        match_contact_thickness: !args.coarse_contact_thickness,
         source: Some(SceneSource {
             scene: absolute(&args.scene)?,
             colliders: args
