@@ -38,7 +38,7 @@ pub fn features(
 ) -> (Vec<f32>, Vec<f32>) {
     let (mut nodes, mut edges) = (Vec::new(), Vec::new());
     graph.node_features(v, body, &mut nodes);
-    graph.edge_features(x, &mut edges);
+    graph.edge_features(x, v, &mut edges);
     norm.nodes.apply(&mut nodes);
     norm.edges.apply(&mut edges);
     (nodes, edges)

@@ -366,7 +366,7 @@ pub fn fit_normalisation(sets: &[TrainSet]) -> Normalisation {
             let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
             let (mut nodes, mut edges) = (Vec::new(), Vec::new());
             s.seq.graph.node_features(&v, &st.body, &mut nodes);
-            s.seq.graph.edge_features(&x, &mut edges);
+            s.seq.graph.edge_features(&x, &v, &mut edges);
             let targets: Vec<f32> = st
                 .int_v
                 .iter()
@@ -442,7 +442,7 @@ impl Trainer<'_> {
         let body: Vec<f32> = nodes_idx.iter().map(|&i| st.body[i as usize]).collect();
         let (mut nodes, mut edges) = (Vec::new(), Vec::new());
         graph.node_features(&vs, &body, &mut nodes);
-        graph.edge_features(&xs, &mut edges);
+        graph.edge_features(&xs, &vs, &mut edges);
         Sample {
             graph,
             nodes,
