@@ -105,7 +105,7 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
 
     // Training again into a finished model directory is refused, naming the file.
     let e = train(&cfg, &mut sets, &model, |_| ControlFlow::Continue(())).expect_err("finished");
-    assert!(e.to_string().contains("config.json"), "{e}");
+    assert!(e.to_string().contains("model.bpk"), "{e}");
 
     // The loaded corrector moves M_c towards M_int on average over the training steps.
     let c = Corrector::load(&model, &seq.mesh).expect("load");

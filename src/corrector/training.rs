@@ -253,9 +253,9 @@ pub fn train(
         let text = std::fs::read_to_string(&state_path).map_err(|e| Error::io(&state_path, e))?;
         position = serde_json::from_str(&text)
             .map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
-    } else if config_path.exists() {
+    } else if out.join(WEIGHTS_FILE).exists() {
         return Err(Error::bad_input(
-            &config_path,
+            out.join(WEIGHTS_FILE),
             "a finished model is already here; choose another output",
         ));
     }
@@ -291,7 +291,9 @@ pub fn train(
     let log_path = out.join("log.csv");
     let mut log = std::fs::OpenOptions::new()
         .create(true)
-        .append(true)
+        .append(resuming)
+        .write(true)
+        .truncate(!resuming)
         .open(&log_path)
         .map_err(|e| Error::io(&log_path, e))?;
     if !resuming {
