@@ -250,7 +250,13 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
     let mut sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
     let e = evaluate(&seq, &mut sim, t0, &corrector, 3, |_, _, _, _| {}).expect("evaluate");
     assert_eq!(e.frame, vec![1, 2, 3]);
-    for v in [&e.sim_alone_mm, &e.interleaved_mm, &e.not_interleaved_mm] {
+    for v in [
+        &e.sim_alone_mm,
+        &e.interleaved_mm,
+        &e.not_interleaved_mm,
+        &e.one_step_uncorrected_mm,
+        &e.one_step_corrected_mm,
+    ] {
         assert_eq!(v.len(), 3);
         assert!(v.iter().all(|x| x.is_finite() && *x >= 0.0));
     }

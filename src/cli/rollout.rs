@@ -80,6 +80,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "mean error, not interleaved {c:.3} mm  ({:.2}× sim alone)",
         c / a
     );
+    let (u, c) = e.one_step_means();
+    println!(
+        "one step: M_c → M_int      {u:.4} mm uncorrected, {c:.4} mm corrected ({:.2}×)",
+        c / u
+    );
     println!(
         "interleaved trend           {:+.3} mm per 100 frames",
         e.interleaved_trend_mm_per_100()

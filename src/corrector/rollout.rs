@@ -30,6 +30,11 @@ pub struct RolloutErrors {
     pub interleaved_mm: Vec<f64>,
     /// Corrector applied to the free-running simulation.
     pub not_interleaved_mm: Vec<f64>,
+    /// One-step check at every frame end: mean distance of the data set's own M_c to M_int,
+    /// mm (what the corrector has to remove) …
+    pub one_step_uncorrected_mm: Vec<f64>,
+    /// … and of the corrected M_c, mm.
+    pub one_step_corrected_mm: Vec<f64>,
     /// Mean coarse simulator step, ms (interleaved run).
     pub sim_step_ms: f64,
     /// Mean corrector call, ms.
@@ -41,6 +46,15 @@ fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
 }
 
 impl RolloutErrors {
+    /// Mean one-step errors over frames: (uncorrected M_c, corrected M_c), mm.
+    pub fn one_step_means(&self) -> (f64, f64) {
+        let m = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (
+            m(&self.one_step_uncorrected_mm),
+            m(&self.one_step_corrected_mm),
+        )
+    }
+
     /// Mean over frames of each variant: (sim alone, interleaved, not interleaved), mm.
     pub fn means(&self) -> (f64, f64, f64) {
         let m = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
@@ -72,16 +86,21 @@ impl RolloutErrors {
         100.0 * cov / var
     }
 
-    /// CSV: `frame,sim_alone_mm,interleaved_mm,not_interleaved_mm`.
+    /// CSV: one row per frame, the columns named after the fields.
     pub fn csv(&self) -> String {
-        let mut s = String::from("frame,sim_alone_mm,interleaved_mm,not_interleaved_mm\n");
+        let mut s = String::from(
+            "frame,sim_alone_mm,interleaved_mm,not_interleaved_mm,one_step_uncorrected_mm,\
+             one_step_corrected_mm\n",
+        );
         for i in 0..self.frame.len() {
             s += &format!(
-                "{},{:.4},{:.4},{:.4}\n",
+                "{},{:.4},{:.4},{:.4},{:.5},{:.5}\n",
                 self.frame[i],
                 self.sim_alone_mm[i],
                 self.interleaved_mm[i],
-                self.not_interleaved_mm[i]
+                self.not_interleaved_mm[i],
+                self.one_step_uncorrected_mm[i],
+                self.one_step_corrected_mm[i]
             );
         }
         s
@@ -139,6 +158,17 @@ pub fn evaluate(
                 mean_distance_mm(&inter.x, &gt),
                 mean_distance_mm(&fixed.x, &gt),
             );
+            let st = &seq.steps[i];
+            let mut data_c = SimState {
+                x: vectors(&st.coarse_x),
+                v: vectors(&st.coarse_v),
+                t_s: inter.t_s,
+            };
+            out.one_step_uncorrected_mm
+                .push(mean_distance_mm(&data_c.x, &gt));
+            corrector.correct(&mut data_c, h, &sim.colliders)?;
+            out.one_step_corrected_mm
+                .push(mean_distance_mm(&data_c.x, &gt));
             let frame = seq.first_frame + i / s;
             out.frame.push(frame);
             out.sim_alone_mm.push(e.0);
