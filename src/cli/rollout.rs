@@ -71,6 +71,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let (a, b, c) = e.means();
     println!("frames                      {}", e.frame.len());
+    if let Some(f) = e.diverged_at_frame {
+        println!("interleaved rollout DIVERGED in frame {f}: the corrector's output left its training range");
+    }
     println!("mean error, sim alone       {a:.3} mm");
     println!(
         "mean error, interleaved     {b:.3} mm  ({:.2}× sim alone)",

@@ -63,6 +63,11 @@ pub fn default_device() -> Result<Device> {
     }
 }
 
+/// Largest correction accepted, in standard deviations of the training targets (per
+/// component): the network extrapolating far outside its data is a failure to report, not a
+/// correction to apply. The data sets here have |p̄| below ~8 σ.
+pub const MAX_CORRECTION_STD: f32 = 25.0;
+
 /// A loaded corrector for one coarse mesh.
 #[derive(Debug)]
 pub struct Corrector {
@@ -160,6 +165,17 @@ impl Corrector {
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
             .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
+        if let Some(k) = p
+            .iter()
+            .position(|c| c.abs() > MAX_CORRECTION_STD || !c.is_finite())
+        {
+            return Err(Error::Simulation(format!(
+                "the corrector diverged: its correction at vertex {} is {:.1} standard deviations \
+                 of its training data (limit {MAX_CORRECTION_STD})",
+                k / 3,
+                p[k]
+            )));
+        }
         self.norm.targets.invert(&mut p);
         let p: Vec<Vector3<f64>> = p
             .chunks_exact(3)

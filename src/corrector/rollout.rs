@@ -35,6 +35,10 @@ pub struct RolloutErrors {
     pub one_step_uncorrected_mm: Vec<f64>,
     /// … and of the corrected M_c, mm.
     pub one_step_corrected_mm: Vec<f64>,
+    /// The frame in which the interleaved run stopped because the corrector diverged
+    /// ([`super::inference::MAX_CORRECTION_STD`]); the report then ends with the last
+    /// complete frame.
+    pub diverged_at_frame: Option<usize>,
     /// Mean coarse simulator step, ms (interleaved run).
     pub sim_step_ms: f64,
     /// Mean corrector call, ms.
@@ -145,8 +149,14 @@ pub fn evaluate(
         let mut c = sim.step_from(&inter)?.0;
         sim_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        corrector.correct(&mut c, h, &sim.colliders)?;
+        let corrected = corrector.correct(&mut c, h, &sim.colliders);
         corr_s += t.elapsed().as_secs_f64();
+        if let Err(e) = corrected {
+            let frame = seq.first_frame + (i + 1).div_ceil(s) - 1;
+            tracing::warn!("interleaved rollout stopped in frame {frame}: {e}");
+            out.diverged_at_frame = Some(frame);
+            break;
+        }
         inter = c;
         // The data set's frame ends are its steps s, 2s, …; step 0 here is its step 1.
         if (i + 1) % s == 0 {
@@ -177,7 +187,8 @@ pub fn evaluate(
             on_frame(frame, e.0, e.1, e.2);
         }
     }
-    out.sim_step_ms = 1e3 * sim_s / steps as f64;
-    out.corrector_ms = 1e3 * corr_s / steps as f64;
+    let done = (out.frame.len() * s).max(1) as f64;
+    out.sim_step_ms = 1e3 * sim_s / done;
+    out.corrector_ms = 1e3 * corr_s / done;
     Ok(out)
 }
