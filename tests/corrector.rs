@@ -248,7 +248,16 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
 
     let corrector = Corrector::load(out.path(), &seq.mesh).expect("load");
     let mut sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
-    let e = evaluate(&seq, &mut sim, t0, &corrector, 3, |_, _, _, _| {}).expect("evaluate");
+    let mut alone = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let e = evaluate(
+        &seq,
+        [&mut alone, &mut sim],
+        t0,
+        &corrector,
+        3,
+        |_, _, _, _| {},
+    )
+    .expect("evaluate");
     assert_eq!(e.frame, vec![1, 2, 3]);
     for v in [
         &e.sim_alone_mm,

@@ -59,13 +59,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         t0,
     )?;
     let corrector = Corrector::load(&args.model, &seq.mesh)?;
-    let e = evaluate(&seq, &mut sim, t0, &corrector, frames, |f, a, b, c| {
-        if f.is_multiple_of(10) {
-            tracing::info!(
+    let mut alone = coarse_simulation(&scene, &args.data, args.start_frame)?;
+    let e = evaluate(
+        &seq,
+        [&mut alone, &mut sim],
+        t0,
+        &corrector,
+        frames,
+        |f, a, b, c| {
+            if f.is_multiple_of(10) {
+                tracing::info!(
                 "frame {f}: sim alone {a:.3} mm, interleaved {b:.3} mm, not interleaved {c:.3} mm"
             );
-        }
-    })?;
+            }
+        },
+    )?;
     if let Some(csv) = &args.csv {
         clothsr::io::write_atomic(csv, e.csv().as_bytes())?;
     }

@@ -112,11 +112,14 @@ impl RolloutErrors {
 }
 
 /// Runs the three variants over `frames` frames of `seq` (from its first stored step) with
-/// `sim` (the data set's coarse simulation, [`crate::data::coarse_simulation`], whose time at
-/// the data set's frame 0 is `t0_s`); `on_frame` sees each frame's errors.
+/// `sims`, two instances of the data set's coarse simulation
+/// ([`crate::data::coarse_simulation`], whose time at the data set's frame 0 is `t0_s`): one
+/// for the simulation alone, one for the interleaved run. They must be separate: a simulator
+/// carries state from step to step (its warm start, its adaptive contact margin) and the
+/// one-Newton-step solver's result depends on it. `on_frame` sees each frame's errors.
 pub fn evaluate(
     seq: &Sequence,
-    sim: &mut Simulation,
+    sims: [&mut Simulation; 2],
     t0_s: f64,
     corrector: &Corrector,
     frames: usize,
@@ -144,12 +147,12 @@ pub fn evaluate(
     let mut out = RolloutErrors::default();
     let (mut sim_s, mut corr_s) = (0.0, 0.0);
     for i in 1..=steps {
-        alone = sim.step_from(&alone)?.0;
+        alone = sims[0].step_from(&alone)?.0;
         let t = Instant::now();
-        let mut c = sim.step_from(&inter)?.0;
+        let mut c = sims[1].step_from(&inter)?.0;
         sim_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let corrected = corrector.correct(&mut c, h, &sim.colliders);
+        let corrected = corrector.correct(&mut c, h, &sims[1].colliders);
         corr_s += t.elapsed().as_secs_f64();
         if let Err(e) = corrected {
             let frame = seq.first_frame + (i + 1).div_ceil(s) - 1;
@@ -162,7 +165,7 @@ pub fn evaluate(
         if (i + 1) % s == 0 {
             let gt = vectors(&seq.steps[i].int_x);
             let mut fixed = alone.clone();
-            corrector.correct(&mut fixed, h, &sim.colliders)?;
+            corrector.correct(&mut fixed, h, &sims[1].colliders)?;
             let e = (
                 mean_distance_mm(&alone.x, &gt),
                 mean_distance_mm(&inter.x, &gt),
@@ -176,7 +179,7 @@ pub fn evaluate(
             };
             out.one_step_uncorrected_mm
                 .push(mean_distance_mm(&data_c.x, &gt));
-            corrector.correct(&mut data_c, h, &sim.colliders)?;
+            corrector.correct(&mut data_c, h, &sims[1].colliders)?;
             out.one_step_corrected_mm
                 .push(mean_distance_mm(&data_c.x, &gt));
             let frame = seq.first_frame + i / s;
