@@ -34,7 +34,9 @@ use serde::{Deserialize, Serialize};
 
 use super::data::{vectors, Sequence};
 use super::graph::{body_proximity, MeshGraph};
-use super::inference::{default_device, features, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
+use super::inference::{
+    default_device, features, read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE,
+};
 use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
 use crate::error::{Error, Result};
@@ -250,9 +252,7 @@ pub fn train(
                 "a training run with another configuration is here; choose another output",
             ));
         }
-        let text = std::fs::read_to_string(&state_path).map_err(|e| Error::io(&state_path, e))?;
-        position = serde_json::from_str(&text)
-            .map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
+        position = read_json(&state_path)?;
     } else if out.join(WEIGHTS_FILE).exists() {
         return Err(Error::bad_input(
             out.join(WEIGHTS_FILE),
@@ -261,8 +261,7 @@ pub fn train(
     }
     let norm_path = out.join(NORMALISATION_FILE);
     let norm = if resuming {
-        let text = std::fs::read_to_string(&norm_path).map_err(|e| Error::io(&norm_path, e))?;
-        serde_json::from_str(&text).map_err(|e| Error::bad_input(&norm_path, e.to_string()))?
+        read_json(&norm_path)?
     } else {
         let norm = fit_normalisation(sets);
         write_json(&norm_path, &norm)?;
