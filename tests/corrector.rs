@@ -204,6 +204,18 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             let a = direct[k % direct.len()];
             assert!((a - b).abs() <= 1e-5 * (1.0 + a.abs()), "{k}: {a} vs {b}");
         }
+        // A state the corrector would push past 20 m/s is refused and left as it was.
+        let mut fast = clothsr::sim::SimState {
+            x: x.clone(),
+            v: vec![Vector3::new(0.0, -30.0, 0.0); x.len()],
+            t_s: 0.0,
+        };
+        let before = fast.clone();
+        let e = loaded
+            .correct(&mut fast, 1.0 / 300.0, &[])
+            .expect_err("too fast");
+        assert!(e.to_string().contains("diverged"), "{e}");
+        assert_eq!(fast, before);
         // A mesh collapsed to a point at rest still gets a finite correction.
         let zeros = vec![Vector3::zeros(); x.len()];
         let p = loaded

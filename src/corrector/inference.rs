@@ -68,6 +68,11 @@ pub fn default_device() -> Result<Device> {
 /// correction to apply. The data sets here have |p̄| below ~8 σ.
 pub const MAX_CORRECTION_STD: f32 = 25.0;
 
+/// Fastest vertex accepted after a correction, m/s. Interleaving can run away without any
+/// single correction being large (each step's velocity bias is fed back into the next step);
+/// garments on people and cloth falling a few metres stay well below this.
+pub const MAX_CORRECTED_SPEED_M_S: f64 = 20.0;
+
 /// A loaded corrector for one coarse mesh.
 #[derive(Debug)]
 pub struct Corrector {
@@ -191,10 +196,26 @@ impl Corrector {
     }
 
     /// Corrects M_c in place into M_int: q′ = q + p, x′ = x + h·p; `colliders` are the
-    /// simulation's, taken at `state.t_s`.
+    /// simulation's, taken at `state.t_s`. A diverged correction (too large, or too fast a
+    /// result) is an error and leaves `state` as it was.
     pub fn correct(&self, state: &mut SimState, dt_s: f64, colliders: &[Collider]) -> Result<()> {
         let body = body_proximity(&state.x, colliders, state.t_s);
         let p = self.predict(&state.x, &state.v, &body)?;
+        if let Some((i, q)) = state
+            .v
+            .iter()
+            .zip(&p)
+            .map(|(v, p)| v + p)
+            .enumerate()
+            .find(|(_, q)| q.norm() > MAX_CORRECTED_SPEED_M_S)
+        {
+            return Err(Error::Simulation(format!(
+                "the corrector diverged: vertex {i} would move at {:.1} m/s after its \
+                 correction at t = {:.4} s (limit {MAX_CORRECTED_SPEED_M_S} m/s)",
+                q.norm(),
+                state.t_s
+            )));
+        }
         for ((x, v), p) in state.x.iter_mut().zip(state.v.iter_mut()).zip(&p) {
             *v += p;
             *x += p * dt_s;

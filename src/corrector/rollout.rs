@@ -36,8 +36,8 @@ pub struct RolloutErrors {
     /// … and of the corrected M_c, mm.
     pub one_step_corrected_mm: Vec<f64>,
     /// The frame in which the interleaved run stopped because the corrector diverged
-    /// ([`super::inference::MAX_CORRECTION_STD`]); the report then ends with the last
-    /// complete frame.
+    /// ([`super::inference::MAX_CORRECTION_STD`], [`super::inference::MAX_CORRECTED_SPEED_M_S`]);
+    /// the report then ends with the last complete frame.
     pub diverged_at_frame: Option<usize>,
     /// Mean coarse simulator step, ms (interleaved run).
     pub sim_step_ms: f64,
