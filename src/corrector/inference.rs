@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use burn::config::Config;
 use burn::module::Module;
-use burn::tensor::Device;
+use burn::tensor::{Device, Int, Tensor};
 use nalgebra::Vector3;
 
 use super::graph::{body_proximity, MeshGraph};
-use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
+use super::model::{index_tensor, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
 use crate::error::{Error, Result};
@@ -79,7 +79,9 @@ pub struct Corrector {
     net: CorrectorNet,
     norm: Normalisation,
     graph: MeshGraph,
-    device: Device,
+    /// The graph's edge lists on the device, uploaded once.
+    senders: Tensor<1, Int>,
+    receivers: Tensor<1, Int>,
     /// The network's sizes.
     pub config: CorrectorConfig,
     /// Where it was loaded from.
@@ -122,32 +124,16 @@ impl Corrector {
     pub fn load(dir: &Path, mesh: &ClothMesh) -> Result<Corrector> {
         let device = default_device()?;
         let (net, norm, config) = load_net(dir, &device)?;
+        let graph = MeshGraph::new(mesh);
         Ok(Corrector {
             net,
             norm,
-            graph: MeshGraph::new(mesh),
-            device,
+            senders: index_tensor(&graph.senders, &device),
+            receivers: index_tensor(&graph.receivers, &device),
+            graph,
             config: config.model,
             dir: dir.to_path_buf(),
         })
-    }
-
-    /// A corrector from an in-memory network (training uses it for rollouts).
-    pub fn from_parts(
-        net: CorrectorNet,
-        norm: Normalisation,
-        config: CorrectorConfig,
-        mesh: &ClothMesh,
-        device: Device,
-    ) -> Corrector {
-        Corrector {
-            net,
-            norm,
-            graph: MeshGraph::new(mesh),
-            device,
-            config,
-            dir: PathBuf::new(),
-        }
     }
 
     /// The predicted velocity correction p for M_c = (x, v) with body proximities `body`
@@ -166,7 +152,8 @@ impl Corrector {
             )));
         }
         let (nodes, edges) = features(&self.graph, x, v, body, &self.norm);
-        let g = GraphTensors::of(&self.graph, nodes, edges, &self.device);
+        let g =
+            GraphTensors::with_indices(nodes, edges, self.senders.clone(), self.receivers.clone());
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()

@@ -99,6 +99,13 @@ pub struct Block {
     score: Option<Linear>,
 }
 
+/// An edge list (`[E]` node indices) on `device`.
+pub fn index_tensor(indices: &[u32], device: &Device) -> Tensor<1, Int> {
+    let v: Vec<i64> = indices.iter().map(|&i| i64::from(i)).collect();
+    let e = v.len();
+    Tensor::from_data(TensorData::new(v, [e]), device)
+}
+
 /// A batch of graphs on a device, features already normalised.
 #[derive(Debug, Clone)]
 pub struct GraphTensors {
@@ -122,19 +129,31 @@ impl GraphTensors {
         receivers: &[u32],
         device: &Device,
     ) -> GraphTensors {
-        let (n, e) = (nodes.len() / NODE_FEATURES, senders.len());
+        GraphTensors::with_indices(
+            nodes,
+            edges,
+            index_tensor(senders, device),
+            index_tensor(receivers, device),
+        )
+    }
+
+    /// Uploads features for a graph whose edge lists (`[E]` each) are already on the device:
+    /// a mesh's topology does not change between steps, so they are uploaded once.
+    pub fn with_indices(
+        nodes: Vec<f32>,
+        edges: Vec<f32>,
+        senders: Tensor<1, Int>,
+        receivers: Tensor<1, Int>,
+    ) -> GraphTensors {
+        let device = senders.device();
+        let [e] = senders.dims();
+        let n = nodes.len() / NODE_FEATURES;
         debug_assert_eq!(edges.len(), e * EDGE_FEATURES);
-        let ints = |v: &[u32]| {
-            Tensor::<1, Int>::from_data(
-                TensorData::new(v.iter().map(|&i| i64::from(i)).collect::<Vec<i64>>(), [e]),
-                device,
-            )
-        };
         GraphTensors {
-            nodes: Tensor::from_data(TensorData::new(nodes, [n, NODE_FEATURES]), device),
-            edges: Tensor::from_data(TensorData::new(edges, [e, EDGE_FEATURES]), device),
-            senders: ints(senders),
-            receivers: ints(receivers),
+            nodes: Tensor::from_data(TensorData::new(nodes, [n, NODE_FEATURES]), &device),
+            edges: Tensor::from_data(TensorData::new(edges, [e, EDGE_FEATURES]), &device),
+            senders,
+            receivers,
         }
     }
 

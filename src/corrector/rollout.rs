@@ -49,23 +49,25 @@ fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     1e3 * a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len().max(1) as f64
 }
 
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
 impl RolloutErrors {
     /// Mean one-step errors over frames: (uncorrected M_c, corrected M_c), mm.
     pub fn one_step_means(&self) -> (f64, f64) {
-        let m = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         (
-            m(&self.one_step_uncorrected_mm),
-            m(&self.one_step_corrected_mm),
+            mean(&self.one_step_uncorrected_mm),
+            mean(&self.one_step_corrected_mm),
         )
     }
 
     /// Mean over frames of each variant: (sim alone, interleaved, not interleaved), mm.
     pub fn means(&self) -> (f64, f64, f64) {
-        let m = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
         (
-            m(&self.sim_alone_mm),
-            m(&self.interleaved_mm),
-            m(&self.not_interleaved_mm),
+            mean(&self.sim_alone_mm),
+            mean(&self.interleaved_mm),
+            mean(&self.not_interleaved_mm),
         )
     }
 
