@@ -7,6 +7,7 @@ mod inspect;
 mod mesh;
 mod rollout;
 mod samples;
+mod sr;
 mod simulate;
 mod train;
 
@@ -44,11 +45,14 @@ enum Command {
     /// Training data: a fine simulation, its coarse downsampling (M_int) and one coarse step
     /// from each (M_c).
     Dataset(dataset::Args),
-    /// Train a network (the corrector) on data sets.
+    /// Train a network (the corrector or the ISR network) on data sets.
     Train(train::Args),
     /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
     /// alone and the corrector without interleaving.
     Rollout(rollout::Args),
+    /// Super-resolve a data set's M_int sequence with an ISR model and measure the fine meshes
+    /// against the fine simulation, beside the upsampled coarse mesh.
+    Sr(sr::Args),
 }
 
 /// Runs the command line and returns the exit code; errors are printed by `main` with their
@@ -77,6 +81,7 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Dataset(a) => dataset::run(a),
         Command::Train(a) => train::run(a),
         Command::Rollout(a) => rollout::run(a),
+        Command::Sr(a) => sr::run(a),
     }?;
     Ok(0)
 }

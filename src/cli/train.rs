@@ -21,6 +21,61 @@ pub struct Args {
 enum What {
     /// The GNN corrector (M_c → M_int).
     Corrector(CorrectorArgs),
+    /// The ISR network of mesh super-resolution (M_int coordinate map → fine map).
+    Isr(IsrArgs),
+}
+
+/// Arguments of `train isr`.
+#[derive(Debug, clap::Args)]
+pub struct IsrArgs {
+    /// Data set directories (`clothsr dataset`); repeat for several sequences.
+    #[arg(long, required = true)]
+    data: Vec<PathBuf>,
+    /// Output model directory (an interrupted run there with the same settings resumes).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Train on frames 1..=N of each data set only (keep the rest for evaluation).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 3000)]
+    steps: usize,
+    /// Patches per step.
+    #[arg(long, default_value_t = 8)]
+    batch: usize,
+    /// Patch side, pixels (a multiple of the window).
+    #[arg(long, default_value_t = 32)]
+    patch: usize,
+    /// Learning rate at the first step.
+    #[arg(long, default_value_t = 2e-4)]
+    lr_start: f64,
+    /// Learning rate at the last step (exponential decay).
+    #[arg(long, default_value_t = 2e-6)]
+    lr_end: f64,
+    /// Weight of the gradient term of the loss (0: positions only).
+    #[arg(long, default_value_t = 10.0)]
+    beta: f64,
+    /// Leave out the previous frame's output as an input (the ablation of §4.2).
+    #[arg(long)]
+    no_init: bool,
+    /// Feature channels.
+    #[arg(long, default_value_t = 32)]
+    embed_dim: usize,
+    /// Swin layers per residual block, one number per block.
+    #[arg(long, value_delimiter = ',', num_args = 1, default_value = "2,2")]
+    depths: Vec<usize>,
+    /// Attention heads.
+    #[arg(long, default_value_t = 4)]
+    heads: usize,
+    /// Attention window side, pixels.
+    #[arg(long, default_value_t = 8)]
+    window: usize,
+    /// σ of the Gaussian smoothing of the training initialisation, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    init_blur_px: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
 }
 
 /// Arguments of `train corrector`.
@@ -83,6 +138,7 @@ pub struct CorrectorArgs {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
         What::Corrector(a) => corrector(a),
+        What::Isr(a) => isr(a),
     }
 }
 
@@ -180,6 +236,80 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         summary.phase2_first_last.0,
         summary.phase2_first_last.1,
         summary.noise_std_m * 1e3,
+        summary.seconds
+    );
+    Ok(())
+}
+
+fn isr(a: IsrArgs) -> anyhow::Result<()> {
+    use clothsr::msr::data::IsrSequence;
+    use clothsr::msr::model::IsrConfig;
+    use clothsr::msr::training::{self, IsrTrainingConfig};
+    anyhow::ensure!(a.steps > 0, "nothing to train: --steps is 0");
+    let first = clothsr::data::read_manifest(&a.data[0])?;
+    let pixel_m = first.fine_edge_m;
+    let model = IsrConfig::new()
+        .with_embed_dim(a.embed_dim)
+        .with_depths(a.depths.clone())
+        .with_heads(a.heads)
+        .with_window(a.window)
+        .with_init_input(!a.no_init);
+    model
+        .check()
+        .map_err(|e| anyhow::anyhow!("ISR network: {e}"))?;
+    let cfg = IsrTrainingConfig::new(model, pixel_m)
+        .with_steps(a.steps)
+        .with_batch(a.batch)
+        .with_patch(a.patch)
+        .with_lr_start(a.lr_start)
+        .with_lr_end(a.lr_end)
+        .with_beta(a.beta)
+        .with_init_blur_px(a.init_blur_px)
+        .with_seed(a.seed);
+    let mut seqs = Vec::new();
+    for dir in &a.data {
+        let m = clothsr::data::read_manifest(dir)?;
+        let frames = a.frames.map(|n| 1..=n.min(m.frames_done));
+        let seq = IsrSequence::load(dir, frames, pixel_m, cfg.init_blur_px)?;
+        tracing::info!(
+            "{}: {} frames, {} panel maps ({}), {} fine vertices",
+            dir.display(),
+            seq.frames.len(),
+            seq.grids.len(),
+            seq.grids
+                .iter()
+                .map(|g| format!("{}×{}", g.shape().0, g.shape().1))
+                .collect::<Vec<_>>()
+                .join(", "),
+            seq.fine_mesh.num_vertices()
+        );
+        seqs.push(seq);
+    }
+    let bar = ProgressBar::new(a.steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template("ISR {msg} {bar:30} {pos}/{len} {per_sec} eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut recent = Vec::new();
+    let summary = training::train(&cfg, &seqs, &a.output, |p: &training::Progress| {
+        recent.push(p.loss);
+        if recent.len() > 50 {
+            recent.remove(0);
+        }
+        let mean = recent.iter().sum::<f64>() / recent.len() as f64;
+        bar.set_position(p.step as u64);
+        bar.set_message(format!("loss {mean:.4}"));
+        if bar.is_hidden() && p.step.is_multiple_of(100) {
+            tracing::info!("step {}/{}: loss {mean:.4}", p.step, p.total);
+        }
+        std::ops::ControlFlow::Continue(())
+    })?;
+    bar.finish_and_clear();
+    tracing::info!(
+        "wrote {}: loss {:.4} → {:.4}; {:.0} s",
+        a.output.display(),
+        summary.first_last.0,
+        summary.first_last.1,
         summary.seconds
     );
     Ok(())

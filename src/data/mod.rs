@@ -524,12 +524,21 @@ pub fn read_frame_positions(dir: &Path, k: usize) -> Result<FramePositions> {
 /// The coarse mesh stored in a data set (positions are zero: the frames hold them), with the
 /// panel names of its manifest.
 pub fn read_coarse_mesh(dir: &Path, manifest: &Manifest) -> Result<ClothMesh> {
+    read_mesh(dir, manifest, "coarse", manifest.coarse_vertices)
+}
+
+/// The fine mesh stored in a data set (positions zero), as [`read_coarse_mesh`].
+pub fn read_fine_mesh(dir: &Path, manifest: &Manifest) -> Result<ClothMesh> {
+    read_mesh(dir, manifest, "fine", manifest.fine_vertices)
+}
+
+fn read_mesh(dir: &Path, manifest: &Manifest, which: &str, expected: usize) -> Result<ClothMesh> {
     let path = dir.join("meshes.safetensors");
     let r = TensorReader::open(&path)?;
-    let (_, material) = r.f64("coarse_material")?;
-    let (_, triangles) = r.u32("coarse_triangles")?;
-    let (_, panel_of_vertex) = r.u32("coarse_panel")?;
-    let (_, seams) = r.u32("coarse_seams")?;
+    let (_, material) = r.f64(&format!("{which}_material"))?;
+    let (_, triangles) = r.u32(&format!("{which}_triangles"))?;
+    let (_, panel_of_vertex) = r.u32(&format!("{which}_panel"))?;
+    let (_, seams) = r.u32(&format!("{which}_seams"))?;
     let n = material.len() / 2;
     let mesh = ClothMesh {
         material: material
@@ -545,13 +554,10 @@ pub fn read_coarse_mesh(dir: &Path, manifest: &Manifest) -> Result<ClothMesh> {
         panel_names: manifest.panels.clone(),
         seam_pairs: seams.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
     };
-    if n != manifest.coarse_vertices {
+    if n != expected {
         return Err(Error::bad_input(
             &path,
-            format!(
-                "{n} coarse vertices, the manifest says {}",
-                manifest.coarse_vertices
-            ),
+            format!("{n} {which} vertices, the manifest says {expected}"),
         ));
     }
     mesh.validate().map_err(|e| e.in_file(&path))?;

@@ -1,0 +1,93 @@
+//! Evaluating the MSR module on a data set: super-resolve its M_int sequence frame by frame
+//! (each frame initialised with the previous frame's output) and compare the fine mesh with
+//! the fine simulation, next to the upsampled coarse mesh (barycentric interpolation of M_int
+//! at the fine vertices' material points, [`crate::transfer::Transfer::upsample`]).
+
+use std::ops::ControlFlow;
+
+use nalgebra::Vector3;
+
+use super::data::IsrSequence;
+use super::inference::{FrameTimes, Isr, SuperResolver};
+use crate::error::Result;
+use crate::transfer::Transfer;
+
+/// One frame's errors, mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameErrors {
+    /// Data-set frame (1-based).
+    pub frame: usize,
+    /// Mean vertex distance of the SR fine mesh to the fine ground truth.
+    pub sr_mm: f64,
+    /// Largest vertex distance of the SR fine mesh.
+    pub sr_max_mm: f64,
+    /// Mean vertex distance of the upsampled M_int.
+    pub upsampled_mm: f64,
+    /// Time of the SR frame.
+    pub times: FrameTimes,
+}
+
+/// Errors of a whole sequence.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SequenceErrors {
+    /// Per frame, in order.
+    pub frames: Vec<FrameErrors>,
+}
+
+impl SequenceErrors {
+    /// Mean over frames of the SR error, mm.
+    pub fn mean_sr_mm(&self) -> f64 {
+        mean(self.frames.iter().map(|f| f.sr_mm))
+    }
+
+    /// Mean over frames of the upsampled-coarse error, mm.
+    pub fn mean_upsampled_mm(&self) -> f64 {
+        mean(self.frames.iter().map(|f| f.upsampled_mm))
+    }
+
+    /// Mean time per frame and the network's share of it.
+    pub fn mean_times(&self) -> (f64, f64) {
+        let total = mean(self.frames.iter().map(|f| f.times.total_s()));
+        let net = mean(self.frames.iter().map(|f| f.times.network_s));
+        (total, if total > 0.0 { net / total } else { 0.0 })
+    }
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    s / n.max(1) as f64
+}
+
+/// Mean and max vertex distance, mm.
+pub fn vertex_error_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
+    let d: Vec<f64> = a.iter().zip(b).map(|(p, q)| (p - q).norm() * 1e3).collect();
+    (mean(d.iter().copied()), d.iter().copied().fold(0.0, f64::max))
+}
+
+/// Super-resolves `seq`'s frames in order and measures them; `progress(done, total)` may stop
+/// early (`ControlFlow::Break`) and the frames so far are returned.
+pub fn evaluate(
+    seq: &IsrSequence,
+    isr: &Isr,
+    mut progress: impl FnMut(usize, usize) -> ControlFlow<()>,
+) -> Result<SequenceErrors> {
+    let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh)?;
+    let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
+    let mut out = SequenceErrors::default();
+    for (k, (int, gt)) in seq.int_x.iter().zip(&seq.fine_x).enumerate() {
+        let fine = sr.frame(int)?;
+        let (sr_mm, sr_max_mm) = vertex_error_mm(&fine, gt);
+        let (upsampled_mm, _) = vertex_error_mm(&transfer.upsample(int), gt);
+        out.frames.push(FrameErrors {
+            frame: seq.first_frame + k,
+            sr_mm,
+            sr_max_mm,
+            upsampled_mm,
+            times: sr.times,
+        });
+        if progress(k + 1, seq.int_x.len()).is_break() {
+            break;
+        }
+    }
+    Ok(out)
+}

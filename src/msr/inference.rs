@@ -1,0 +1,273 @@
+//! Running the ISR network (the paper's §3.2, Fig. 6): per frame, rasterise M_int on the fine
+//! panel grids, cut each map into overlapping patches, run them through the network in
+//! batches together with the previous frame's fine output (the initialisation), blend the
+//! patches back (two-pixel overlap, Laplacian smoothing of the bands) and read the fine mesh
+//! out. The fine maps are kept as the next frame's initialisation.
+
+use std::path::Path;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use nalgebra::Vector3;
+use ndarray::{s, Array3, Array4, ArrayView2, ArrayView3};
+
+use super::coordmap::{Boundary, PanelGrid, Rasteriser, Readout};
+use super::model::IsrNet;
+use super::patches::{blend_patches, split_patches, PatchLayout, DEFAULT_OVERLAP, DEFAULT_SIGMA};
+use super::training::IsrTrainingConfig;
+use crate::error::{Error, Result};
+use crate::mesh::ClothMesh;
+
+/// The training settings and network sizes in a model directory.
+pub const CONFIG_FILE: &str = "config.json";
+/// The weights in a model directory (burnpack).
+pub const WEIGHTS_FILE: &str = "model.bpk";
+
+/// The network's input for one patch, normalised: channels coarse (3), initialisation (3, when
+/// `init` is given) and mask (1), each `P × P`, positions centred on the mean of the coarse
+/// patch's masked pixels and divided by `scale_m`; zero off the mask. Returns the input
+/// (channels · P · P values) and the centre, m; `None` when no pixel is masked.
+pub fn patch_input(
+    coarse: ArrayView3<f32>,
+    init: Option<ArrayView3<f32>>,
+    mask: ArrayView2<bool>,
+    scale_m: f32,
+) -> Option<(Vec<f32>, [f32; 3])> {
+    let count = mask.iter().filter(|&&m| m).count();
+    if count == 0 {
+        return None;
+    }
+    let mut centre = [0.0f32; 3];
+    for (c, centre) in centre.iter_mut().enumerate() {
+        let sum: f64 = coarse
+            .index_axis(ndarray::Axis(0), c)
+            .iter()
+            .zip(mask.iter())
+            .filter(|(_, &m)| m)
+            .map(|(v, _)| f64::from(*v))
+            .sum();
+        *centre = (sum / count as f64) as f32;
+    }
+    let (_, p, q) = coarse.dim();
+    let channels = if init.is_some() { 7 } else { 4 };
+    let mut out = Vec::with_capacity(channels * p * q);
+    let mut push = |img: ArrayView3<f32>| {
+        for c in 0..3 {
+            for ((i, j), &m) in mask.indexed_iter() {
+                out.push(if m {
+                    (img[(c, i, j)] - centre[c]) / scale_m
+                } else {
+                    0.0
+                });
+            }
+        }
+    };
+    push(coarse);
+    if let Some(init) = init {
+        push(init);
+    }
+    out.extend(mask.iter().map(|&m| if m { 1.0 } else { 0.0 }));
+    Some((out, centre))
+}
+
+/// A trained ISR network and its settings.
+pub struct Isr {
+    /// Training settings, with the network's sizes, pixel size and normalisation scale.
+    pub cfg: IsrTrainingConfig,
+    net: IsrNet,
+    device: Device,
+}
+
+impl Isr {
+    /// Loads `dir/config.json` and `dir/model.bpk` on the default device
+    /// ([`crate::corrector::inference::default_device`]).
+    pub fn load(dir: &Path) -> Result<Isr> {
+        let cfg_path = dir.join(CONFIG_FILE);
+        let cfg = <IsrTrainingConfig as burn::config::Config>::load(&cfg_path)
+            .map_err(|e| Error::bad_input(&cfg_path, e.to_string()))?;
+        cfg.model
+            .check()
+            .map_err(|e| Error::bad_input(&cfg_path, e))?;
+        let device = crate::corrector::inference::default_device()?;
+        let weights = dir.join(WEIGHTS_FILE);
+        let net = cfg
+            .model
+            .init(&device)
+            .try_load_file(&weights)
+            .map_err(|e| Error::bad_input(&weights, e.to_string()))?;
+        Ok(Isr { cfg, net, device })
+    }
+
+    /// Wraps a network (for instance one just trained).
+    pub fn from_net(cfg: IsrTrainingConfig, net: IsrNet, device: Device) -> Isr {
+        Isr { cfg, net, device }
+    }
+
+    /// Runs the network on normalised inputs `[B, in, P, P]` → `[B, 3, P, P]` (normalised).
+    pub fn run(&self, inputs: Vec<f32>, batch: usize) -> Result<Vec<f32>> {
+        let (cin, p) = (self.cfg.model.in_channels(), self.cfg.patch);
+        let x = Tensor::<4>::from_data(TensorData::new(inputs, [batch, cin, p, p]), &self.device);
+        self.net
+            .forward(x)
+            .into_data()
+            .try_to_vec::<f32>()
+            .map_err(|e| Error::Invalid(format!("ISR output: {e:?}")))
+    }
+}
+
+/// Seconds spent in each part of the last frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameTimes {
+    /// Rasterising M_int and cutting patches.
+    pub rasterise_s: f64,
+    /// The network.
+    pub network_s: f64,
+    /// Blending patches and reading the fine mesh out.
+    pub readout_s: f64,
+}
+
+impl FrameTimes {
+    /// The whole frame.
+    pub fn total_s(&self) -> f64 {
+        self.rasterise_s + self.network_s + self.readout_s
+    }
+}
+
+/// Super-resolves a garment frame by frame: M_int of the coarse mesh in, the fine mesh out.
+pub struct SuperResolver<'a> {
+    isr: &'a Isr,
+    grids: Vec<PanelGrid>,
+    rasteriser: Rasteriser,
+    readout: Readout,
+    layouts: Vec<PatchLayout>,
+    /// The previous frame's fine maps (the initialisation), metres.
+    prev: Option<Vec<Array3<f32>>>,
+    /// Patches per network call.
+    pub batch: usize,
+    /// Times of the last frame.
+    pub times: FrameTimes,
+}
+
+impl<'a> SuperResolver<'a> {
+    /// Prepares super-resolving `coarse` (the M_int mesh) into `fine` (same panels and material
+    /// space), on grids at the model's pixel size.
+    pub fn new(isr: &'a Isr, coarse: &ClothMesh, fine: &ClothMesh) -> Result<SuperResolver<'a>> {
+        let grids = PanelGrid::for_mesh(fine, isr.cfg.pixel_m, Boundary::Extended)?;
+        let rasteriser = Rasteriser::new(coarse, &grids)?;
+        let readout = Readout::new(fine, &grids)?;
+        let layouts = grids
+            .iter()
+            .map(|g| {
+                let (h, w) = g.shape();
+                PatchLayout::new(h, w, isr.cfg.patch, DEFAULT_OVERLAP)
+            })
+            .collect();
+        Ok(SuperResolver {
+            isr,
+            grids,
+            rasteriser,
+            readout,
+            layouts,
+            prev: None,
+            batch: 32,
+            times: FrameTimes::default(),
+        })
+    }
+
+    /// Forgets the previous frame: the next frame starts from the coarse map (a new shot).
+    pub fn reset(&mut self) {
+        self.prev = None;
+    }
+
+    /// The fine maps of the last frame (metres), one per grid.
+    pub fn fine_maps(&self) -> Option<&[Array3<f32>]> {
+        self.prev.as_deref()
+    }
+
+    /// The panel grids.
+    pub fn grids(&self) -> &[PanelGrid] {
+        &self.grids
+    }
+
+    /// The fine mesh's vertex positions for coarse (M_int) positions `x`.
+    pub fn frame(&mut self, x: &[Vector3<f64>]) -> Result<Vec<Vector3<f64>>> {
+        let t0 = Instant::now();
+        let cfg = &self.isr.cfg;
+        let (p, scale) = (cfg.patch, cfg.scale_m as f32);
+        let use_init = cfg.model.init_input;
+        let maps = self.rasteriser.rasterise(x);
+        // Every patch of every panel: (grid, patch index, centre) and its input.
+        let mut index: Vec<(usize, usize, [f32; 3])> = Vec::new();
+        let mut inputs: Vec<f32> = Vec::new();
+        let mut patches: Vec<(Array4<f32>, Array3<bool>)> = Vec::new();
+        for (g, (map, layout)) in maps.iter().zip(&self.layouts).enumerate() {
+            let init = match &self.prev {
+                Some(prev) => &prev[g],
+                None => &map.image,
+            };
+            let (cp, mp) = split_patches(&map.image, &map.mask, layout);
+            let (ip, _) = split_patches(init, &map.mask, layout);
+            for k in 0..layout.num_patches() {
+                let init_k = use_init.then(|| ip.slice(s![k, .., .., ..]));
+                if let Some((input, centre)) = patch_input(
+                    cp.slice(s![k, .., .., ..]),
+                    init_k,
+                    mp.slice(s![k, .., ..]),
+                    scale,
+                ) {
+                    inputs.extend(input);
+                    index.push((g, k, centre));
+                }
+            }
+            patches.push((cp, mp));
+        }
+        let t1 = Instant::now();
+        let per = cfg.model.in_channels() * p * p;
+        let mut outputs: Vec<f32> = Vec::with_capacity(index.len() * 3 * p * p);
+        for chunk in inputs.chunks(per * self.batch.max(1)) {
+            outputs.extend(self.isr.run(chunk.to_vec(), chunk.len() / per)?);
+        }
+        if outputs.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Simulation(
+                "the ISR network produced a non-finite output".into(),
+            ));
+        }
+        let t2 = Instant::now();
+        // Denormalise into the patch arrays (patches the network did not see keep the coarse
+        // map), blend, read out.
+        for (n, &(g, k, centre)) in index.iter().enumerate() {
+            let out = &outputs[n * 3 * p * p..(n + 1) * 3 * p * p];
+            let cp = &mut patches[g].0;
+            for c in 0..3 {
+                for i in 0..p {
+                    for j in 0..p {
+                        cp[(k, c, i, j)] = out[(c * p + i) * p + j] * scale + centre[c];
+                    }
+                }
+            }
+        }
+        let fine_maps: Vec<Array3<f32>> = patches
+            .iter()
+            .zip(&self.layouts)
+            .zip(&maps)
+            .map(|(((cp, _), layout), map)| blend_patches(cp, layout, &map.mask, DEFAULT_SIGMA))
+            .collect();
+        let read: Vec<super::coordmap::CoordMap> = fine_maps
+            .iter()
+            .zip(&maps)
+            .map(|(img, m)| super::coordmap::CoordMap {
+                image: img.clone(),
+                mask: m.mask.clone(),
+            })
+            .collect();
+        let fine = self.readout.read(&read);
+        self.prev = Some(fine_maps);
+        self.times = FrameTimes {
+            rasterise_s: (t1 - t0).as_secs_f64(),
+            network_s: (t2 - t1).as_secs_f64(),
+            readout_s: t2.elapsed().as_secs_f64(),
+        };
+        Ok(fine)
+    }
+}

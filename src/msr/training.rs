@@ -1,0 +1,531 @@
+//! Training the ISR network (the paper's §3.2.2, §3.3.3, §3.3.4).
+//!
+//! * Samples are random `P × P` patches of the coordinate maps (random panel, frame, position,
+//!   and a random mirror of material space along either axis, which leaves the cloth itself
+//!   unchanged), kept when at least `min_mask_fraction` of their pixels lie on the pattern.
+//! * The initialisation input is the ground-truth fine map of the previous frame smoothed with a
+//!   Gaussian kernel (`init_blur_px`) plus N(0, `init_noise_m`²) noise (0.1 mm, §3.3.3); with
+//!   probability `coarse_init_prob`, and always on a sequence's first frame, it is the coarse
+//!   map itself (what inference uses on a shot's first frame).
+//! * Loss α·|I_f − I_gt| + β·|G_f − G_gt| over masked pixels (mean per value), with G the
+//!   central differences of §3.2.1 along both map axes where a pixel and its four neighbours
+//!   lie on the pattern. Both terms are in normalised units (metres / `scale_m`) and the
+//!   differences per pixel spacing (h = two pixels), so α and β weigh comparable quantities.
+//! * Adam with an exponential learning-rate decay `lr_start → lr_end` over `steps`.
+//!
+//! The output directory holds `config.json` (these settings, the network's sizes, pixel size
+//! and normalisation scale), `model.bpk`, `log.csv` (step, learning rate, loss, its two terms,
+//! elapsed seconds) and, while training, `checkpoint/`, from which an interrupted run resumes.
+
+use std::io::Write;
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::time::Instant;
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
+use ndarray::{s, Array2, Array3};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+use super::data::IsrSequence;
+use super::inference::{patch_input, CONFIG_FILE, WEIGHTS_FILE};
+use super::model::{IsrConfig, IsrNet};
+use crate::error::{Error, Result};
+use crate::io::write_atomic;
+
+/// How to train (saved as `config.json`, with the network's sizes).
+#[derive(Config, Debug, PartialEq)]
+pub struct IsrTrainingConfig {
+    /// The network.
+    pub model: IsrConfig,
+    /// Pixel size of the coordinate maps, m (the fine mesh's edge length; taken from the data).
+    pub pixel_m: f64,
+    /// Patch side P, pixels (a multiple of the window).
+    #[config(default = 32)]
+    pub patch: usize,
+    /// Length that one normalised unit stands for, m.
+    #[config(default = 0.01)]
+    pub scale_m: f64,
+    /// Optimiser steps.
+    #[config(default = 3000)]
+    pub steps: usize,
+    /// Patches per step.
+    #[config(default = 8)]
+    pub batch: usize,
+    /// Learning rate at the first step.
+    #[config(default = 2e-4)]
+    pub lr_start: f64,
+    /// Learning rate at the last step (exponential decay).
+    #[config(default = 2e-6)]
+    pub lr_end: f64,
+    /// Weight α of the position term.
+    #[config(default = 1.0)]
+    pub alpha: f64,
+    /// Weight β of the gradient term (§4.2.3: 10).
+    #[config(default = 10.0)]
+    pub beta: f64,
+    /// σ of the Gaussian smoothing of the initialisation, pixels.
+    #[config(default = 1.0)]
+    pub init_blur_px: f64,
+    /// Standard deviation of the noise added to the initialisation, m (§3.3.3: 0.1 mm).
+    #[config(default = 1e-4)]
+    pub init_noise_m: f64,
+    /// Probability that a sample's initialisation is the coarse map (a shot's first frame).
+    #[config(default = 0.1)]
+    pub coarse_init_prob: f64,
+    /// Fewest pattern pixels a training patch may have, as a fraction of P².
+    #[config(default = 0.25)]
+    pub min_mask_fraction: f64,
+    /// Checkpoint every this many steps.
+    #[config(default = 250)]
+    pub checkpoint_every: usize,
+    /// Random seed.
+    #[config(default = 7)]
+    pub seed: u64,
+}
+
+/// Progress, reported after each optimiser step.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    /// Steps done.
+    pub step: usize,
+    /// Steps in all.
+    pub total: usize,
+    /// Loss of the last step.
+    pub loss: f64,
+}
+
+/// What training did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Summary {
+    /// Mean loss over the first 50 steps run and the last 50.
+    pub first_last: (f64, f64),
+    /// Wall time, s.
+    pub seconds: f64,
+    /// Stopped by the progress callback before the end; resumable from the checkpoint.
+    pub interrupted: bool,
+}
+
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+struct Position {
+    done: usize,
+}
+
+const CHECKPOINT_DIR: &str = "checkpoint";
+
+/// A batch on a device: inputs `[B, in, P, P]`, targets `[B, 3, P, P]`, the mask `[B, 1, P, P]`
+/// and the gradient-validity mask `[B, 1, P − 2, P − 2]`, with the number of masked values of
+/// each (for the means).
+pub struct Batch {
+    /// Normalised inputs.
+    pub inputs: Tensor<4>,
+    /// Normalised ground truth.
+    pub targets: Tensor<4>,
+    /// 1 on pattern pixels.
+    pub mask: Tensor<4>,
+    /// 1 where the central differences are valid.
+    pub grad_mask: Tensor<4>,
+    /// Σ mask · 3.
+    pub mask_values: f32,
+    /// Σ grad_mask · 6.
+    pub grad_values: f32,
+}
+
+/// The ISR loss (see the module documentation): returns (total, position term, gradient term).
+pub fn isr_loss(pred: Tensor<4>, b: &Batch, alpha: f64, beta: f64) -> (Tensor<1>, f64, f64) {
+    let [n, _, p, q] = pred.dims();
+    let diff = pred - b.targets.clone(); // [B, 3, P, P]
+    let dist = (diff.clone().abs() * b.mask.clone()).sum() / b.mask_values.max(1.0);
+    // Central differences of the difference (linear, so G_f − G_gt = G(I_f − I_gt)).
+    let gu = (diff.clone().slice([0..n, 0..3, 2..p, 1..q - 1])
+        - diff.clone().slice([0..n, 0..3, 0..p - 2, 1..q - 1]))
+        * 0.5;
+    let gv = (diff.clone().slice([0..n, 0..3, 1..p - 1, 2..q])
+        - diff.slice([0..n, 0..3, 1..p - 1, 0..q - 2]))
+        * 0.5;
+    let cons = ((gu.abs() + gv.abs()) * b.grad_mask.clone()).sum() / b.grad_values.max(1.0);
+    let d = f64::from(dist.clone().into_scalar::<f32>());
+    let c = f64::from(cons.clone().into_scalar::<f32>());
+    (dist * alpha + cons * beta, d, c)
+}
+
+/// `true` where a pixel and its four neighbours are on the pattern, cropped to (P − 2)².
+pub fn gradient_mask(mask: &Array2<bool>) -> Array2<bool> {
+    let (h, w) = mask.dim();
+    Array2::from_shape_fn((h - 2, w - 2), |(i, j)| {
+        let (i, j) = (i + 1, j + 1);
+        mask[(i, j)]
+            && mask[(i - 1, j)]
+            && mask[(i + 1, j)]
+            && mask[(i, j - 1)]
+            && mask[(i, j + 1)]
+    })
+}
+
+/// One training patch before normalisation, metres.
+struct RawPatch {
+    coarse: Array3<f32>,
+    init: Array3<f32>,
+    fine: Array3<f32>,
+    mask: Array2<bool>,
+}
+
+/// Checks a configuration against the data.
+fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
+    let bad = |m: String| Err(Error::Invalid(format!("ISR training configuration: {m}")));
+    if let Err(e) = cfg.model.check() {
+        return bad(e);
+    }
+    if seqs.is_empty() || seqs.iter().all(|s| s.frames.is_empty()) {
+        return bad("no training data".into());
+    }
+    if cfg.patch < 4 || !cfg.patch.is_multiple_of(cfg.model.window) {
+        return bad(format!(
+            "the patch ({}) must be a multiple of the window ({})",
+            cfg.patch, cfg.model.window
+        ));
+    }
+    if cfg.batch == 0 {
+        return bad("batch must be at least 1".into());
+    }
+    let positive = [cfg.lr_start, cfg.lr_end, cfg.scale_m, cfg.pixel_m];
+    if positive.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+        return bad("learning rates, scale_m and pixel_m must be positive".into());
+    }
+    for s in seqs {
+        if (s.grids[0].pixel_m - cfg.pixel_m).abs() > 1e-9 {
+            return bad(format!(
+                "{} is rasterised at {} m pixels, the configuration says {} m",
+                s.dir.display(),
+                s.grids[0].pixel_m,
+                cfg.pixel_m
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Trains an ISR network on `seqs` into `out` (resuming from `out/checkpoint` when the
+/// configuration there is the same); `progress` sees every optimiser step and may stop the run
+/// (`ControlFlow::Break`): the position is then checkpointed and a later call with the same
+/// arguments resumes.
+pub fn train(
+    cfg: &IsrTrainingConfig,
+    seqs: &[IsrSequence],
+    out: &Path,
+    mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<Summary> {
+    check(cfg, seqs)?;
+    std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    let config_path = out.join(CONFIG_FILE);
+    let state_path = out.join(CHECKPOINT_DIR).join("state.json");
+    let resuming = state_path.exists();
+    let mut position = Position::default();
+    if resuming {
+        let old = IsrTrainingConfig::load(&config_path)
+            .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+        if &old != cfg {
+            return Err(Error::bad_input(
+                &config_path,
+                "a training run with another configuration is here; choose another output",
+            ));
+        }
+        let text = std::fs::read_to_string(&state_path).map_err(|e| Error::io(&state_path, e))?;
+        position =
+            serde_json::from_str(&text).map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
+    } else if out.join(WEIGHTS_FILE).exists() {
+        return Err(Error::bad_input(
+            out.join(WEIGHTS_FILE),
+            "a finished model is already here; choose another output",
+        ));
+    } else {
+        write_json(&config_path, cfg)?;
+    }
+    let device = crate::corrector::inference::default_device()?.autodiff();
+    device.seed(cfg.seed);
+    let mut net = cfg.model.init(&device);
+    let mut optim = AdamConfig::new().init();
+    if resuming {
+        let dir = out.join(CHECKPOINT_DIR);
+        net = net
+            .try_load_file(dir.join(WEIGHTS_FILE))
+            .map_err(|e| Error::bad_input(dir.join(WEIGHTS_FILE), e.to_string()))?;
+        optim = optim
+            .load(dir.join("optim.bpk"))
+            .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+        tracing::info!("resuming at step {}", position.done);
+    }
+    let log_path = out.join("log.csv");
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(resuming)
+        .write(true)
+        .truncate(!resuming)
+        .open(&log_path)
+        .map_err(|e| Error::io(&log_path, e))?;
+    if !resuming {
+        writeln!(log, "step,lr,loss,position,gradient,seconds")
+            .map_err(|e| Error::io(&log_path, e))?;
+    }
+    let mut rng = StdRng::seed_from_u64(cfg.seed ^ (position.done as u64) << 20);
+    let t0 = Instant::now();
+    let mut losses = Vec::new();
+    let mut acc = (0.0, 0.0, 0.0, 0usize);
+    let mut stopped = false;
+    while position.done < cfg.steps {
+        let step = position.done;
+        let lr =
+            cfg.lr_start * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
+        let raws: Vec<RawPatch> = (0..cfg.batch)
+            .map(|_| sample(cfg, seqs, &mut rng))
+            .collect();
+        let batch = batch_tensors(cfg, &raws, &device);
+        let pred = net.forward(batch.inputs.clone());
+        let (loss, d, c) = isr_loss(pred, &batch, cfg.alpha, cfg.beta);
+        let value = f64::from(loss.clone().into_scalar::<f32>());
+        if !value.is_finite() {
+            return Err(Error::Simulation(format!(
+                "ISR training diverged at step {step} (loss {value})"
+            )));
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(lr, net, grads);
+        position.done += 1;
+        losses.push(value);
+        acc = (acc.0 + value, acc.1 + d, acc.2 + c, acc.3 + 1);
+        if acc.3 == 25 || position.done == cfg.steps {
+            let k = acc.3 as f64;
+            writeln!(
+                log,
+                "{},{lr:.3e},{:.6},{:.6},{:.6},{:.1}",
+                position.done,
+                acc.0 / k,
+                acc.1 / k,
+                acc.2 / k,
+                t0.elapsed().as_secs_f64()
+            )
+            .map_err(|e| Error::io(&log_path, e))?;
+            acc = (0.0, 0.0, 0.0, 0);
+        }
+        let flow = progress(&Progress {
+            step: position.done,
+            total: cfg.steps,
+            loss: value,
+        });
+        if position
+            .done
+            .is_multiple_of(cfg.checkpoint_every.max(1))
+            || flow.is_break()
+        {
+            checkpoint(out, &net, &optim, position)?;
+        }
+        if flow.is_break() {
+            stopped = true;
+            break;
+        }
+    }
+    let k = 50.min(losses.len()).max(1);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let summary = Summary {
+        first_last: (
+            mean(&losses[..k.min(losses.len())]),
+            mean(&losses[losses.len().saturating_sub(k)..]),
+        ),
+        seconds: t0.elapsed().as_secs_f64(),
+        interrupted: stopped,
+    };
+    if stopped {
+        return Ok(summary);
+    }
+    save_model(out, cfg, &net)?;
+    std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    Ok(summary)
+}
+
+/// Writes a model directory: `config.json` and `model.bpk` (each written whole, then renamed).
+pub fn save_model(dir: &Path, cfg: &IsrTrainingConfig, net: &IsrNet) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    write_json(&dir.join(CONFIG_FILE), cfg)?;
+    let weights = dir.join(WEIGHTS_FILE);
+    let tmp = dir.join("model.bpk.tmp");
+    net.valid()
+        .save_file(&tmp)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", tmp.display())))?;
+    std::fs::rename(&tmp, &weights).map_err(|e| Error::io(&weights, e))
+}
+
+fn checkpoint(
+    out: &Path,
+    net: &IsrNet,
+    optim: &burn::optim::ModuleOptimizer,
+    position: Position,
+) -> Result<()> {
+    let dir = out.join(CHECKPOINT_DIR);
+    let (w, o) = (dir.join("model.bpk.tmp"), dir.join("optim.bpk.tmp"));
+    net.clone()
+        .save_file(&w)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
+    optim
+        .save(&o)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))?;
+    std::fs::rename(&w, dir.join(WEIGHTS_FILE)).map_err(|e| Error::io(&w, e))?;
+    std::fs::rename(&o, dir.join("optim.bpk")).map_err(|e| Error::io(&o, e))?;
+    write_json(&dir.join("state.json"), &position)
+}
+
+fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_vec_pretty(value)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    write_atomic(path, &text)
+}
+
+/// Crops `(C, H, W)` at `(r0, c0)` to `p × p`, zero-padded past the border.
+fn crop3(a: &Array3<f32>, r0: usize, c0: usize, p: usize) -> Array3<f32> {
+    let (c, h, w) = a.dim();
+    let (hr, wc) = (p.min(h - r0), p.min(w - c0));
+    let mut out = Array3::zeros((c, p, p));
+    out.slice_mut(s![.., ..hr, ..wc])
+        .assign(&a.slice(s![.., r0..r0 + hr, c0..c0 + wc]));
+    out
+}
+
+fn crop2(a: &Array2<bool>, r0: usize, c0: usize, p: usize) -> Array2<bool> {
+    let (h, w) = a.dim();
+    let (hr, wc) = (p.min(h - r0), p.min(w - c0));
+    let mut out = Array2::from_elem((p, p), false);
+    out.slice_mut(s![..hr, ..wc])
+        .assign(&a.slice(s![r0..r0 + hr, c0..c0 + wc]));
+    out
+}
+
+/// A random training patch (see the module documentation).
+fn sample(cfg: &IsrTrainingConfig, seqs: &[IsrSequence], rng: &mut StdRng) -> RawPatch {
+    let p = cfg.patch;
+    let total: usize = seqs.iter().map(|s| s.frames.len()).sum();
+    let min_px = (cfg.min_mask_fraction * (p * p) as f64) as usize;
+    let noise = Normal::new(0.0, cfg.init_noise_m.max(0.0)).ok();
+    let mut best: Option<RawPatch> = None;
+    for _attempt in 0..50 {
+        let mut pick = rng.random_range(0..total);
+        let Some(seq) = seqs.iter().find(|s| {
+            if pick < s.frames.len() {
+                true
+            } else {
+                pick -= s.frames.len();
+                false
+            }
+        }) else {
+            continue;
+        };
+        let k = pick;
+        let g = rng.random_range(0..seq.grids.len());
+        let mask_full = &seq.grids[g].mask;
+        let (h, w) = mask_full.dim();
+        let r0 = rng.random_range(0..=h.saturating_sub(p));
+        let c0 = rng.random_range(0..=w.saturating_sub(p));
+        let mask = crop2(mask_full, r0, c0, p);
+        let count = mask.iter().filter(|&&m| m).count();
+        let frame = &seq.frames[k];
+        let coarse = crop3(&frame.coarse[g], r0, c0, p);
+        let fine = crop3(&frame.fine[g], r0, c0, p);
+        let init = if k == 0 || rng.random_bool(cfg.coarse_init_prob.clamp(0.0, 1.0)) {
+            coarse.clone()
+        } else {
+            let mut init = crop3(&seq.frames[k - 1].smoothed[g], r0, c0, p);
+            if let Some(n) = noise {
+                for ((_, i, j), v) in init.indexed_iter_mut() {
+                    if mask[(i, j)] {
+                        *v += n.sample(rng) as f32;
+                    }
+                }
+            }
+            init
+        };
+        let mut raw = RawPatch {
+            coarse,
+            init,
+            fine,
+            mask,
+        };
+        for axis in [1usize, 2] {
+            if rng.random_bool(0.5) {
+                for a in [&mut raw.coarse, &mut raw.init, &mut raw.fine] {
+                    a.invert_axis(ndarray::Axis(axis));
+                }
+                raw.mask.invert_axis(ndarray::Axis(axis - 1));
+            }
+        }
+        // Mirrored views: make them standard layout for the flat copies below.
+        raw.coarse = raw.coarse.as_standard_layout().to_owned();
+        raw.init = raw.init.as_standard_layout().to_owned();
+        raw.fine = raw.fine.as_standard_layout().to_owned();
+        raw.mask = raw.mask.as_standard_layout().to_owned();
+        if count >= min_px.max(1) {
+            return raw;
+        }
+        let better = best
+            .as_ref()
+            .is_none_or(|b| count > b.mask.iter().filter(|&&m| m).count());
+        if better {
+            best = Some(raw);
+        }
+    }
+    best.unwrap_or_else(|| RawPatch {
+        coarse: Array3::zeros((3, p, p)),
+        init: Array3::zeros((3, p, p)),
+        fine: Array3::zeros((3, p, p)),
+        mask: Array2::from_elem((p, p), false),
+    })
+}
+
+/// Normalises and uploads raw patches.
+fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) -> Batch {
+    let p = cfg.patch;
+    let scale = cfg.scale_m as f32;
+    let cin = cfg.model.in_channels();
+    let (mut inputs, mut targets, mut mask, mut gmask) = (vec![], vec![], vec![], vec![]);
+    let (mut mask_values, mut grad_values) = (0.0f32, 0.0f32);
+    for r in raws {
+        let init = cfg.model.init_input.then(|| r.init.view());
+        match patch_input(r.coarse.view(), init, r.mask.view(), scale) {
+            Some((input, centre)) => {
+                inputs.extend(input);
+                for c in 0..3 {
+                    for ((i, j), &m) in r.mask.indexed_iter() {
+                        targets.push(if m {
+                            (r.fine[(c, i, j)] - centre[c]) / scale
+                        } else {
+                            0.0
+                        });
+                    }
+                }
+            }
+            None => {
+                inputs.extend(std::iter::repeat_n(0.0, cin * p * p));
+                targets.extend(std::iter::repeat_n(0.0, 3 * p * p));
+            }
+        }
+        for &m in &r.mask {
+            mask.push(if m { 1.0f32 } else { 0.0 });
+            mask_values += if m { 3.0 } else { 0.0 };
+        }
+        for &m in &gradient_mask(&r.mask) {
+            gmask.push(if m { 1.0f32 } else { 0.0 });
+            grad_values += if m { 6.0 } else { 0.0 };
+        }
+    }
+    let b = raws.len();
+    Batch {
+        inputs: Tensor::from_data(TensorData::new(inputs, [b, cin, p, p]), device),
+        targets: Tensor::from_data(TensorData::new(targets, [b, 3, p, p]), device),
+        mask: Tensor::from_data(TensorData::new(mask, [b, 1, p, p]), device),
+        grad_mask: Tensor::from_data(TensorData::new(gmask, [b, 1, p - 2, p - 2]), device),
+        mask_values,
+        grad_values,
+    }
+}

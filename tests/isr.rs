@@ -1,0 +1,288 @@
+//! `clothsr::msr` ISR network: window partition/reverse and shifted-window masks, output shapes,
+//! the loss against the reference finite differences, training lowers the loss and resumes,
+//! save → load gives identical outputs, and super-resolution of a tiny data set is invariant to
+//! moving the garment.
+
+use std::ops::ControlFlow;
+
+use burn::tensor::{Tensor, TensorData};
+use clothsr::corrector::inference::default_device;
+use clothsr::data::{generate, Options, Variation};
+use clothsr::garment::Fabric;
+use clothsr::msr::data::IsrSequence;
+use clothsr::msr::eval::evaluate;
+use clothsr::msr::gradients::gradient_l1;
+use clothsr::msr::model::{
+    relative_position_index, shift_mask, window_partition, window_reverse, IsrConfig,
+};
+use clothsr::msr::training::{gradient_mask, isr_loss, save_model, train, Batch, IsrTrainingConfig};
+use clothsr::msr::{Isr, SuperResolver};
+use clothsr::scene::samples::flat_sheet;
+use clothsr::scene::{Collider, Scene};
+use nalgebra::Vector3;
+use ndarray::{Array2, Array3};
+
+fn scene() -> Scene {
+    let mut s = Scene {
+        garments: vec![flat_sheet(
+            "sheet",
+            0.3,
+            0.3,
+            Vector3::new(0.0, 0.17, 0.0),
+            Fabric::preset("silk").expect("preset"),
+        )],
+        ..Scene::default()
+    };
+    s.colliders
+        .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
+    s
+}
+
+const FINE_M: f64 = 0.01;
+
+/// A 4-frame data set at 40 mm / 10 mm (maps of about 32 × 32 pixels), made once.
+fn dataset() -> std::path::PathBuf {
+    static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
+    let dir = DIR.get_or_init(|| {
+        let dir = tempfile::tempdir().expect("tmp");
+        let opts = Options {
+            coarse_edge_m: 0.04,
+            fine_edge_m: FINE_M,
+            frames: 4,
+            dress: false,
+            self_collision: false,
+            variation: Variation::default(),
+            fast: true,
+            match_contact_thickness: true,
+            source: None,
+        };
+        generate(&scene(), "test", &opts, dir.path(), |_| {}).expect("generate");
+        dir
+    });
+    dir.path().to_path_buf()
+}
+
+fn tiny_model() -> IsrConfig {
+    IsrConfig::new()
+        .with_embed_dim(8)
+        .with_depths(vec![2])
+        .with_heads(2)
+        .with_window(4)
+}
+
+fn tiny_config() -> IsrTrainingConfig {
+    IsrTrainingConfig::new(tiny_model(), FINE_M)
+        .with_patch(16)
+        .with_steps(60)
+        .with_batch(4)
+        .with_lr_start(3e-3)
+        .with_lr_end(1e-3)
+        .with_checkpoint_every(20)
+}
+
+#[test]
+fn windows_partition_and_reverse_exactly_and_shift_masks_separate_wrapped_tokens() {
+    let device = default_device().expect("device");
+    let (b, h, w, c, ws) = (2, 8, 12, 3, 4);
+    let values: Vec<f32> = (0..b * h * w * c).map(|i| i as f32).collect();
+    let x = Tensor::<4>::from_data(TensorData::new(values.clone(), [b, h, w, c]), &device);
+    let win = window_partition(x.clone(), ws);
+    assert_eq!(win.dims(), [b * (h / ws) * (w / ws), ws * ws, c]);
+    // Window 1 of image 0 starts at pixel (0, 4).
+    let v: Vec<f32> = win.clone().into_data().try_to_vec::<f32>().expect("data");
+    let at = |i: usize, j: usize, ch: usize| values[((i * w) + j) * c + ch];
+    assert_eq!(v[(ws * ws) * c], at(0, 4, 0));
+    assert_eq!(v[(ws * ws + ws) * c + 2], at(1, 4, 2));
+    let back: Vec<f32> = window_reverse(win, ws, b, h, w)
+        .into_data()
+        .try_to_vec::<f32>()
+        .expect("data");
+    assert_eq!(back, values);
+    // The cyclic shift and its inverse.
+    let rolled: Vec<f32> = x
+        .clone()
+        .roll(&[-2i64, -2], &[1usize, 2])
+        .roll(&[2i64, 2], &[1usize, 2])
+        .into_data()
+        .try_to_vec::<f32>()
+        .expect("data");
+    assert_eq!(rolled, values);
+
+    // Shift mask: after rolling by −s, a token at row i wrapped around iff i ≥ H − s (same for
+    // columns); two tokens of a window may attend each other iff they wrapped alike.
+    let s = ws / 2;
+    let mask = shift_mask(h, w, ws, s);
+    let n = ws * ws;
+    let (nh, nw) = (h / ws, w / ws);
+    assert_eq!(mask.len(), nh * nw * n * n);
+    let mut blocked = 0;
+    for wi in 0..nh {
+        for wj in 0..nw {
+            for a in 0..n {
+                for bb in 0..n {
+                    let pos = |t: usize| (wi * ws + t / ws, wj * ws + t % ws);
+                    let ((ia, ja), (ib, jb)) = (pos(a), pos(bb));
+                    let same = (ia >= h - s) == (ib >= h - s) && (ja >= w - s) == (jb >= w - s);
+                    let m = mask[((wi * nw + wj) * n + a) * n + bb];
+                    assert_eq!(m == 0.0, same, "window ({wi},{wj}) tokens {a},{bb}");
+                    blocked += usize::from(m != 0.0);
+                }
+            }
+        }
+    }
+    assert!(blocked > 0);
+    // Relative positions: a token with itself is the table's centre; offsets are antisymmetric.
+    let idx = relative_position_index(ws);
+    let centre = ((ws - 1) * (2 * ws - 1) + ws - 1) as i64;
+    assert!((0..n).all(|a| idx[a * n + a] == centre));
+    assert!(idx.iter().all(|&i| i >= 0 && i < ((2 * ws - 1) * (2 * ws - 1)) as i64));
+    assert_eq!(idx[1] + idx[n], 2 * centre);
+}
+
+#[test]
+fn forward_shapes_and_the_loss_matches_the_reference_differences() {
+    let device = default_device().expect("device");
+    for init in [true, false] {
+        let cfg = tiny_model().with_init_input(init);
+        let net = cfg.init(&device);
+        let x = Tensor::<4>::ones([3, cfg.in_channels(), 16, 16], &device);
+        let y = net.forward(x);
+        assert_eq!(y.dims(), [3, 3, 16, 16]);
+        let v: Vec<f32> = y.into_data().try_to_vec::<f32>().expect("data");
+        assert!(v.iter().all(|x| x.is_finite()));
+    }
+    // isr_loss's gradient term against msr::gradients::gradient_l1 (pixel spacing 1).
+    let p = 12;
+    let mut mask = Array2::from_elem((p, p), true);
+    for i in 0..p {
+        for j in 0..p {
+            if i + j < 5 || (i > 8 && j > 9) {
+                mask[(i, j)] = false;
+            }
+        }
+    }
+    let a = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+        ((c * 7 + i * 3 + j * j) as f32 * 0.37).sin()
+    });
+    let b = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+        ((c + i * j) as f32 * 0.21).cos()
+    });
+    let masked = |x: &Array3<f32>| {
+        Array3::from_shape_fn(x.dim(), |(c, i, j)| if mask[(i, j)] { x[(c, i, j)] } else { 0.0 })
+    };
+    let (a, b) = (masked(&a), masked(&b));
+    let gm = gradient_mask(&mask);
+    let t = |x: &Array3<f32>| {
+        Tensor::<4>::from_data(TensorData::new(x.iter().copied().collect(), [1, 3, p, p]), &device)
+    };
+    let m1: Vec<f32> = mask.iter().map(|&m| f32::from(u8::from(m))).collect();
+    let g1: Vec<f32> = gm.iter().map(|&m| f32::from(u8::from(m))).collect();
+    let batch = Batch {
+        inputs: t(&a),
+        targets: t(&b),
+        mask: Tensor::from_data(TensorData::new(m1.clone(), [1, 1, p, p]), &device),
+        grad_mask: Tensor::from_data(TensorData::new(g1.clone(), [1, 1, p - 2, p - 2]), &device),
+        mask_values: 3.0 * m1.iter().sum::<f32>(),
+        grad_values: 6.0 * g1.iter().sum::<f32>(),
+    };
+    let (total, dist, cons) = isr_loss(t(&a), &batch, 1.0, 10.0);
+    let reference = gradient_l1(&a, &b, &mask, 1.0);
+    assert!((cons as f32 - reference).abs() < 1e-5, "{cons} vs {reference}");
+    let l1: f32 = a
+        .indexed_iter()
+        .filter(|((_, i, j), _)| mask[(*i, *j)])
+        .map(|((c, i, j), v)| (v - b[(c, i, j)]).abs())
+        .sum::<f32>()
+        / (3.0 * m1.iter().sum::<f32>());
+    assert!((dist as f32 - l1).abs() < 1e-5);
+    let total = total.into_scalar::<f32>();
+    assert!((total - (l1 + 10.0 * reference)).abs() < 1e-4);
+}
+
+#[test]
+fn training_lowers_the_loss_resumes_and_the_saved_model_loads_identically() {
+    let seqs = vec![IsrSequence::load(&dataset(), None, FINE_M, 1.0).expect("load")];
+    assert_eq!(seqs[0].frames.len(), 4);
+    let out = tempfile::tempdir().expect("tmp");
+    let model = out.path().join("isr");
+    let cfg = tiny_config();
+    // Stop after 25 steps, then resume to the end.
+    let s1 = train(&cfg, &seqs, &model, |p| {
+        if p.step == 25 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("train");
+    assert!(s1.interrupted);
+    assert!(!model.join("model.bpk").exists());
+    let mut first_step = None;
+    let s2 = train(&cfg, &seqs, &model, |p| {
+        first_step.get_or_insert(p.step);
+        ControlFlow::Continue(())
+    })
+    .expect("resume");
+    assert_eq!(first_step, Some(26));
+    assert!(!s2.interrupted);
+    let log = std::fs::read_to_string(model.join("log.csv")).expect("log");
+    assert_eq!(log.matches("step,").count(), 1, "{log}");
+    let losses: Vec<f64> = log
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(2)?.parse().ok())
+        .collect();
+    assert!(losses.len() >= 2);
+    assert!(
+        losses[losses.len() - 1] < 0.8 * losses[0],
+        "loss did not fall: {losses:?}"
+    );
+    // Another configuration in the same directory is refused; the finished model too.
+    let err = train(&cfg.clone().with_beta(1.0), &seqs, &model, |_| {
+        ControlFlow::Continue(())
+    });
+    assert!(err.is_err());
+
+    // save → load: identical outputs.
+    let device = default_device().expect("device");
+    let net = cfg.model.init(&device);
+    let dir = out.path().join("random");
+    save_model(&dir, &cfg, &net).expect("save");
+    let loaded = Isr::load(&dir).expect("load");
+    let fresh = Isr::from_net(cfg.clone(), net, device);
+    let n = cfg.model.in_channels() * 16 * 16 * 2;
+    let input: Vec<f32> = (0..n).map(|i| ((i * 13 % 29) as f32 - 14.0) * 0.1).collect();
+    let a = loaded.run(input.clone(), 2).expect("run");
+    let b = fresh.run(input, 2).expect("run");
+    assert_eq!(a, b);
+}
+
+#[test]
+fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
+    let seq = IsrSequence::load(&dataset(), None, FINE_M, 0.0).expect("load");
+    let device = default_device().expect("device");
+    let cfg = tiny_config();
+    let isr = Isr::from_net(cfg.clone(), cfg.model.init(&device), device);
+    let e = evaluate(&seq, &isr, |_, _| ControlFlow::Continue(())).expect("evaluate");
+    assert_eq!(e.frames.len(), 4);
+    assert!(e.frames.iter().all(|f| f.sr_mm.is_finite() && f.upsampled_mm.is_finite()));
+    // The upsampled coarse mesh is close to the fine simulation (a few mm, not metres).
+    assert!(e.mean_upsampled_mm() < 20.0, "{}", e.mean_upsampled_mm());
+
+    // Moving M_int by 1 m moves the fine mesh by 1 m and changes nothing else.
+    let shift = Vector3::new(1.0, -0.5, 2.0);
+    let mut a = SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh).expect("sr");
+    let mut b = SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh).expect("sr");
+    for int in seq.int_x.iter().take(2) {
+        let moved: Vec<Vector3<f64>> = int.iter().map(|p| p + shift).collect();
+        let fa = a.frame(int).expect("frame");
+        let fb = b.frame(&moved).expect("frame");
+        assert_eq!(fa.len(), seq.fine_mesh.num_vertices());
+        let worst = fa
+            .iter()
+            .zip(&fb)
+            .map(|(p, q)| (q - p - shift).norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "moved output differs by {worst} m");
+    }
+}
