@@ -15,7 +15,9 @@ use clothsr::msr::gradients::gradient_l1;
 use clothsr::msr::model::{
     relative_position_index, shift_mask, window_partition, window_reverse, IsrConfig,
 };
-use clothsr::msr::training::{gradient_mask, isr_loss, save_model, train, Batch, IsrTrainingConfig};
+use clothsr::msr::training::{
+    gradient_mask, isr_loss, save_model, train, Batch, IsrTrainingConfig,
+};
 use clothsr::msr::{Isr, SuperResolver};
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::{Collider, Scene};
@@ -135,7 +137,9 @@ fn windows_partition_and_reverse_exactly_and_shift_masks_separate_wrapped_tokens
     let idx = relative_position_index(ws);
     let centre = ((ws - 1) * (2 * ws - 1) + ws - 1) as i64;
     assert!((0..n).all(|a| idx[a * n + a] == centre));
-    assert!(idx.iter().all(|&i| i >= 0 && i < ((2 * ws - 1) * (2 * ws - 1)) as i64));
+    assert!(idx
+        .iter()
+        .all(|&i| i >= 0 && i < ((2 * ws - 1) * (2 * ws - 1)) as i64));
     assert_eq!(idx[1] + idx[n], 2 * centre);
 }
 
@@ -164,16 +168,20 @@ fn forward_shapes_and_the_loss_matches_the_reference_differences() {
     let a = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
         ((c * 7 + i * 3 + j * j) as f32 * 0.37).sin()
     });
-    let b = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
-        ((c + i * j) as f32 * 0.21).cos()
-    });
+    let b = Array3::from_shape_fn((3, p, p), |(c, i, j)| ((c + i * j) as f32 * 0.21).cos());
     let masked = |x: &Array3<f32>| {
-        Array3::from_shape_fn(x.dim(), |(c, i, j)| if mask[(i, j)] { x[(c, i, j)] } else { 0.0 })
+        Array3::from_shape_fn(
+            x.dim(),
+            |(c, i, j)| if mask[(i, j)] { x[(c, i, j)] } else { 0.0 },
+        )
     };
     let (a, b) = (masked(&a), masked(&b));
     let gm = gradient_mask(&mask);
     let t = |x: &Array3<f32>| {
-        Tensor::<4>::from_data(TensorData::new(x.iter().copied().collect(), [1, 3, p, p]), &device)
+        Tensor::<4>::from_data(
+            TensorData::new(x.iter().copied().collect(), [1, 3, p, p]),
+            &device,
+        )
     };
     let m1: Vec<f32> = mask.iter().map(|&m| f32::from(u8::from(m))).collect();
     let g1: Vec<f32> = gm.iter().map(|&m| f32::from(u8::from(m))).collect();
@@ -187,7 +195,10 @@ fn forward_shapes_and_the_loss_matches_the_reference_differences() {
     };
     let (total, dist, cons) = isr_loss(t(&a), &batch, 1.0, 10.0);
     let reference = gradient_l1(&a, &b, &mask, 1.0);
-    assert!((cons as f32 - reference).abs() < 1e-5, "{cons} vs {reference}");
+    assert!(
+        (cons as f32 - reference).abs() < 1e-5,
+        "{cons} vs {reference}"
+    );
     let l1: f32 = a
         .indexed_iter()
         .filter(|((_, i, j), _)| mask[(*i, *j)])
@@ -251,7 +262,9 @@ fn training_lowers_the_loss_resumes_and_the_saved_model_loads_identically() {
     let loaded = Isr::load(&dir).expect("load");
     let fresh = Isr::from_net(cfg.clone(), net, device);
     let n = cfg.model.in_channels() * 16 * 16 * 2;
-    let input: Vec<f32> = (0..n).map(|i| ((i * 13 % 29) as f32 - 14.0) * 0.1).collect();
+    let input: Vec<f32> = (0..n)
+        .map(|i| ((i * 13 % 29) as f32 - 14.0) * 0.1)
+        .collect();
     let a = loaded.run(input.clone(), 2).expect("run");
     let b = fresh.run(input, 2).expect("run");
     assert_eq!(a, b);
@@ -265,7 +278,10 @@ fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
     let isr = Isr::from_net(cfg.clone(), cfg.model.init(&device), device);
     let e = evaluate(&seq, &isr, |_, _| ControlFlow::Continue(())).expect("evaluate");
     assert_eq!(e.frames.len(), 4);
-    assert!(e.frames.iter().all(|f| f.sr_mm.is_finite() && f.upsampled_mm.is_finite()));
+    assert!(e
+        .frames
+        .iter()
+        .all(|f| f.sr_mm.is_finite() && f.upsampled_mm.is_finite()));
     // The upsampled coarse mesh is close to the fine simulation (a few mm, not metres).
     assert!(e.mean_upsampled_mm() < 20.0, "{}", e.mean_upsampled_mm());
 

@@ -7,8 +7,8 @@ mod inspect;
 mod mesh;
 mod rollout;
 mod samples;
-mod sr;
 mod simulate;
+mod sr;
 mod train;
 
 use std::path::{Path, PathBuf};

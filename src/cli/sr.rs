@@ -41,9 +41,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         m.frames_done,
         args.start_frame
     );
-    let last = args
-        .frames
-        .map_or(m.frames_done, |n| (args.start_frame + n.max(1) - 1).min(m.frames_done));
+    let last = args.frames.map_or(m.frames_done, |n| {
+        (args.start_frame + n.max(1) - 1).min(m.frames_done)
+    });
     let isr = Isr::load(&args.model)?;
     anyhow::ensure!(
         (isr.cfg.pixel_m - m.fine_edge_m).abs() < 1e-9,
@@ -52,7 +52,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.data.display(),
         m.fine_edge_m * 1e3
     );
-    let seq = IsrSequence::load(&args.data, Some(args.start_frame..=last), isr.cfg.pixel_m, 0.0)?;
+    let seq = IsrSequence::load(
+        &args.data,
+        Some(args.start_frame..=last),
+        isr.cfg.pixel_m,
+        0.0,
+    )?;
     let e = evaluate(&seq, &isr, |k, n| {
         if k.is_multiple_of(10) {
             tracing::info!("frame {k}/{n}");
@@ -60,7 +65,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::ops::ControlFlow::Continue(())
     })?;
     if let Some(csv) = &args.csv {
-        let mut text = String::from("frame,sr_mm,sr_max_mm,upsampled_mm,rasterise_s,network_s,readout_s\n");
+        let mut text =
+            String::from("frame,sr_mm,sr_max_mm,upsampled_mm,rasterise_s,network_s,readout_s\n");
         for f in &e.frames {
             let _ = writeln!(
                 text,
@@ -81,7 +87,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!("frames                   {}", e.frames.len());
     println!("fine vertices            {}", seq.fine_mesh.num_vertices());
     println!("mean error, upsampled    {up:.4} mm");
-    println!("mean error, SR           {sr:.4} mm  ({:.2}× upsampled)", sr / up);
+    println!(
+        "mean error, SR           {sr:.4} mm  ({:.2}× upsampled)",
+        sr / up
+    );
     println!(
         "time per frame           {:.3} s ({:.0} % in the network)",
         t,

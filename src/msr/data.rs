@@ -11,7 +11,9 @@ use nalgebra::Vector3;
 use ndarray::{Array2, Array3};
 
 use super::coordmap::{Boundary, PanelGrid, Rasteriser};
-use crate::data::{read_coarse_mesh, read_fine_mesh, read_frame_positions, read_manifest, Manifest};
+use crate::data::{
+    read_coarse_mesh, read_fine_mesh, read_frame_positions, read_manifest, Manifest,
+};
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
 
@@ -96,9 +98,7 @@ impl IsrSequence {
             fine_x: Vec::new(),
         };
         for k in range {
-            let path = dir
-                .join("frames")
-                .join(format!("frame_{k:05}.safetensors"));
+            let path = dir.join("frames").join(format!("frame_{k:05}.safetensors"));
             let f = read_frame_positions(dir, k)?;
             let (ishape, int_all) = f.int_x;
             let (fshape, fine) = f.fine_x;
@@ -119,9 +119,16 @@ impl IsrSequence {
                 return Err(Error::bad_input(&path, "non-finite positions"));
             }
             let (int, fine) = (vectors(int), vectors(&fine));
-            let coarse: Vec<Array3<f32>> = coarse_r.rasterise(&int).into_iter().map(|m| m.image).collect();
-            let fine_maps: Vec<Array3<f32>> =
-                fine_r.rasterise(&fine).into_iter().map(|m| m.image).collect();
+            let coarse: Vec<Array3<f32>> = coarse_r
+                .rasterise(&int)
+                .into_iter()
+                .map(|m| m.image)
+                .collect();
+            let fine_maps: Vec<Array3<f32>> = fine_r
+                .rasterise(&fine)
+                .into_iter()
+                .map(|m| m.image)
+                .collect();
             let smoothed = fine_maps
                 .iter()
                 .zip(&seq.grids)

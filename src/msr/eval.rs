@@ -61,7 +61,10 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 /// Mean and max vertex distance, mm.
 pub fn vertex_error_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
     let d: Vec<f64> = a.iter().zip(b).map(|(p, q)| (p - q).norm() * 1e3).collect();
-    (mean(d.iter().copied()), d.iter().copied().fold(0.0, f64::max))
+    (
+        mean(d.iter().copied()),
+        d.iter().copied().fold(0.0, f64::max),
+    )
 }
 
 /// Super-resolves `seq`'s frames in order and measures them; `progress(done, total)` may stop

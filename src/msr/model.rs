@@ -231,7 +231,9 @@ impl SwinLayer {
             y = y.roll(&[s, s], &[1, 2]);
         }
         let x = shortcut + y;
-        let m = self.fc2.forward(gelu(self.fc1.forward(self.norm2.forward(x.clone()))));
+        let m = self
+            .fc2
+            .forward(gelu(self.fc1.forward(self.norm2.forward(x.clone()))));
         x + m
     }
 }

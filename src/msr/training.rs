@@ -159,11 +159,7 @@ pub fn gradient_mask(mask: &Array2<bool>) -> Array2<bool> {
     let (h, w) = mask.dim();
     Array2::from_shape_fn((h - 2, w - 2), |(i, j)| {
         let (i, j) = (i + 1, j + 1);
-        mask[(i, j)]
-            && mask[(i - 1, j)]
-            && mask[(i + 1, j)]
-            && mask[(i, j - 1)]
-            && mask[(i, j + 1)]
+        mask[(i, j)] && mask[(i - 1, j)] && mask[(i + 1, j)] && mask[(i, j - 1)] && mask[(i, j + 1)]
     })
 }
 
@@ -236,8 +232,8 @@ pub fn train(
             ));
         }
         let text = std::fs::read_to_string(&state_path).map_err(|e| Error::io(&state_path, e))?;
-        position =
-            serde_json::from_str(&text).map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
+        position = serde_json::from_str(&text)
+            .map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
     } else if out.join(WEIGHTS_FILE).exists() {
         return Err(Error::bad_input(
             out.join(WEIGHTS_FILE),
@@ -317,11 +313,7 @@ pub fn train(
             total: cfg.steps,
             loss: value,
         });
-        if position
-            .done
-            .is_multiple_of(cfg.checkpoint_every.max(1))
-            || flow.is_break()
-        {
+        if position.done.is_multiple_of(cfg.checkpoint_every.max(1)) || flow.is_break() {
             checkpoint(out, &net, &optim, position)?;
         }
         if flow.is_break() {
@@ -495,10 +487,10 @@ fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) ->
         match patch_input(r.coarse.view(), init, r.mask.view(), scale) {
             Some((input, centre)) => {
                 inputs.extend(input);
-                for c in 0..3 {
+                for (c, centre) in centre.iter().enumerate() {
                     for ((i, j), &m) in r.mask.indexed_iter() {
                         targets.push(if m {
-                            (r.fine[(c, i, j)] - centre[c]) / scale
+                            (r.fine[(c, i, j)] - centre) / scale
                         } else {
                             0.0
                         });
