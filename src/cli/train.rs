@@ -47,10 +47,10 @@ pub struct IsrArgs {
     #[arg(long, default_value_t = 32)]
     patch: usize,
     /// Learning rate at the first step.
-    #[arg(long, default_value_t = 2e-4)]
+    #[arg(long, default_value_t = 4e-4)]
     lr_start: f64,
     /// Learning rate at the last step (exponential decay).
-    #[arg(long, default_value_t = 2e-6)]
+    #[arg(long, default_value_t = 1e-5)]
     lr_end: f64,
     /// Weight of the gradient term of the loss (0: positions only).
     #[arg(long, default_value_t = 10.0)]
@@ -73,6 +73,12 @@ pub struct IsrArgs {
     /// σ of the Gaussian smoothing of the training initialisation, pixels.
     #[arg(long, default_value_t = 1.0)]
     init_blur_px: f64,
+    /// Standard deviation of the noise added to the training initialisation, mm.
+    #[arg(long, default_value_t = 0.1)]
+    init_noise_mm: f64,
+    /// Pass the previous frame's output as it is, without moving it by the coarse motion.
+    #[arg(long)]
+    no_init_motion: bool,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -265,6 +271,8 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_lr_end(a.lr_end)
         .with_beta(a.beta)
         .with_init_blur_px(a.init_blur_px)
+        .with_init_noise_m(a.init_noise_mm * 1e-3)
+        .with_init_motion(!a.no_init_motion)
         .with_seed(a.seed);
     let mut seqs = Vec::new();
     for dir in &a.data {

@@ -24,16 +24,18 @@ pub const CONFIG_FILE: &str = "config.json";
 /// The weights in a model directory (burnpack).
 pub const WEIGHTS_FILE: &str = "model.bpk";
 
-/// The network's input for one patch, normalised: channels coarse (3), initialisation (3, when
-/// `init` is given) and mask (1), each `P × P`, positions centred on the mean of the coarse
-/// patch's masked pixels and divided by `scale_m`; zero off the mask. Returns the input
-/// (channels · P · P values) and the centre, m; `None` when no pixel is masked.
+/// The network's input for one patch, normalised: channels coarse shape (3), initialisation
+/// detail (3, when `init` is given) and mask (1), each `P × P`, zero off the mask. The coarse
+/// positions are centred on the mean of the patch's masked pixels and divided by `scale_m`;
+/// the initialisation enters as its difference to the coarse patch divided by `detail_m`.
+/// `None` when no pixel is masked.
 pub fn patch_input(
     coarse: ArrayView3<f32>,
     init: Option<ArrayView3<f32>>,
     mask: ArrayView2<bool>,
     scale_m: f32,
-) -> Option<(Vec<f32>, [f32; 3])> {
+    detail_m: f32,
+) -> Option<Vec<f32>> {
     let count = mask.iter().filter(|&&m| m).count();
     if count == 0 {
         return None;
@@ -52,23 +54,28 @@ pub fn patch_input(
     let (_, p, q) = coarse.dim();
     let channels = if init.is_some() { 7 } else { 4 };
     let mut out = Vec::with_capacity(channels * p * q);
-    let mut push = |img: ArrayView3<f32>| {
+    for (c, centre) in centre.iter().enumerate() {
+        for ((i, j), &m) in mask.indexed_iter() {
+            out.push(if m {
+                (coarse[(c, i, j)] - centre) / scale_m
+            } else {
+                0.0
+            });
+        }
+    }
+    if let Some(init) = init {
         for c in 0..3 {
             for ((i, j), &m) in mask.indexed_iter() {
                 out.push(if m {
-                    (img[(c, i, j)] - centre[c]) / scale_m
+                    (init[(c, i, j)] - coarse[(c, i, j)]) / detail_m
                 } else {
                     0.0
                 });
             }
         }
-    };
-    push(coarse);
-    if let Some(init) = init {
-        push(init);
     }
     out.extend(mask.iter().map(|&m| if m { 1.0 } else { 0.0 }));
-    Some((out, centre))
+    Some(out)
 }
 
 /// A trained ISR network and its settings.
@@ -104,7 +111,8 @@ impl Isr {
         Isr { cfg, net, device }
     }
 
-    /// Runs the network on normalised inputs `[B, in, P, P]` → `[B, 3, P, P]` (normalised).
+    /// Runs the network on normalised inputs `[B, in, P, P]` → `[B, 3, P, P]`, the fine detail
+    /// (fine − coarse) in units of `detail_m`.
     pub fn run(&self, inputs: Vec<f32>, batch: usize) -> Result<Vec<f32>> {
         let (cin, p) = (self.cfg.model.in_channels(), self.cfg.patch);
         let x = Tensor::<4>::from_data(TensorData::new(inputs, [batch, cin, p, p]), &self.device);
@@ -143,6 +151,8 @@ pub struct SuperResolver<'a> {
     layouts: Vec<PatchLayout>,
     /// The previous frame's fine maps (the initialisation), metres.
     prev: Option<Vec<Array3<f32>>>,
+    /// The previous frame's coarse maps, metres.
+    prev_coarse: Option<Vec<Array3<f32>>>,
     /// Patches per network call.
     pub batch: usize,
     /// Times of the last frame.
@@ -170,6 +180,7 @@ impl<'a> SuperResolver<'a> {
             readout,
             layouts,
             prev: None,
+            prev_coarse: None,
             batch: 32,
             times: FrameTimes::default(),
         })
@@ -178,6 +189,7 @@ impl<'a> SuperResolver<'a> {
     /// Forgets the previous frame: the next frame starts from the coarse map (a new shot).
     pub fn reset(&mut self) {
         self.prev = None;
+        self.prev_coarse = None;
     }
 
     /// The fine maps of the last frame (metres), one per grid.
@@ -194,30 +206,32 @@ impl<'a> SuperResolver<'a> {
     pub fn frame(&mut self, x: &[Vector3<f64>]) -> Result<Vec<Vector3<f64>>> {
         let t0 = Instant::now();
         let cfg = &self.isr.cfg;
-        let (p, scale) = (cfg.patch, cfg.scale_m as f32);
+        let (p, scale, detail) = (cfg.patch, cfg.scale_m as f32, cfg.detail_m as f32);
         let use_init = cfg.model.init_input;
         let maps = self.rasteriser.rasterise(x);
-        // Every patch of every panel: (grid, patch index, centre) and its input.
-        let mut index: Vec<(usize, usize, [f32; 3])> = Vec::new();
+        // Every patch of every panel: (grid, patch index) and its input.
+        let mut index: Vec<(usize, usize)> = Vec::new();
         let mut inputs: Vec<f32> = Vec::new();
         let mut patches: Vec<(Array4<f32>, Array3<bool>)> = Vec::new();
         for (g, (map, layout)) in maps.iter().zip(&self.layouts).enumerate() {
-            let init = match &self.prev {
-                Some(prev) => &prev[g],
-                None => &map.image,
+            let init = match (&self.prev, &self.prev_coarse) {
+                (Some(prev), Some(pc)) if cfg.init_motion => &prev[g] + &map.image - &pc[g],
+                (Some(prev), _) => prev[g].clone(),
+                _ => map.image.clone(),
             };
             let (cp, mp) = split_patches(&map.image, &map.mask, layout);
-            let (ip, _) = split_patches(init, &map.mask, layout);
+            let (ip, _) = split_patches(&init, &map.mask, layout);
             for k in 0..layout.num_patches() {
                 let init_k = use_init.then(|| ip.slice(s![k, .., .., ..]));
-                if let Some((input, centre)) = patch_input(
+                if let Some(input) = patch_input(
                     cp.slice(s![k, .., .., ..]),
                     init_k,
                     mp.slice(s![k, .., ..]),
                     scale,
+                    detail,
                 ) {
                     inputs.extend(input);
-                    index.push((g, k, centre));
+                    index.push((g, k));
                 }
             }
             patches.push((cp, mp));
@@ -234,15 +248,15 @@ impl<'a> SuperResolver<'a> {
             ));
         }
         let t2 = Instant::now();
-        // Denormalise into the patch arrays (patches the network did not see keep the coarse
-        // map), blend, read out.
-        for (n, &(g, k, centre)) in index.iter().enumerate() {
+        // Add the detail to the coarse patches (patches the network did not see keep the
+        // coarse map), blend, read out.
+        for (n, &(g, k)) in index.iter().enumerate() {
             let out = &outputs[n * 3 * p * p..(n + 1) * 3 * p * p];
             let cp = &mut patches[g].0;
             for c in 0..3 {
                 for i in 0..p {
                     for j in 0..p {
-                        cp[(k, c, i, j)] = out[(c * p + i) * p + j] * scale + centre[c];
+                        cp[(k, c, i, j)] += out[(c * p + i) * p + j] * detail;
                     }
                 }
             }
@@ -263,6 +277,7 @@ impl<'a> SuperResolver<'a> {
             .collect();
         let fine = self.readout.read(&read);
         self.prev = Some(fine_maps);
+        self.prev_coarse = Some(maps.into_iter().map(|m| m.image).collect());
         self.times = FrameTimes {
             rasterise_s: (t1 - t0).as_secs_f64(),
             network_s: (t2 - t1).as_secs_f64(),

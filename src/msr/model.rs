@@ -10,14 +10,18 @@
 //!   shifted by half a window in every other layer, then a 3×3 convolution and the block's
 //!   residual. A LayerNorm and a 3×3 convolution follow the blocks, with the global residual to
 //!   the shallow features.
-//! * **Reconstruction**: a 3×3 convolution `C → 3` giving a residual over the coarse patch:
-//!   I_f = I_c + f(·).
+//! * **Reconstruction**: a 3×3 convolution `C → 3` giving the fine detail as a residual over
+//!   the coarse patch: I_f = I_c + δ·f(·).
 //!
 //! The relative-position bias and the shifted-window mask enter burn's fused `attention` as its
 //! additive bias (`[B·nW, heads, N, N]`, N = window²). Patches must be multiples of the window.
-//! Coordinates are normalised outside the network ([`super::training`]): each patch is centred
-//! on the mean of its coarse pixels and divided by a length scale, so the network sees the same
-//! input wherever the garment is in the world.
+//! Inputs are normalised outside the network ([`super::inference::patch_input`]) with two
+//! length scales: the coarse patch is centred on the mean of its pixels and divided by a shape
+//! scale (1 cm), so the network sees the same input wherever the garment is in the world; the
+//! initialisation enters as its difference to the coarse patch and the output is that same
+//! difference for the fine patch, both divided by a detail scale δ (1 mm). Wrinkles are a
+//! fraction of a millimetre to a few millimetres deep, so they arrive at unit size rather than
+//! as a 1 % ripple on centimetre-sized coordinates (which the network could not learn to copy).
 
 use burn::config::Config;
 use burn::module::{Module, Param};
@@ -97,7 +101,12 @@ impl IsrConfig {
             layers,
             norm: LayerNormConfig::new(c).init(device),
             conv_after_body: conv3(c, c, device),
-            conv_last: conv3(c, 3, device),
+            // Zero-initialised: an untrained network returns the coarse patch unchanged, so
+            // training starts from the upsampled baseline instead of from noise.
+            conv_last: Conv2dConfig::new([c, 3], [3, 3])
+                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                .with_initializer(Initializer::Zeros)
+                .init(device),
             window: self.window,
         }
     }
@@ -313,8 +322,9 @@ impl IsrNet {
         self.window
     }
 
-    /// `input [B, in, P, P]` (coarse first in channels 0..3), `→ [B, 3, P, P]`, the fine patch
-    /// in the input's normalised units. P must be a multiple of the window.
+    /// `input [B, in, P, P]` (normalised: coarse shape, initialisation detail, mask)
+    /// `→ [B, 3, P, P]`, the fine patch's detail (fine − coarse)
+    /// in detail units. P must be a multiple of the window.
     pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = input.dims();
         assert!(
@@ -322,7 +332,6 @@ impl IsrNet {
             "ISR patches ({h}×{w}) must be multiples of the window ({})",
             self.window
         );
-        let coarse = input.clone().narrow(1, 0, 3); // [B, 3, P, P]
         let shallow = self.conv_first.forward(input); // [B, C, P, P]
         let mut x = shallow.clone();
         for rstb in &self.layers {
@@ -337,6 +346,6 @@ impl IsrNet {
             .forward(x.permute([0, 2, 3, 1]))
             .permute([0, 3, 1, 2]);
         let deep = self.conv_after_body.forward(x) + shallow;
-        coarse + self.conv_last.forward(deep)
+        self.conv_last.forward(deep)
     }
 }

@@ -6,15 +6,17 @@
 //! * The initialisation input is the ground-truth fine map of the previous frame smoothed with a
 //!   Gaussian kernel (`init_blur_px`) plus N(0, `init_noise_m`²) noise (0.1 mm, §3.3.3); with
 //!   probability `coarse_init_prob`, and always on a sequence's first frame, it is the coarse
-//!   map itself (what inference uses on a shot's first frame).
+//!   map itself (what inference uses on a shot's first frame). With `init_motion` the
+//!   initialisation is first moved by the coarse map's change since that frame.
 //! * Loss α·|I_f − I_gt| + β·|G_f − G_gt| over masked pixels (mean per value), with G the
 //!   central differences of §3.2.1 along both map axes where a pixel and its four neighbours
-//!   lie on the pattern. Both terms are in normalised units (metres / `scale_m`) and the
+//!   lie on the pattern. Both terms are in detail units (metres / `detail_m`) and the
 //!   differences per pixel spacing (h = two pixels), so α and β weigh comparable quantities.
 //! * Adam with an exponential learning-rate decay `lr_start → lr_end` over `steps`.
 //!
 //! The output directory holds `config.json` (these settings, the network's sizes, pixel size
 //! and normalisation scale), `model.bpk`, `log.csv` (step, learning rate, loss, its two terms,
+//! the loss of the coarse map and of the initialisation themselves on the same patches,
 //! elapsed seconds) and, while training, `checkpoint/`, from which an interrupted run resumes.
 
 use std::io::Write;
@@ -48,9 +50,13 @@ pub struct IsrTrainingConfig {
     /// Patch side P, pixels (a multiple of the window).
     #[config(default = 32)]
     pub patch: usize,
-    /// Length that one normalised unit stands for, m.
+    /// Length that one normalised unit of the coarse shape input stands for, m.
     #[config(default = 0.01)]
     pub scale_m: f64,
+    /// Length that one normalised unit of detail (initialisation and output, fine − coarse)
+    /// stands for, m.
+    #[config(default = 0.001)]
+    pub detail_m: f64,
     /// Optimiser steps.
     #[config(default = 3000)]
     pub steps: usize,
@@ -58,10 +64,10 @@ pub struct IsrTrainingConfig {
     #[config(default = 8)]
     pub batch: usize,
     /// Learning rate at the first step.
-    #[config(default = 2e-4)]
+    #[config(default = 4e-4)]
     pub lr_start: f64,
     /// Learning rate at the last step (exponential decay).
-    #[config(default = 2e-6)]
+    #[config(default = 1e-5)]
     pub lr_end: f64,
     /// Weight α of the position term.
     #[config(default = 1.0)]
@@ -75,6 +81,11 @@ pub struct IsrTrainingConfig {
     /// Standard deviation of the noise added to the initialisation, m (§3.3.3: 0.1 mm).
     #[config(default = 1e-4)]
     pub init_noise_m: f64,
+    /// Move the previous frame's fine map with the coarse motion before it enters the network:
+    /// init = I_f^{t−1} + (I_c^t − I_c^{t−1}), so its detail sits where the coarse cloth is now
+    /// (beyond the paper, which passes I_f^{t−1} as it is).
+    #[config(default = true)]
+    pub init_motion: bool,
     /// Probability that a sample's initialisation is the coarse map (a shot's first frame).
     #[config(default = 0.1)]
     pub coarse_init_prob: f64,
@@ -189,9 +200,15 @@ fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
     if cfg.batch == 0 {
         return bad("batch must be at least 1".into());
     }
-    let positive = [cfg.lr_start, cfg.lr_end, cfg.scale_m, cfg.pixel_m];
+    let positive = [
+        cfg.lr_start,
+        cfg.lr_end,
+        cfg.scale_m,
+        cfg.detail_m,
+        cfg.pixel_m,
+    ];
     if positive.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
-        return bad("learning rates, scale_m and pixel_m must be positive".into());
+        return bad("learning rates, scale_m, detail_m and pixel_m must be positive".into());
     }
     for s in seqs {
         if (s.grids[0].pixel_m - cfg.pixel_m).abs() > 1e-9 {
@@ -265,13 +282,16 @@ pub fn train(
         .open(&log_path)
         .map_err(|e| Error::io(&log_path, e))?;
     if !resuming {
-        writeln!(log, "step,lr,loss,position,gradient,seconds")
-            .map_err(|e| Error::io(&log_path, e))?;
+        writeln!(
+            log,
+            "step,lr,loss,position,gradient,coarse_loss,init_loss,seconds"
+        )
+        .map_err(|e| Error::io(&log_path, e))?;
     }
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ (position.done as u64) << 20);
     let t0 = Instant::now();
     let mut losses = Vec::new();
-    let mut acc = (0.0, 0.0, 0.0, 0usize);
+    let mut acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
     let mut stopped = false;
     while position.done < cfg.steps {
         let step = position.done;
@@ -283,6 +303,22 @@ pub fn train(
         let batch = batch_tensors(cfg, &raws, &device);
         let pred = net.forward(batch.inputs.clone());
         let (loss, d, c) = isr_loss(pred, &batch, cfg.alpha, cfg.beta);
+        // The same loss for the coarse map itself (the upsampled baseline: no detail), for
+        // the log.
+        let identity = batch.inputs.clone().narrow(1, 0, 3).zeros_like();
+        let (base, _, _) = isr_loss(identity, &batch, cfg.alpha, cfg.beta);
+        let base = f64::from(base.into_scalar::<f32>());
+        // And for the initialisation (the previous frame's map) as the prediction.
+        let init_base = if cfg.model.init_input {
+            let init = batch.inputs.clone().narrow(1, 3, 3).detach();
+            f64::from(
+                isr_loss(init, &batch, cfg.alpha, cfg.beta)
+                    .0
+                    .into_scalar::<f32>(),
+            )
+        } else {
+            base
+        };
         let value = f64::from(loss.clone().into_scalar::<f32>());
         if !value.is_finite() {
             return Err(Error::Simulation(format!(
@@ -293,20 +329,29 @@ pub fn train(
         net = optim.step(lr, net, grads);
         position.done += 1;
         losses.push(value);
-        acc = (acc.0 + value, acc.1 + d, acc.2 + c, acc.3 + 1);
-        if acc.3 == 25 || position.done == cfg.steps {
-            let k = acc.3 as f64;
+        acc = (
+            acc.0 + value,
+            acc.1 + d,
+            acc.2 + c,
+            acc.3 + base,
+            acc.4 + init_base,
+            acc.5 + 1,
+        );
+        if acc.5 == 25 || position.done == cfg.steps {
+            let k = acc.5 as f64;
             writeln!(
                 log,
-                "{},{lr:.3e},{:.6},{:.6},{:.6},{:.1}",
+                "{},{lr:.3e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.1}",
                 position.done,
                 acc.0 / k,
                 acc.1 / k,
                 acc.2 / k,
+                acc.3 / k,
+                acc.4 / k,
                 t0.elapsed().as_secs_f64()
             )
             .map_err(|e| Error::io(&log_path, e))?;
-            acc = (0.0, 0.0, 0.0, 0);
+            acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0);
         }
         let flow = progress(&Progress {
             step: position.done,
@@ -429,6 +474,9 @@ fn sample(cfg: &IsrTrainingConfig, seqs: &[IsrSequence], rng: &mut StdRng) -> Ra
             coarse.clone()
         } else {
             let mut init = crop3(&seq.frames[k - 1].smoothed[g], r0, c0, p);
+            if cfg.init_motion {
+                init = init + &coarse - crop3(&seq.frames[k - 1].coarse[g], r0, c0, p);
+            }
             if let Some(n) = noise {
                 for ((_, i, j), v) in init.indexed_iter_mut() {
                     if mask[(i, j)] {
@@ -478,19 +526,19 @@ fn sample(cfg: &IsrTrainingConfig, seqs: &[IsrSequence], rng: &mut StdRng) -> Ra
 /// Normalises and uploads raw patches.
 fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) -> Batch {
     let p = cfg.patch;
-    let scale = cfg.scale_m as f32;
+    let (scale, detail) = (cfg.scale_m as f32, cfg.detail_m as f32);
     let cin = cfg.model.in_channels();
     let (mut inputs, mut targets, mut mask, mut gmask) = (vec![], vec![], vec![], vec![]);
     let (mut mask_values, mut grad_values) = (0.0f32, 0.0f32);
     for r in raws {
         let init = cfg.model.init_input.then(|| r.init.view());
-        match patch_input(r.coarse.view(), init, r.mask.view(), scale) {
-            Some((input, centre)) => {
+        match patch_input(r.coarse.view(), init, r.mask.view(), scale, detail) {
+            Some(input) => {
                 inputs.extend(input);
-                for (c, centre) in centre.iter().enumerate() {
+                for c in 0..3 {
                     for ((i, j), &m) in r.mask.indexed_iter() {
                         targets.push(if m {
-                            (r.fine[(c, i, j)] - centre) / scale
+                            (r.fine[(c, i, j)] - r.coarse[(c, i, j)]) / detail
                         } else {
                             0.0
                         });
