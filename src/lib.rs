@@ -18,6 +18,7 @@ pub mod garment;
 pub mod io;
 pub mod mesh;
 pub mod msr;
+pub mod pipeline;
 pub mod scene;
 pub mod sim;
 pub mod transfer;

@@ -6,6 +6,7 @@ mod dataset;
 mod inspect;
 mod mesh;
 mod rollout;
+mod run;
 mod samples;
 mod simulate;
 mod sr;
@@ -50,6 +51,9 @@ enum Command {
     /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
     /// alone and the corrector without interleaving.
     Rollout(rollout::Args),
+    /// The whole pipeline on a scene: coarse simulation, corrector, mesh super-resolution,
+    /// fine garments to time-sampled USD.
+    Run(run::Args),
     /// Super-resolve a data set's M_int sequence with an ISR model and measure the fine meshes
     /// against the fine simulation, beside the upsampled coarse mesh.
     Sr(sr::Args),
@@ -82,6 +86,7 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Train(a) => train::run(a),
         Command::Rollout(a) => rollout::run(a),
         Command::Sr(a) => sr::run(a),
+        Command::Run(a) => run::run(a),
     }?;
     Ok(0)
 }

@@ -445,7 +445,7 @@ pub fn generate(
     Ok(manifest)
 }
 
-fn new_simulation(
+pub(crate) fn new_simulation(
     scene: &Scene,
     edge_m: f64,
     self_collision: bool,

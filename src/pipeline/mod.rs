@@ -1,0 +1,179 @@
+//! The whole of the paper's Fig. 2 on a scene: per coarse step the simulator, then (when a model
+//! is given) the corrector, whose output M_int the next step starts from (§3.1.3); per frame the
+//! MSR module on M_int with the previous frame's fine output as initialisation (§3.2).
+//!
+//! The coarse simulation is set up as `clothsr dataset` set up the training data's: the same
+//! mesher and solver settings, and by default the fine simulation's contact thickness d̂, so a
+//! model sees at run time the kind of coarse mesh it was trained on.
+
+use std::time::Instant;
+
+use nalgebra::Vector3;
+
+use crate::corrector::Corrector;
+use crate::data::new_simulation;
+use crate::error::{Error, Result};
+use crate::garment::Fabric;
+use crate::mesh::ClothMesh;
+use crate::msr::{Isr, SuperResolver};
+use crate::scene::Scene;
+use crate::sim::driver::Simulation;
+
+/// How to set up the coarse simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    /// Coarse edge length, m (the paper: 20 mm).
+    pub coarse_edge_m: f64,
+    /// One Newton step per time step when it is accepted (`clothsr simulate --fast`).
+    pub fast: bool,
+    /// Cloth self-collision.
+    pub self_collision: bool,
+    /// Give the coarse simulation the fine one's contact thickness (as `clothsr dataset` does
+    /// by default).
+    pub match_contact_thickness: bool,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            coarse_edge_m: 0.02,
+            fast: true,
+            self_collision: false,
+            match_contact_thickness: true,
+        }
+    }
+}
+
+/// Seconds spent in each stage of the last frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameTimes {
+    /// Coarse simulator steps.
+    pub simulator_s: f64,
+    /// Corrector calls.
+    pub corrector_s: f64,
+    /// Mesh super-resolution.
+    pub msr_s: f64,
+}
+
+/// A scene running through the pipeline.
+pub struct Pipeline<'a> {
+    /// The coarse simulation; its state is M_int after each step when a corrector runs.
+    pub coarse: Simulation,
+    /// The fine mesh (all garments, in the coarse simulation's part order; positions are those
+    /// of the last frame).
+    pub fine: ClothMesh,
+    /// Vertex range of each garment part in the fine mesh.
+    pub fine_parts: Vec<std::ops::Range<usize>>,
+    /// Each fine garment part on its own (name, mesh at rest, fabric), for writing.
+    pub fine_part_meshes: Vec<(String, ClothMesh, Fabric)>,
+    corrector: Option<Corrector>,
+    sr: SuperResolver<'a>,
+    /// Times of the last frame.
+    pub times: FrameTimes,
+}
+
+impl<'a> Pipeline<'a> {
+    /// Sets up `scene` with an ISR model and optionally a corrector model directory.
+    pub fn new(
+        scene: &Scene,
+        isr: &'a Isr,
+        corrector_dir: Option<&std::path::Path>,
+        opts: Options,
+    ) -> Result<Pipeline<'a>> {
+        let fine_edge = isr.cfg.pixel_m;
+        if opts.coarse_edge_m <= fine_edge {
+            return Err(Error::Invalid(format!(
+                "the coarse edge ({} mm) must be longer than the ISR model's pixel ({} mm)",
+                opts.coarse_edge_m * 1e3,
+                fine_edge * 1e3
+            )));
+        }
+        // The fine mesh: meshed exactly as the training data's fine simulation (never stepped).
+        let fine_sim = new_simulation(scene, fine_edge, opts.self_collision, opts.fast, None)?;
+        let dhat = opts
+            .match_contact_thickness
+            .then_some(fine_sim.sim.params.collision.dhat_m);
+        let coarse = new_simulation(
+            scene,
+            opts.coarse_edge_m,
+            opts.self_collision,
+            opts.fast,
+            dhat,
+        )?;
+        let fine = fine_sim.sim.model.mesh.clone();
+        let fine_parts = fine_sim
+            .sim
+            .model
+            .parts
+            .iter()
+            .map(|p| p.vertices.clone())
+            .collect();
+        let model = &fine_sim.sim.model;
+        let fine_part_meshes = (0..model.parts.len())
+            .map(|i| {
+                let p = &model.parts[i];
+                (p.name.clone(), model.part_mesh(i), p.fabric.clone())
+            })
+            .collect();
+        let corrector = corrector_dir
+            .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
+            .transpose()?;
+        let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
+        Ok(Pipeline {
+            coarse,
+            fine,
+            fine_parts,
+            fine_part_meshes,
+            corrector,
+            sr,
+            times: FrameTimes::default(),
+        })
+    }
+
+    /// Whether a corrector runs.
+    pub fn has_corrector(&self) -> bool {
+        self.corrector.is_some()
+    }
+
+    /// The fine mesh of the current state (the first frame, before any step: a new shot).
+    pub fn super_resolve(&mut self) -> Result<&[Vector3<f64>]> {
+        let t = Instant::now();
+        let x = self.sr.frame(&self.coarse.state.x)?;
+        self.times.msr_s = t.elapsed().as_secs_f64();
+        if let Some(i) = x.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+            return Err(Error::Simulation(format!(
+                "super-resolution produced a non-finite fine vertex ({i})"
+            )));
+        }
+        self.fine.positions = x;
+        Ok(&self.fine.positions)
+    }
+
+    /// One output frame: the coarse steps, each followed by the corrector, then the MSR
+    /// module. Returns the fine positions.
+    pub fn advance_frame(&mut self) -> Result<&[Vector3<f64>]> {
+        let (mut sim_s, mut cor_s) = (0.0, 0.0);
+        let dt = self.coarse.sim.params.dt_s;
+        for _ in 0..self.coarse.steps_per_frame {
+            let t = Instant::now();
+            self.coarse.step()?;
+            sim_s += t.elapsed().as_secs_f64();
+            if let Some(c) = &self.corrector {
+                let t = Instant::now();
+                c.correct(&mut self.coarse.state, dt, &self.coarse.colliders)?;
+                cor_s += t.elapsed().as_secs_f64();
+            }
+        }
+        self.times.simulator_s = sim_s;
+        self.times.corrector_s = cor_s;
+        self.super_resolve()
+    }
+
+    /// Positions of each fine garment part.
+    pub fn fine_part_positions(&self) -> Vec<&[Vector3<f64>]> {
+        self.fine_parts
+            .iter()
+            .map(|r| &self.fine.positions[r.clone()])
+            .collect()
+    }
+}
