@@ -135,7 +135,7 @@ fn a_missing_python_environment_says_what_to_run() {
 /// Issue 5: `dataset` → `train corrector` (both phases, the second reloading the scene the
 /// manifest names) → `rollout`, on a coarse sample; offsets with minus signs parse.
 #[test]
-fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
+fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let dir = tempfile::tempdir().expect("tempdir");
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
     let (data, model, csv) = (
@@ -208,6 +208,77 @@ fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
         2
     );
 
+    // The ISR network on the same data, evaluated by `sr`.
+    let isr = dir.path().join("models").join("isr");
+    run(vec![
+        "train".into(),
+        "isr".into(),
+        "--data".into(),
+        data.clone().into(),
+        "-o".into(),
+        isr.clone().into(),
+        "--steps".into(),
+        "3".into(),
+        "--batch".into(),
+        "2".into(),
+        "--patch".into(),
+        "16".into(),
+        "--embed-dim".into(),
+        "8".into(),
+        "--depths".into(),
+        "2".into(),
+        "--heads".into(),
+        "2".into(),
+        "--window".into(),
+        "4".into(),
+    ]);
+    let report = run(vec![
+        "sr".into(),
+        "--model".into(),
+        isr.clone().into(),
+        "--data".into(),
+        data.clone().into(),
+        "--csv".into(),
+        csv.clone().into(),
+    ]);
+    assert!(report.contains("mean error, SR"), "{report}");
+    assert_eq!(
+        std::fs::read_to_string(&csv).expect("csv").lines().count(),
+        4
+    );
+
+    // `run`: the whole pipeline with both models, to a USD file with one time sample per
+    // frame plus the first.
+    copy_dir(&model, &dir.path().join("models").join("corrector"));
+    let usd = dir.path().join("fine.usdc");
+    run(vec![
+        "run".into(),
+        sample.clone().into(),
+        "--models".into(),
+        dir.path().join("models").into(),
+        "--coarse-mm".into(),
+        "80".into(),
+        "--frames".into(),
+        "2".into(),
+        "-o".into(),
+        usd.clone().into(),
+    ]);
+    let stage = clothsr::io::usd::read_usd(&usd).expect("read the output");
+    let cloth: Vec<_> = stage
+        .meshes
+        .iter()
+        .filter(|m| m.role == clothsr::io::usd::MeshRole::Cloth)
+        .collect();
+    assert_eq!(cloth.len(), 1);
+    assert_eq!(cloth[0].frames.len(), 3);
+    assert!(cloth[0]
+        .frames
+        .iter()
+        .flatten()
+        .all(|p| p.iter().all(|c| c.is_finite())));
+    let (_, fabric_edge) = cloth[0].fabric.clone().expect("fabric");
+    assert!((fabric_edge - 0.04).abs() < 1e-9, "{fabric_edge}");
+
     // A directory that is not a model: exit code 2 and the directory named.
     let out = clothsr()
         .args(["rollout", "--model"])
@@ -219,4 +290,14 @@ fn dataset_train_corrector_and_rollout_chain_on_a_sample() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("not a corrector model directory"), "{err}");
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for e in std::fs::read_dir(from).expect("read_dir") {
+        let e = e.expect("entry");
+        if e.path().is_file() {
+            std::fs::copy(e.path(), to.join(e.file_name())).expect("copy");
+        }
+    }
 }
