@@ -132,8 +132,9 @@ fn a_missing_python_environment_says_what_to_run() {
     );
 }
 
-/// Issue 5: `dataset` → `train corrector` (both phases, the second reloading the scene the
-/// manifest names) → `rollout`, on a coarse sample; offsets with minus signs parse.
+/// `dataset` → `train corrector` (both phases, the second reloading the scene the manifest
+/// names) → `rollout` → `train isr` → `sr` → `run` with both models, on a coarse sample;
+/// offsets with minus signs parse.
 #[test]
 fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let dir = tempfile::tempdir().expect("tempdir");
