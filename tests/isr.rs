@@ -285,7 +285,11 @@ fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
     let device = default_device().expect("device");
     let cfg = tiny_config();
     let isr = Isr::from_net(cfg.clone(), cfg.model.init(&device), device);
-    let e = evaluate(&seq, &isr, |_, _| ControlFlow::Continue(())).expect("evaluate");
+    let e = evaluate(&seq, &isr, false, |_, _| ControlFlow::Continue(())).expect("evaluate");
+    let tf = evaluate(&seq, &isr, true, |_, _| ControlFlow::Continue(())).expect("evaluate");
+    assert_eq!(tf.frames.len(), 4);
+    // The first frame starts from the coarse map either way.
+    assert_eq!(tf.frames[0].sr_mm, e.frames[0].sr_mm);
     assert_eq!(e.frames.len(), 4);
     assert!(e
         .frames

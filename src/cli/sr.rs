@@ -25,6 +25,10 @@ pub struct Args {
     /// Frames to super-resolve (default: all from the start).
     #[arg(long)]
     frames: Option<usize>,
+    /// Initialise every frame with the fine simulation's previous frame instead of the
+    /// network's own output (a diagnostic).
+    #[arg(long)]
+    teacher_forcing: bool,
     /// Write per-frame errors and times as CSV here.
     #[arg(long)]
     csv: Option<PathBuf>,
@@ -58,7 +62,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         isr.cfg.pixel_m,
         0.0,
     )?;
-    let e = evaluate(&seq, &isr, |k, n| {
+    let e = evaluate(&seq, &isr, args.teacher_forcing, |k, n| {
         if k.is_multiple_of(10) {
             tracing::info!("frame {k}/{n}");
         }

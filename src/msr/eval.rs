@@ -68,16 +68,23 @@ pub fn vertex_error_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
 }
 
 /// Super-resolves `seq`'s frames in order and measures them; `progress(done, total)` may stop
-/// early (`ControlFlow::Break`) and the frames so far are returned.
+/// early (`ControlFlow::Break`) and the frames so far are returned. With `teacher_forcing`
+/// every frame after the first is initialised with the fine simulation's previous frame
+/// instead of the network's own output (a diagnostic: the network's error without its own
+/// errors fed back).
 pub fn evaluate(
     seq: &IsrSequence,
     isr: &Isr,
+    teacher_forcing: bool,
     mut progress: impl FnMut(usize, usize) -> ControlFlow<()>,
 ) -> Result<SequenceErrors> {
     let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh)?;
     let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
     let mut out = SequenceErrors::default();
     for (k, (int, gt)) in seq.int_x.iter().zip(&seq.fine_x).enumerate() {
+        if teacher_forcing && k > 0 {
+            sr.set_previous(&seq.fine_mesh, &seq.fine_x[k - 1], &seq.int_x[k - 1])?;
+        }
         let fine = sr.frame(int)?;
         let (sr_mm, sr_max_mm) = vertex_error_mm(&fine, gt);
         let (upsampled_mm, _) = vertex_error_mm(&transfer.upsample(int), gt);

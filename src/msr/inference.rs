@@ -186,6 +186,27 @@ impl<'a> SuperResolver<'a> {
         })
     }
 
+    /// Sets the previous frame from outside: the fine mesh `fine` (rasterised on the grids; a
+    /// fine simulation's frame, for teacher-forced evaluation) and the coarse M_int `coarse` it
+    /// went with.
+    pub fn set_previous(
+        &mut self,
+        fine_mesh: &ClothMesh,
+        fine: &[Vector3<f64>],
+        coarse: &[Vector3<f64>],
+    ) -> Result<()> {
+        let r = Rasteriser::new(fine_mesh, &self.grids)?;
+        self.prev = Some(r.rasterise(fine).into_iter().map(|m| m.image).collect());
+        self.prev_coarse = Some(
+            self.rasteriser
+                .rasterise(coarse)
+                .into_iter()
+                .map(|m| m.image)
+                .collect(),
+        );
+        Ok(())
+    }
+
     /// Forgets the previous frame: the next frame starts from the coarse map (a new shot).
     pub fn reset(&mut self) {
         self.prev = None;
