@@ -42,7 +42,7 @@ fn scene() -> Scene {
 
 const FINE_M: f64 = 0.01;
 
-/// A 4-frame data set at 40 mm / 10 mm (maps of about 32 × 32 pixels), made once.
+/// An 8-frame data set at 40 mm / 10 mm (maps of about 32 × 32 pixels), made once.
 fn dataset() -> std::path::PathBuf {
     static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
     let dir = DIR.get_or_init(|| {
@@ -50,7 +50,7 @@ fn dataset() -> std::path::PathBuf {
         let opts = Options {
             coarse_edge_m: 0.04,
             fine_edge_m: FINE_M,
-            frames: 4,
+            frames: 8,
             dress: false,
             self_collision: false,
             variation: Variation::default(),
@@ -80,6 +80,7 @@ fn tiny_config() -> IsrTrainingConfig {
         .with_lr_start(3e-3)
         .with_lr_end(1e-3)
         .with_checkpoint_every(100)
+        .with_unroll_max(1)
 }
 
 #[test]
@@ -213,7 +214,7 @@ fn forward_shapes_and_the_loss_matches_the_reference_differences() {
 #[test]
 fn training_lowers_the_loss_resumes_and_the_saved_model_loads_identically() {
     let seqs = vec![IsrSequence::load(&dataset(), None, FINE_M, 1.0).expect("load")];
-    assert_eq!(seqs[0].frames.len(), 4);
+    assert_eq!(seqs[0].frames.len(), 8);
     let out = tempfile::tempdir().expect("tmp");
     let model = out.path().join("isr");
     let cfg = tiny_config();
@@ -287,10 +288,10 @@ fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
     let isr = Isr::from_net(cfg.clone(), cfg.model.init(&device), device);
     let e = evaluate(&seq, &isr, false, |_, _| ControlFlow::Continue(())).expect("evaluate");
     let tf = evaluate(&seq, &isr, true, |_, _| ControlFlow::Continue(())).expect("evaluate");
-    assert_eq!(tf.frames.len(), 4);
+    assert_eq!(tf.frames.len(), 8);
     // The first frame starts from the coarse map either way.
     assert_eq!(tf.frames[0].sr_mm, e.frames[0].sr_mm);
-    assert_eq!(e.frames.len(), 4);
+    assert_eq!(e.frames.len(), 8);
     assert!(e
         .frames
         .iter()

@@ -79,6 +79,10 @@ pub struct IsrArgs {
     /// Pass the previous frame's output as it is, without moving it by the coarse motion.
     #[arg(long)]
     no_init_motion: bool,
+    /// Most frames a sample is rolled out through the network before its loss (its
+    /// initialisation is then the network's own output; 0: always the data's).
+    #[arg(long, default_value_t = 3)]
+    unroll_max: usize,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -273,6 +277,7 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_init_blur_px(a.init_blur_px)
         .with_init_noise_m(a.init_noise_mm * 1e-3)
         .with_init_motion(!a.no_init_motion)
+        .with_unroll_max(a.unroll_max)
         .with_seed(a.seed);
     let mut seqs = Vec::new();
     for dir in &a.data {
