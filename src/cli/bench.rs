@@ -15,9 +15,20 @@ use nalgebra::Vector3;
 /// Arguments of `bench`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// What to benchmark (only `sim` for now).
+    /// What to benchmark: `sim` (the simulator beside Newton 1.8) or `pipeline` (the paper's
+    /// Table 1 for a scene: coarse step, corrector, ISR and fine step times).
     #[arg(default_value = "sim")]
     what: String,
+    /// `pipeline`: the scene.
+    #[arg(long, default_value = "samples/sheet_three_balls.usda")]
+    scene: std::path::PathBuf,
+    /// `pipeline`: the model directory (`isr/`, optional `corrector/`), as for `clothsr run`.
+    #[arg(long)]
+    models: Option<std::path::PathBuf>,
+    /// `pipeline`: frames to time (both the pipeline and the fine simulation run them from the
+    /// scene's start).
+    #[arg(long, default_value_t = 10)]
+    frames: usize,
     /// Sheet resolutions as approximate vertex counts.
     #[arg(long, default_value = "3k,40k", value_delimiter = ',')]
     sizes: Vec<String>,
@@ -54,9 +65,12 @@ fn parse_size(s: &str) -> anyhow::Result<f64> {
 
 /// Runs `bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.what == "pipeline" {
+        return pipeline(&args);
+    }
     anyhow::ensure!(
         args.what == "sim",
-        "unknown benchmark '{}' (known: sim)",
+        "unknown benchmark '{}' (known: sim, pipeline)",
         args.what
     );
     for m in &args.modes {
@@ -171,5 +185,79 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// The paper's Table 1 on this machine for one scene.
+fn pipeline(args: &Args) -> anyhow::Result<()> {
+    use clothsr::msr::Isr;
+    use clothsr::pipeline::{Options, Pipeline};
+    let models = args
+        .models
+        .as_ref()
+        .ok_or_else(|| anyhow::anyhow!("bench pipeline needs --models DIR (isr/, corrector/)"))?;
+    anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
+    let scene = Scene::load(&args.scene, &Fabric::default())?;
+    let isr = Isr::load(&models.join("isr"))?;
+    let corrector_dir = models.join("corrector");
+    let corrector = corrector_dir
+        .join("config.json")
+        .exists()
+        .then_some(corrector_dir.as_path());
+    let opts = Options::default();
+    let mut p = Pipeline::new(&scene, &isr, corrector, opts)?;
+    p.super_resolve()?;
+    let steps = p.coarse.steps_per_frame;
+    let (mut tc, mut tg, mut ti) = (0.0, 0.0, 0.0);
+    for _ in 0..args.frames {
+        p.advance_frame()?;
+        tc += p.times.simulator_s;
+        tg += p.times.corrector_s;
+        ti += p.times.msr_s;
+    }
+    let n = args.frames as f64;
+    let (tc, tg, ti) = (tc / (n * steps as f64), tg / (n * steps as f64), ti / n);
+    let mut fine = clothsr::data::new_simulation(
+        &scene,
+        isr.cfg.pixel_m,
+        opts.self_collision,
+        opts.fast,
+        None,
+    )?;
+    let t = Instant::now();
+    for _ in 0..args.frames {
+        fine.advance_frame(|_| {})?;
+    }
+    let tf = t.elapsed().as_secs_f64() / (n * fine.steps_per_frame as f64);
+    let (cm, fm) = (&p.coarse.sim.model.mesh, &fine.sim.model.mesh);
+    let t_sf = steps as f64 * (tc + tg) + ti;
+    let t_ff = fine.steps_per_frame as f64 * tf;
+    println!("scene                {}", args.scene.display());
+    println!(
+        "fine                 {} verts, {} tris ({} mm)",
+        fm.num_vertices(),
+        fm.triangles.len(),
+        isr.cfg.pixel_m * 1e3
+    );
+    println!(
+        "coarse               {} verts, {} tris ({} mm)",
+        cm.num_vertices(),
+        cm.triangles.len(),
+        opts.coarse_edge_m * 1e3
+    );
+    println!("t_c  coarse step     {:.2} ms", tc * 1e3);
+    if p.has_corrector() {
+        println!("t_g  corrector       {:.2} ms", tg * 1e3);
+    } else {
+        println!("t_g  corrector       - (no corrector in the models)");
+    }
+    println!("t_i  ISR per frame   {:.1} ms", ti * 1e3);
+    println!("t_f  fine step       {:.1} ms", tf * 1e3);
+    println!(
+        "t_sf SR frame        {:.1} ms  ({steps}(t_c + t_g) + t_i)",
+        t_sf * 1e3
+    );
+    println!("t_ff fine frame      {:.1} ms", t_ff * 1e3);
+    println!("t_ff / t_sf          {:.2}×", t_ff / t_sf);
     Ok(())
 }

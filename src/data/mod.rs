@@ -445,7 +445,10 @@ pub fn generate(
     Ok(manifest)
 }
 
-pub(crate) fn new_simulation(
+/// A simulation of `scene` at `edge_m` with the data tool's solver settings: self-collision
+/// on or off, the fast one-Newton-step solver or not, and optionally a contact thickness d̂
+/// (also the detection margin).
+pub fn new_simulation(
     scene: &Scene,
     edge_m: f64,
     self_collision: bool,
