@@ -213,7 +213,7 @@ fn forward_shapes_and_the_loss_matches_the_reference_differences() {
 
 #[test]
 fn training_lowers_the_loss_resumes_and_the_saved_model_loads_identically() {
-    let seqs = vec![IsrSequence::load(&dataset(), None, FINE_M, 1.0).expect("load")];
+    let seqs = vec![IsrSequence::load(&dataset(), None, FINE_M, 0.5, 1.0).expect("load")];
     assert_eq!(seqs[0].frames.len(), 8);
     let out = tempfile::tempdir().expect("tmp");
     let model = out.path().join("isr");
@@ -282,7 +282,7 @@ fn training_lowers_the_loss_resumes_and_the_saved_model_loads_identically() {
 
 #[test]
 fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
-    let seq = IsrSequence::load(&dataset(), None, FINE_M, 0.0).expect("load");
+    let seq = IsrSequence::load(&dataset(), None, FINE_M, 0.5, 0.0).expect("load");
     let device = default_device().expect("device");
     let cfg = tiny_config();
     let isr = Isr::from_net(cfg.clone(), cfg.model.init(&device), device);

@@ -79,6 +79,9 @@ pub struct IsrArgs {
     /// Pass the previous frame's output as it is, without moving it by the coarse motion.
     #[arg(long)]
     no_init_motion: bool,
+    /// Phong tessellation blend of the coarse map (0: piecewise-linear, as the paper).
+    #[arg(long, default_value_t = 0.5)]
+    phong_alpha: f64,
     /// Most frames a sample is rolled out through the network before its loss (its
     /// initialisation is then the network's own output; 0: always the data's).
     #[arg(long, default_value_t = 3)]
@@ -278,12 +281,13 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_init_noise_m(a.init_noise_mm * 1e-3)
         .with_init_motion(!a.no_init_motion)
         .with_unroll_max(a.unroll_max)
+        .with_phong_alpha(a.phong_alpha)
         .with_seed(a.seed);
     let mut seqs = Vec::new();
     for dir in &a.data {
         let m = clothsr::data::read_manifest(dir)?;
         let frames = a.frames.map(|n| 1..=n.min(m.frames_done));
-        let seq = IsrSequence::load(dir, frames, pixel_m, cfg.init_blur_px)?;
+        let seq = IsrSequence::load(dir, frames, pixel_m, cfg.phong_alpha, cfg.init_blur_px)?;
         tracing::info!(
             "{}: {} frames, {} panel maps ({}), {} fine vertices",
             dir.display(),

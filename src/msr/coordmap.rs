@@ -155,6 +155,10 @@ type PixelSample = (u32, u32, [u32; 3], [f32; 3]);
 #[derive(Debug, Clone)]
 pub struct Rasteriser {
     grids: Vec<PanelGrid>,
+    /// The mesh's triangles (for vertex normals).
+    triangles: Vec<[u32; 3]>,
+    /// Phong tessellation blend (0: piecewise-linear, the paper).
+    phong_alpha: f64,
     /// Per grid: every masked pixel's sample.
     samples: Vec<Vec<PixelSample>>,
 }
@@ -194,8 +198,18 @@ impl Rasteriser {
         }
         Ok(Rasteriser {
             grids: grids.to_vec(),
+            triangles: mesh.triangles.clone(),
+            phong_alpha: 0.0,
             samples,
         })
+    }
+
+    /// Rasterises by Phong tessellation of the mesh with blend `alpha`
+    /// ([`crate::transfer::phong_point`]; 0: piecewise-linear, as the paper) instead of linear
+    /// interpolation: a coarse mesh's curvature then shows in its map, not only its chords.
+    pub fn with_phong(mut self, alpha: f64) -> Rasteriser {
+        self.phong_alpha = alpha;
+        self
     }
 
     /// The grids.
@@ -205,6 +219,9 @@ impl Rasteriser {
 
     /// Coordinate maps of the mesh at positions `x` (one per grid).
     pub fn rasterise(&self, x: &[Vector3<f64>]) -> Vec<CoordMap> {
+        if self.phong_alpha != 0.0 {
+            return self.rasterise_phong(x);
+        }
         self.grids
             .iter()
             .zip(&self.samples)
@@ -217,6 +234,36 @@ impl Rasteriser {
                         + x[t[2] as usize].cast::<f32>() * b[2];
                     for c in 0..3 {
                         image[(c, *i as usize, *j as usize)] = p[c];
+                    }
+                }
+                CoordMap {
+                    image,
+                    mask: g.mask.clone(),
+                }
+            })
+            .collect()
+    }
+}
+
+impl Rasteriser {
+    fn rasterise_phong(&self, x: &[Vector3<f64>]) -> Vec<CoordMap> {
+        let n = crate::transfer::vertex_normals(&self.triangles, x);
+        self.grids
+            .iter()
+            .zip(&self.samples)
+            .map(|(g, s)| {
+                let (h, w) = g.shape();
+                let mut image = Array3::<f32>::zeros((3, h, w));
+                for (i, j, t, b) in s {
+                    let v = |k: usize| t[k] as usize;
+                    let p = crate::transfer::phong_point(
+                        [x[v(0)], x[v(1)], x[v(2)]],
+                        [n[v(0)], n[v(1)], n[v(2)]],
+                        b.map(f64::from),
+                        self.phong_alpha,
+                    );
+                    for c in 0..3 {
+                        image[(c, *i as usize, *j as usize)] = p[c] as f32;
                     }
                 }
                 CoordMap {

@@ -59,12 +59,14 @@ fn vectors(v: &[f32]) -> Vec<Vector3<f64>> {
 
 impl IsrSequence {
     /// Loads frames `frames` (1-based, inclusive; `None`: every complete frame) of the data set
-    /// in `dir`, rasterised at `pixel_m`, with the initialisation smoothed by a Gaussian of
-    /// `blur_px` pixels (0: none).
+    /// in `dir`, rasterised at `pixel_m` (M_int by Phong tessellation with blend
+    /// `phong_alpha`, 0: linear), with the initialisation smoothed by a Gaussian of `blur_px`
+    /// pixels (0: none).
     pub fn load(
         dir: &Path,
         frames: Option<RangeInclusive<usize>>,
         pixel_m: f64,
+        phong_alpha: f64,
         blur_px: f64,
     ) -> Result<IsrSequence> {
         let manifest = read_manifest(dir)?;
@@ -83,7 +85,7 @@ impl IsrSequence {
             ));
         }
         let grids = PanelGrid::for_mesh(&fine_mesh, pixel_m, Boundary::Extended)?;
-        let coarse_r = Rasteriser::new(&coarse_mesh, &grids)?;
+        let coarse_r = Rasteriser::new(&coarse_mesh, &grids)?.with_phong(phong_alpha);
         let fine_r = Rasteriser::new(&fine_mesh, &grids)?;
         let (nc, nf) = (coarse_mesh.num_vertices(), fine_mesh.num_vertices());
         let mut seq = IsrSequence {

@@ -1,7 +1,8 @@
 //! Evaluating the MSR module on a data set: super-resolve its M_int sequence frame by frame
 //! (each frame initialised with the previous frame's output) and compare the fine mesh with
 //! the fine simulation, next to the upsampled coarse mesh (barycentric interpolation of M_int
-//! at the fine vertices' material points, [`crate::transfer::Transfer::upsample`]).
+//! at the fine vertices' material points, [`crate::transfer::Transfer::upsample`]) and the
+//! Phong-tessellated one ([`crate::transfer::Transfer::upsample_phong`]).
 
 use std::ops::ControlFlow;
 
@@ -21,8 +22,10 @@ pub struct FrameErrors {
     pub sr_mm: f64,
     /// Largest vertex distance of the SR fine mesh.
     pub sr_max_mm: f64,
-    /// Mean vertex distance of the upsampled M_int.
+    /// Mean vertex distance of the upsampled M_int (piecewise-linear).
     pub upsampled_mm: f64,
+    /// Mean vertex distance of M_int upsampled by Phong tessellation with the model's blend.
+    pub phong_mm: f64,
     /// Time of the SR frame.
     pub times: FrameTimes,
 }
@@ -43,6 +46,11 @@ impl SequenceErrors {
     /// Mean over frames of the upsampled-coarse error, mm.
     pub fn mean_upsampled_mm(&self) -> f64 {
         mean(self.frames.iter().map(|f| f.upsampled_mm))
+    }
+
+    /// Mean over frames of the Phong-upsampled error, mm.
+    pub fn mean_phong_mm(&self) -> f64 {
+        mean(self.frames.iter().map(|f| f.phong_mm))
     }
 
     /// Mean time per frame and the network's share of it.
@@ -88,11 +96,14 @@ pub fn evaluate(
         let fine = sr.frame(int)?;
         let (sr_mm, sr_max_mm) = vertex_error_mm(&fine, gt);
         let (upsampled_mm, _) = vertex_error_mm(&transfer.upsample(int), gt);
+        let phong = transfer.upsample_phong(int, &seq.coarse_mesh.triangles, isr.cfg.phong_alpha);
+        let (phong_mm, _) = vertex_error_mm(&phong, gt);
         out.frames.push(FrameErrors {
             frame: seq.first_frame + k,
             sr_mm,
             sr_max_mm,
             upsampled_mm,
+            phong_mm,
             times: sr.times,
         });
         if progress(k + 1, seq.int_x.len()).is_break() {

@@ -164,7 +164,7 @@ impl<'a> SuperResolver<'a> {
     /// space), on grids at the model's pixel size.
     pub fn new(isr: &'a Isr, coarse: &ClothMesh, fine: &ClothMesh) -> Result<SuperResolver<'a>> {
         let grids = PanelGrid::for_mesh(fine, isr.cfg.pixel_m, Boundary::Extended)?;
-        let rasteriser = Rasteriser::new(coarse, &grids)?;
+        let rasteriser = Rasteriser::new(coarse, &grids)?.with_phong(isr.cfg.phong_alpha);
         let readout = Readout::new(fine, &grids)?;
         let layouts = grids
             .iter()

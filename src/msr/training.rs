@@ -58,6 +58,10 @@ pub struct IsrTrainingConfig {
     /// Patch side P, pixels (a multiple of the window).
     #[config(default = 32)]
     pub patch: usize,
+    /// Phong tessellation blend of the coarse map (0: piecewise-linear rasterisation, as the
+    /// paper; 0.5 halves the upsampled M_int's error on our drapes before any learning).
+    #[config(default = 0.5)]
+    pub phong_alpha: f64,
     /// Length that one normalised unit of the coarse shape input stands for, m.
     #[config(default = 0.01)]
     pub scale_m: f64,
@@ -222,6 +226,9 @@ fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
     ];
     if positive.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
         return bad("learning rates, scale_m, detail_m and pixel_m must be positive".into());
+    }
+    if !(cfg.phong_alpha.is_finite() && (0.0..=1.0).contains(&cfg.phong_alpha)) {
+        return bad("phong_alpha must lie in [0, 1]".into());
     }
     for s in seqs {
         if (s.grids[0].pixel_m - cfg.pixel_m).abs() > 1e-9 {
