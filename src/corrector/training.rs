@@ -353,7 +353,8 @@ pub fn save_model(
     std::fs::rename(&tmp, &weights).map_err(|e| Error::io(&weights, e))
 }
 
-fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+/// Writes `value` as pretty JSON, atomically (shared by the model directories' trainers).
+pub(crate) fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     let text = serde_json::to_vec_pretty(value)
         .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
     write_atomic(path, &text)

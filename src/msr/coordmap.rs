@@ -219,35 +219,12 @@ impl Rasteriser {
 
     /// Coordinate maps of the mesh at positions `x` (one per grid).
     pub fn rasterise(&self, x: &[Vector3<f64>]) -> Vec<CoordMap> {
-        if self.phong_alpha != 0.0 {
-            return self.rasterise_phong(x);
-        }
-        self.grids
-            .iter()
-            .zip(&self.samples)
-            .map(|(g, s)| {
-                let (h, w) = g.shape();
-                let mut image = Array3::<f32>::zeros((3, h, w));
-                for (i, j, t, b) in s {
-                    let p = x[t[0] as usize].cast::<f32>() * b[0]
-                        + x[t[1] as usize].cast::<f32>() * b[1]
-                        + x[t[2] as usize].cast::<f32>() * b[2];
-                    for c in 0..3 {
-                        image[(c, *i as usize, *j as usize)] = p[c];
-                    }
-                }
-                CoordMap {
-                    image,
-                    mask: g.mask.clone(),
-                }
-            })
-            .collect()
-    }
-}
-
-impl Rasteriser {
-    fn rasterise_phong(&self, x: &[Vector3<f64>]) -> Vec<CoordMap> {
-        let n = crate::transfer::vertex_normals(&self.triangles, x);
+        // Vertex normals only for Phong tessellation (alpha 0 is linear interpolation).
+        let n = if self.phong_alpha != 0.0 {
+            crate::transfer::vertex_normals(&self.triangles, x)
+        } else {
+            Vec::new()
+        };
         self.grids
             .iter()
             .zip(&self.samples)
@@ -256,12 +233,19 @@ impl Rasteriser {
                 let mut image = Array3::<f32>::zeros((3, h, w));
                 for (i, j, t, b) in s {
                     let v = |k: usize| t[k] as usize;
-                    let p = crate::transfer::phong_point(
-                        [x[v(0)], x[v(1)], x[v(2)]],
-                        [n[v(0)], n[v(1)], n[v(2)]],
-                        b.map(f64::from),
-                        self.phong_alpha,
-                    );
+                    let p = if n.is_empty() {
+                        (x[v(0)].cast::<f32>() * b[0]
+                            + x[v(1)].cast::<f32>() * b[1]
+                            + x[v(2)].cast::<f32>() * b[2])
+                            .cast::<f64>()
+                    } else {
+                        crate::transfer::phong_point(
+                            [x[v(0)], x[v(1)], x[v(2)]],
+                            [n[v(0)], n[v(1)], n[v(2)]],
+                            b.map(f64::from),
+                            self.phong_alpha,
+                        )
+                    };
                     for c in 0..3 {
                         image[(c, *i as usize, *j as usize)] = p[c] as f32;
                     }

@@ -45,8 +45,8 @@ use serde::{Deserialize, Serialize};
 use super::data::IsrSequence;
 use super::inference::{patch_input, CONFIG_FILE, WEIGHTS_FILE};
 use super::model::{IsrConfig, IsrNet};
+use crate::corrector::training::write_json;
 use crate::error::{Error, Result};
-use crate::io::write_atomic;
 
 /// How to train (saved as `config.json`, with the network's sizes).
 #[derive(Config, Debug, PartialEq)]
@@ -435,12 +435,6 @@ fn checkpoint(
     std::fs::rename(&w, dir.join(WEIGHTS_FILE)).map_err(|e| Error::io(&w, e))?;
     std::fs::rename(&o, dir.join("optim.bpk")).map_err(|e| Error::io(&o, e))?;
     write_json(&dir.join("state.json"), &position)
-}
-
-fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    let text = serde_json::to_vec_pretty(value)
-        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
-    write_atomic(path, &text)
 }
 
 /// Crops `(C, H, W)` at `(r0, c0)` to `p × p`, zero-padded past the border.
