@@ -9,11 +9,13 @@
 //! 3. [`sim`] simulates cloth; [`transfer`] moves states between the coarse and fine meshes;
 //!    [`data`] makes training data; [`corrector`] turns each coarse step M_c into M_int and the
 //!    simulator goes on from it; [`msr`] turns meshes into coordinate maps and patches and back;
-//! 4. [`io`] writes time-sampled USD.
+//! 4. [`pipeline`] runs these stages per frame; [`io`] writes time-sampled USD and [`viz`]
+//!    streams previews to Rerun; [`eval`] measures results against fine simulations.
 
 pub mod corrector;
 pub mod data;
 pub mod error;
+pub mod eval;
 pub mod garment;
 pub mod io;
 pub mod mesh;
@@ -22,5 +24,6 @@ pub mod pipeline;
 pub mod scene;
 pub mod sim;
 pub mod transfer;
+pub mod viz;
 
 pub use error::{Error, Result};

@@ -280,6 +280,95 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let (_, fabric_edge) = cloth[0].fabric.clone().expect("fabric");
     assert!((fabric_edge - 0.04).abs() < 1e-9, "{fabric_edge}");
 
+    // `run` again with a Rerun recording and the upsampled baseline, then `eval` against a
+    // fine simulation of the same scene: table, CSV, PNG plot and heat-map recording.
+    let (rrd, up, gt) = (
+        dir.path().join("run.rrd"),
+        dir.path().join("up.usdc"),
+        dir.path().join("gt.usdc"),
+    );
+    run(vec![
+        "run".into(),
+        sample.clone().into(),
+        "--models".into(),
+        dir.path().join("models").into(),
+        "--coarse-mm".into(),
+        "80".into(),
+        "--frames".into(),
+        "2".into(),
+        "-o".into(),
+        usd.clone().into(),
+        "--rrd".into(),
+        rrd.clone().into(),
+        "--upsampled-out".into(),
+        up.clone().into(),
+    ]);
+    let rec = clothsr::viz::read_rrd(&rrd).expect("a valid recording");
+    for entity in [
+        "world/fine",
+        "world/coarse/m_int",
+        "world/coarse/m_c",
+        "timings/corrector_s",
+    ] {
+        assert!(rec.entities.contains(entity), "{entity}: {rec:?}");
+    }
+    run(vec![
+        "simulate".into(),
+        sample.clone().into(),
+        "--edge-mm".into(),
+        "40".into(),
+        "--fast".into(),
+        "--no-self-collision".into(),
+        "--frames".into(),
+        "2".into(),
+        "-o".into(),
+        gt.clone().into(),
+    ]);
+    let (eval_csv, png, eval_rrd) = (
+        dir.path().join("eval.csv"),
+        dir.path().join("eval.png"),
+        dir.path().join("eval.rrd"),
+    );
+    let table = run(vec![
+        "eval".into(),
+        "--gt".into(),
+        gt.clone().into(),
+        "--pred".into(),
+        usd.clone().into(),
+        "--baseline".into(),
+        format!("upsampled={}", up.display()).into(),
+        "--csv".into(),
+        eval_csv.clone().into(),
+        "--plot".into(),
+        png.clone().into(),
+        "--rrd".into(),
+        eval_rrd.clone().into(),
+    ]);
+    assert!(table.contains("prediction / upsampled"), "{table}");
+    // Header plus (prediction, upsampled) × 3 frames.
+    let rows = std::fs::read_to_string(&eval_csv).expect("csv");
+    assert_eq!(rows.lines().count(), 7, "{rows}");
+    assert!(rows.lines().skip(1).all(|l| l
+        .split(',')
+        .nth(2)
+        .and_then(|v| v.parse::<f64>().ok())
+        .is_some_and(f64::is_finite)));
+    let png_bytes = std::fs::read(&png).expect("png");
+    assert!(png_bytes.starts_with(b"\x89PNG"), "not a PNG");
+    let rec = clothsr::viz::read_rrd(&eval_rrd).expect("a valid recording");
+    assert!(rec.entities.contains("world/prediction"), "{rec:?}");
+    assert!(rec.entities.contains("world/upsampled"), "{rec:?}");
+    // A prediction on another mesh is refused, naming the file.
+    let out = clothsr()
+        .args(["eval", "--gt"])
+        .arg(&gt)
+        .arg("--pred")
+        .arg(dir.path().join("fine.usdc").with_file_name("missing.usdc"))
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.usdc"));
+
     // A directory that is not a model: exit code 2 and the directory named.
     let out = clothsr()
         .args(["rollout", "--model"])

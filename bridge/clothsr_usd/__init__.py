@@ -23,11 +23,12 @@ except ImportError as exc:  # pragma: no cover - the message is the point
         "usd-core==26.11 and numpy)"
     ) from exc
 
+from .plot import plot_errors  # noqa: E402
 from .read import inspect_stage, read_stage  # noqa: E402
 from .validate import validate  # noqa: E402
 from .write import AnimationWriter, write_stage  # noqa: E402
 
-__all__ = ["inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "schema_registered"]
+__all__ = ["plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "schema_registered"]
 
 
 def schema_registered() -> bool:

@@ -11,7 +11,7 @@ import shutil
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
 
-from .common import valid_name
+from .common import BadInput, valid_name
 from .read import FABRIC_ATTRS
 from .validate import validate
 
@@ -207,7 +207,7 @@ class AnimationWriter:
     meshes. ``checkpoint`` publishes what is written so far at the target path (a consistent
     file, replaced atomically); ``close`` validates and publishes the final file."""
 
-    def __init__(self, path: str, spec: dict):
+    def __init__(self, path: str, spec: dict, resume_until=None):
         self.path = path
         self.target = pathlib.Path(path)
         self.tmp = _temp_path(self.target)
@@ -218,6 +218,28 @@ class AnimationWriter:
         self.paths = _build(self.stage, spec)
         self.start = float(spec.get("start", 0.0))
         self.last = None
+        # Meshes whose points come frame by frame through write_frame (not static, no times).
+        self.framed = [m["name"] for m in spec.get("meshes", []) if not m.get("static") and "times" not in m]
+        if resume_until is not None:
+            self._resume(float(resume_until))
+
+    def _resume(self, until: float):
+        """Copies the time samples up to ``until`` of the animated meshes from the file already
+        at the target (an interrupted run's last checkpoint). Fails when it lacks that frame."""
+        old = Sdf.Layer.FindOrOpen(str(self.target)) if self.target.exists() else None
+        if old is None:
+            raise BadInput(f"{self.path}: cannot resume: the file is missing or unreadable")
+        with Sdf.ChangeBlock():
+            for name in self.framed:
+                prim = self.paths[name]
+                for attr in ("points", "extent"):
+                    src = Sdf.Path(f"{prim}.{attr}")
+                    times = [t for t in old.ListTimeSamplesForPath(src) if t <= until + 1e-9]
+                    if attr == "points" and (not times or abs(max(times) - until) > 1e-9):
+                        raise BadInput(f"{self.path}: cannot resume: {prim} has no frame {until:g}")
+                    for t in times:
+                        self.layer.SetTimeSample(src, t, old.QueryTimeSample(src, t))
+        self.last = until
 
     def write_frame(self, time: float, points: dict):
         with Sdf.ChangeBlock():

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Context;
 use clothsr::data::{generate, Options, SceneSource, Variation};
 use clothsr::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -63,18 +62,6 @@ pub struct Args {
     coarse_contact_thickness: bool,
 }
 
-fn absolute(p: &std::path::Path) -> anyhow::Result<PathBuf> {
-    std::path::absolute(p).with_context(|| format!("{}: cannot resolve the path", p.display()))
-}
-
-fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
-    match v {
-        None => Ok([0.0; 3]),
-        Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
-        Some(v) => anyhow::bail!("expected three finite numbers x,y,z, got {v:?}"),
-    }
-}
-
 /// Runs `dataset`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -108,21 +95,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dress: !args.no_dress,
         self_collision: !args.no_self_collision,
         variation: Variation {
-            garment_offset_m: triple(&args.garment_offset)?,
-            collider_offset_m: triple(&args.collider_offset)?,
+            garment_offset_m: super::triple(&args.garment_offset)?,
+            collider_offset_m: super::triple(&args.collider_offset)?,
             garment_yaw_deg: args.garment_yaw_deg,
             clip_start_s: args.clip_start_s,
         },
         fast: args.fast,
         match_contact_thickness: !args.coarse_contact_thickness,
         source: Some(SceneSource {
-            scene: absolute(&args.scene)?,
+            scene: super::absolute(&args.scene)?,
             colliders: args
                 .collider
                 .iter()
-                .map(|c| absolute(c))
+                .map(|c| super::absolute(c))
                 .collect::<anyhow::Result<_>>()?,
-            avatar: args.avatar.as_deref().map(absolute).transpose()?,
+            avatar: args.avatar.as_deref().map(super::absolute).transpose()?,
             fabric: args.fabric.clone(),
         }),
     };

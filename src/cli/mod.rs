@@ -3,6 +3,7 @@
 mod bench;
 mod convert;
 mod dataset;
+mod eval;
 mod inspect;
 mod mesh;
 mod rollout;
@@ -54,6 +55,9 @@ enum Command {
     /// The whole pipeline on a scene: coarse simulation, corrector, mesh super-resolution,
     /// fine garments to time-sampled USD.
     Run(run::Args),
+    /// Errors of a run's fine meshes (and baselines) against a fine simulation: table, CSV,
+    /// plot over time, Rerun heat map.
+    Eval(eval::Args),
     /// Super-resolve a data set's M_int sequence with an ISR model and measure the fine meshes
     /// against the fine simulation, beside the upsampled coarse mesh.
     Sr(sr::Args),
@@ -87,6 +91,7 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Rollout(a) => rollout::run(a),
         Command::Sr(a) => sr::run(a),
         Command::Run(a) => run::run(a),
+        Command::Eval(a) => eval::run(a),
     }?;
     Ok(0)
 }
@@ -110,4 +115,18 @@ pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBu
         }
     }
     Ok(output.to_path_buf())
+}
+
+/// An absolute path (for files recorded in manifests).
+pub(crate) fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(p).with_context(|| format!("{}: cannot resolve the path", p.display()))
+}
+
+/// Three numbers x,y,z from a comma-separated option; zero when absent.
+pub(crate) fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
+    match v {
+        None => Ok([0.0; 3]),
+        Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
+        Some(v) => anyhow::bail!("expected three finite numbers x,y,z, got {v:?}"),
+    }
 }

@@ -1,29 +1,52 @@
-//! `clothsr run SCENE -o OUT.usdc --models DIR`: the whole pipeline (see
+//! `clothsr run SCENE… (-o OUT.usdc | --out-dir DIR) --models DIR`: the whole pipeline (see
 //! [`clothsr::pipeline`]) — coarse simulation, corrector, mesh super-resolution — writing the
-//! fine garments as time-sampled points frame by frame.
+//! fine garments as time-sampled points frame by frame, with an optional Rerun recording. A
+//! killed run continues from its last published frame when called again with the same settings.
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use clothsr::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
+use clothsr::data::Variation;
 use clothsr::msr::Isr;
-use clothsr::pipeline::{Options, Pipeline};
+use clothsr::pipeline::{run_to_files, Options, Outputs, Pipeline, Progress};
 use clothsr::scene::Scene;
-use indicatif::{ProgressBar, ProgressStyle};
+use clothsr::viz::Recorder;
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// Arguments of `run`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Scene: USD (garments, colliders, solver), GarmentCode JSON or OBJ cloth.
-    scene: PathBuf,
-    /// Output USD file: the fine garments (and the colliders), one time sample per frame.
-    #[arg(short, long)]
-    output: PathBuf,
+    /// Scenes: USD (garments, colliders, solver), GarmentCode JSON or OBJ cloth. Several need
+    /// --out-dir.
+    #[arg(required = true)]
+    scenes: Vec<PathBuf>,
+    /// Output USD file of a single scene: the fine garments (and the colliders), one time
+    /// sample per frame.
+    #[arg(short, long, conflicts_with = "out_dir")]
+    output: Option<PathBuf>,
+    /// Output folder for several scenes: DIR/<scene name>.usdc (and .rrd with --rrd).
+    #[arg(long)]
+    out_dir: Option<PathBuf>,
     /// Model directory: `isr/` (required, `clothsr train isr`) and `corrector/` (used when
     /// present, `clothsr train corrector`).
     #[arg(long)]
     models: PathBuf,
+    /// Save a Rerun recording (colliders, coarse M_c and M_int, fine meshes, stage timings on
+    /// a frame timeline): to FILE.rrd, or without a value beside each output as <name>.rrd.
+    /// Open it with `rerun FILE.rrd` (pip install rerun-sdk==0.36.3).
+    #[arg(long, num_args = 0..=1, default_missing_value = "")]
+    rrd: Option<PathBuf>,
+    /// Stream live to a Rerun viewer (started if none runs; needs `rerun` on the PATH).
+    #[arg(long, conflicts_with = "rrd")]
+    spawn: bool,
+    /// Also write the coarse mesh the MSR module saw (M_int, or M_c without corrector).
+    #[arg(long)]
+    coarse_out: Option<PathBuf>,
+    /// Also write the coarse mesh upsampled to the fine mesh (the baseline without learned
+    /// detail), for `clothsr eval --baseline`.
+    #[arg(long)]
+    upsampled_out: Option<PathBuf>,
     /// Run without the corrector even when the models have one (the simulator alone drives
     /// the coarse mesh).
     #[arg(long)]
@@ -31,6 +54,9 @@ pub struct Args {
     /// Frames to run (default: the scene's frame range).
     #[arg(long)]
     frames: Option<usize>,
+    /// Start over even when an interrupted run with the same settings left a resume point.
+    #[arg(long)]
+    restart: bool,
     /// Coarse edge length, millimetres.
     #[arg(long, default_value_t = 20.0)]
     coarse_mm: f64,
@@ -43,6 +69,21 @@ pub struct Args {
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
     fabric: String,
+    /// Move the garments by x,y,z metres (as `clothsr dataset`'s variations).
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
+    garment_offset: Option<Vec<f64>>,
+    /// Move the colliders by x,y,z metres.
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
+    collider_offset: Option<Vec<f64>>,
+    /// Turn the garments about the vertical axis, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    garment_yaw_deg: f64,
+    /// Start animated colliders (an avatar's clip) this many seconds in.
+    #[arg(long, default_value_t = 0.0)]
+    clip_start_s: f64,
+    /// Skip sewing and settling garments with seams before the first frame.
+    #[arg(long)]
+    no_dress: bool,
     /// Iterate Newton to convergence every coarse step instead of the fast one-step solver the
     /// sample models were trained beside.
     #[arg(long)]
@@ -55,13 +96,95 @@ pub struct Args {
     ascii: bool,
 }
 
+/// One scene's files.
+struct Job {
+    scene: PathBuf,
+    output: PathBuf,
+    rrd: Option<PathBuf>,
+}
+
+fn jobs(args: &Args) -> anyhow::Result<Vec<Job>> {
+    let rrd_beside = |out: &Path| out.with_extension("rrd");
+    match (&args.output, &args.out_dir) {
+        (Some(out), None) => {
+            anyhow::ensure!(
+                args.scenes.len() == 1,
+                "-o names one output but {} scenes were given: use --out-dir DIR",
+                args.scenes.len()
+            );
+            let output = super::check_output(&args.scenes[0], out)?;
+            let rrd = args.rrd.as_ref().map(|r| {
+                if r.as_os_str().is_empty() {
+                    rrd_beside(&output)
+                } else {
+                    r.clone()
+                }
+            });
+            Ok(vec![Job {
+                scene: args.scenes[0].clone(),
+                output,
+                rrd,
+            }])
+        }
+        (None, Some(dir)) => {
+            anyhow::ensure!(
+                dir.is_dir(),
+                "{}: the output folder does not exist",
+                dir.display()
+            );
+            anyhow::ensure!(
+                args.rrd.as_ref().is_none_or(|r| r.as_os_str().is_empty()),
+                "with --out-dir, give --rrd without a file: each scene's recording goes beside its USD"
+            );
+            anyhow::ensure!(
+                args.coarse_out.is_none() && args.upsampled_out.is_none(),
+                "--coarse-out and --upsampled-out name one file: run scenes one at a time for them"
+            );
+            let mut seen = std::collections::HashSet::new();
+            args.scenes
+                .iter()
+                .map(|s| {
+                    let stem = s
+                        .file_stem()
+                        .map(|n| n.to_string_lossy().into_owned())
+                        .with_context(|| format!("{}: no file name", s.display()))?;
+                    anyhow::ensure!(
+                        seen.insert(stem.clone()),
+                        "two scenes are named '{stem}': their outputs would collide in {}",
+                        dir.display()
+                    );
+                    let output = super::check_output(s, &dir.join(format!("{stem}.usdc")))?;
+                    Ok(Job {
+                        scene: s.clone(),
+                        rrd: args.rrd.as_ref().map(|_| rrd_beside(&output)),
+                        output,
+                    })
+                })
+                .collect()
+        }
+        _ => anyhow::bail!("give the output: -o OUT.usdc (one scene) or --out-dir DIR"),
+    }
+}
+
 /// Runs `run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let output = super::check_output(&args.scene, &args.output)?;
     anyhow::ensure!(
         args.coarse_mm.is_finite() && args.coarse_mm > 0.0,
         "--coarse-mm must be positive"
     );
+    anyhow::ensure!(
+        args.garment_yaw_deg.is_finite()
+            && args.clip_start_s.is_finite()
+            && args.clip_start_s >= 0.0,
+        "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
+    );
+    let jobs = jobs(&args)?;
+    for extra in [&args.coarse_out, &args.upsampled_out]
+        .into_iter()
+        .flatten()
+    {
+        clothsr::io::usd::check_extension(extra)?;
+    }
     let isr_dir = args.models.join("isr");
     anyhow::ensure!(
         isr_dir.join("config.json").exists(),
@@ -73,13 +196,62 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let corrector_dir = args.models.join("corrector");
     let corrector = (!args.no_corrector && corrector_dir.join("config.json").exists())
         .then_some(corrector_dir.as_path());
-    let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
+    let variation = Variation {
+        garment_offset_m: super::triple(&args.garment_offset)?,
+        collider_offset_m: super::triple(&args.collider_offset)?,
+        garment_yaw_deg: args.garment_yaw_deg,
+        clip_start_s: args.clip_start_s,
+    };
+    let opts = Options {
+        coarse_edge_m: args.coarse_mm * 1e-3,
+        fast: !args.converged,
+        self_collision: args.self_collision,
+        match_contact_thickness: true,
+        dress: !args.no_dress,
+    };
+    let multi = MultiProgress::new();
+    let overall = (jobs.len() > 1).then(|| {
+        let b = multi.add(ProgressBar::new(jobs.len() as u64));
+        b.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} scenes {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        b
+    });
+    for job in &jobs {
+        if let Some(o) = &overall {
+            o.set_message(job.scene.display().to_string());
+        }
+        run_one(&args, job, &isr, corrector, variation, opts, &multi)
+            .with_context(|| format!("{}", job.scene.display()))?;
+        if let Some(o) = &overall {
+            o.inc(1);
+        }
+    }
+    if let Some(o) = overall {
+        o.finish();
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_one(
+    args: &Args,
+    job: &Job,
+    isr: &Isr,
+    corrector: Option<&Path>,
+    variation: Variation,
+    opts: Options,
+    multi: &MultiProgress,
+) -> anyhow::Result<()> {
+    let mut scene = Scene::load(&job.scene, &super::fabric(&args.fabric)?)?;
     for c in &args.collider {
         scene.add_collider_file(c)?;
     }
     if let Some(a) = &args.avatar {
         scene.add_collider_file(a)?;
     }
+    variation.apply(&mut scene);
     let frames = args
         .frames
         .unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
@@ -87,106 +259,110 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames > 0,
         "nothing to run: give --frames N (the scene's frame range is empty)"
     );
-    let opts = Options {
-        coarse_edge_m: args.coarse_mm * 1e-3,
-        fast: !args.converged,
-        self_collision: args.self_collision,
-        match_contact_thickness: true,
-    };
-    let t_setup = Instant::now();
-    let mut p = Pipeline::new(&scene, &isr, corrector, opts)
-        .with_context(|| format!("setting up {}", args.scene.display()))?;
+    let t_setup = std::time::Instant::now();
+    let mut p = Pipeline::new(&scene, isr, corrector, opts).context("setting up the pipeline")?;
     tracing::info!(
-        "coarse {} vertices, fine {} vertices ({} mm pixels), corrector {}; set up in {:.1} s",
+        "{}: coarse {} vertices, fine {} vertices ({} mm pixels), corrector {}; set up in {:.1} s",
+        job.scene.display(),
         p.coarse.sim.model.num_vertices(),
         p.fine.num_vertices(),
         isr.cfg.pixel_m * 1e3,
         if p.has_corrector() { "on" } else { "off" },
         t_setup.elapsed().as_secs_f64()
     );
-    p.super_resolve()?;
-
-    let start = scene.frame_start as f64;
-    let mut meshes: Vec<MeshOut> = p
-        .fine_part_meshes
-        .iter()
-        .map(|(name, mesh, fabric)| {
-            let mut m = MeshOut::cloth(name, mesh, fabric, isr.cfg.pixel_m);
-            m.animated = true;
-            m
-        })
-        .collect();
-    for c in &scene.colliders {
-        meshes.push(MeshOut::collider(c, scene.fps));
-    }
-    let stage = StageOut {
-        fps: scene.fps,
-        start,
-        end: start + frames as f64,
-        doc: Some(format!(
+    let rec = match (&job.rrd, args.spawn) {
+        (Some(path), _) => Some(Recorder::save("clothsr", path)?),
+        (None, true) => Some(Recorder::spawn("clothsr")?),
+        (None, false) => None,
+    };
+    // Everything that shapes the output: a resume point made with other settings is ignored.
+    let fingerprint = format!(
+        "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
+         colliders={:?} avatar={:?} fabric={}",
+        super::absolute(&job.scene)?.display(),
+        super::absolute(&args.models)?.display(),
+        p.has_corrector(),
+        args.collider,
+        args.avatar,
+        args.fabric
+    );
+    let outputs = Outputs {
+        fine: job.output.clone(),
+        coarse: args.coarse_out.clone(),
+        upsampled: args.upsampled_out.clone(),
+        ascii: args.ascii,
+        doc: format!(
             "clothsr run {} with models {} (corrector {})",
-            args.scene.display(),
+            job.scene.display(),
             args.models.display(),
             if p.has_corrector() { "on" } else { "off" }
-        )),
-        ascii: args.ascii,
-        garments: Vec::new(),
-        meshes,
-        solver: Some(SolverSettings {
-            gravity_m_s2: scene.gravity_m_s2,
-            dt_s: p.coarse.sim.params.dt_s,
-        }),
+        ),
+        resume: !args.restart,
+        fingerprint,
+        publish_every_s: 10.0,
     };
-    let mut writer = AnimationWriter::create(&output, &stage)?;
-    writer.write_frame(start, &p.fine_part_positions())?;
-    let bar = ProgressBar::new(frames as u64);
+    let bar = multi.add(ProgressBar::new(frames as u64));
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} frames {per_sec} eta {eta} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let t0 = Instant::now();
-    let mut totals = [0.0f64; 3];
-    for f in 1..=frames {
-        if let Err(e) = p.advance_frame() {
+    let report = run_to_files(
+        &mut p,
+        &scene,
+        frames,
+        &outputs,
+        rec.as_ref(),
+        |g: &Progress| {
+            if g.frame == 0 || Some(g.frame) == g.resumed_after {
+                bar.set_position(g.frame as u64);
+                bar.reset_eta();
+                return ControlFlow::Continue(());
+            }
+            let t = g.times;
+            let message = format!(
+                "frame {}/{}: simulator {:.2} s, corrector {:.2} s, MSR {:.2} s",
+                g.frame, g.frames, t.simulator_s, t.corrector_s, t.msr_s
+            );
+            if bar.is_hidden() {
+                tracing::info!("{message}");
+            }
+            bar.set_message(message);
+            bar.set_position(g.frame as u64);
+            ControlFlow::Continue(())
+        },
+    );
+    let report = match report {
+        Ok(r) => r,
+        Err(e) => {
             bar.abandon();
-            writer
-                .checkpoint()
-                .context("saving the frames written so far")?;
             return Err(e).with_context(|| {
                 format!(
-                    "frame {f}: {} keeps the {} frames before",
-                    output.display(),
-                    f - 1
+                    "{} keeps the frames published before the failure; run again to resume",
+                    job.output.display()
                 )
             });
         }
-        let t = p.times;
-        totals[0] += t.simulator_s;
-        totals[1] += t.corrector_s;
-        totals[2] += t.msr_s;
-        let message = format!(
-            "frame {f}/{frames}: simulator {:.2} s, corrector {:.2} s, MSR {:.2} s",
-            t.simulator_s, t.corrector_s, t.msr_s
-        );
-        if bar.is_hidden() {
-            tracing::info!("{message}");
-        }
-        bar.set_message(message);
-        bar.inc(1);
-        writer.write_frame(start + f as f64, &p.fine_part_positions())?;
-    }
+    };
     bar.finish();
-    for w in writer.finish()? {
-        tracing::warn!("{}: {w}", output.display());
+    if let Some(r) = rec {
+        if let Some(path) = r.finish()? {
+            tracing::info!("wrote {}", path.display());
+        }
     }
-    let n = frames as f64;
+    let n = report.frames_computed.max(1) as f64;
+    let t = report.totals;
     tracing::info!(
-        "wrote {}: {frames} frames in {:.1} s; per frame: simulator {:.3} s, corrector {:.3} s, MSR {:.3} s",
-        output.display(),
-        t0.elapsed().as_secs_f64(),
-        totals[0] / n,
-        totals[1] / n,
-        totals[2] / n
+        "wrote {}: {} frames in {:.1} s{}; per frame: simulator {:.3} s, corrector {:.3} s, MSR {:.3} s",
+        job.output.display(),
+        report.frames_computed,
+        report.wall_s,
+        report
+            .resumed_after
+            .map(|f| format!(" (resumed after frame {f})"))
+            .unwrap_or_default(),
+        t.simulator_s / n,
+        t.corrector_s / n,
+        t.msr_s / n
     );
     Ok(())
 }

@@ -108,6 +108,12 @@ impl TensorReader {
         Ok((v.shape().to_vec(), v.data()))
     }
 
+    /// A metadata entry of the header.
+    pub fn meta(&self, key: &str) -> Option<String> {
+        let (_, m) = SafeTensors::read_metadata(&self.bytes).ok()?;
+        m.metadata().as_ref()?.get(key).cloned()
+    }
+
     /// An f32 array and its shape.
     pub fn f32(&self, name: &str) -> Result<(Vec<usize>, Vec<f32>)> {
         let (s, b) = self.view(name, Dtype::F32)?;

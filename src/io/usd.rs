@@ -693,6 +693,17 @@ pub struct AnimationWriter {
 impl AnimationWriter {
     /// Starts writing `out` (its animated meshes' first frame is the rest pose) to `path`.
     pub fn create(path: &Path, out: &StageOut<'_>) -> Result<AnimationWriter> {
+        Self::open(path, out, None)
+    }
+
+    /// Starts writing `out` to `path` again after an interrupted run: the animated meshes'
+    /// time samples up to `until` are taken from the file already at `path` (its last
+    /// checkpoint), which must hold that frame.
+    pub fn resume(path: &Path, out: &StageOut<'_>, until: f64) -> Result<AnimationWriter> {
+        Self::open(path, out, Some(until))
+    }
+
+    fn open(path: &Path, out: &StageOut<'_>, until: Option<f64>) -> Result<AnimationWriter> {
         check_extension(path)?;
         let p = path.to_string_lossy().into_owned();
         let names = out
@@ -705,7 +716,7 @@ impl AnimationWriter {
             let spec = stage_spec(py, out)?;
             Ok(module
                 .getattr("AnimationWriter")?
-                .call1((p.as_str(), spec))?
+                .call1((p.as_str(), spec, until))?
                 .unbind())
         })?;
         Ok(AnimationWriter { writer, names })

@@ -207,6 +207,35 @@ impl<'a> SuperResolver<'a> {
         Ok(())
     }
 
+    /// The previous frame's fine and coarse maps (the next frame's initialisation), metres.
+    pub fn previous_maps(&self) -> Option<(&[Array3<f32>], &[Array3<f32>])> {
+        Some((self.prev.as_deref()?, self.prev_coarse.as_deref()?))
+    }
+
+    /// Sets the previous frame's maps exactly as [`SuperResolver::previous_maps`] gave them
+    /// (resuming a run). Fails when their shapes are not those of the grids.
+    pub fn set_previous_maps(
+        &mut self,
+        fine: Vec<Array3<f32>>,
+        coarse: Vec<Array3<f32>>,
+    ) -> Result<()> {
+        let shapes_ok = |maps: &[Array3<f32>]| {
+            maps.len() == self.grids.len()
+                && maps.iter().zip(&self.grids).all(|(m, g)| {
+                    let (h, w) = g.shape();
+                    m.shape() == [3, h, w]
+                })
+        };
+        if !shapes_ok(&fine) || !shapes_ok(&coarse) {
+            return Err(Error::Invalid(
+                "the saved initialisation maps do not fit this garment's grids".into(),
+            ));
+        }
+        self.prev = Some(fine);
+        self.prev_coarse = Some(coarse);
+        Ok(())
+    }
+
     /// Forgets the previous frame: the next frame starts from the coarse map (a new shot).
     pub fn reset(&mut self) {
         self.prev = None;

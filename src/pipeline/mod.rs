@@ -18,6 +18,11 @@ use crate::mesh::ClothMesh;
 use crate::msr::{Isr, SuperResolver};
 use crate::scene::Scene;
 use crate::sim::driver::Simulation;
+use crate::sim::step::SimState;
+
+mod run;
+use crate::transfer::Transfer;
+pub use run::{resume_path, run_to_files, Outputs, Progress, Report};
 
 /// How to set up the coarse simulation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +36,8 @@ pub struct Options {
     /// Give the coarse simulation the fine one's contact thickness (as `clothsr dataset` does
     /// by default).
     pub match_contact_thickness: bool,
+    /// Sew and settle garments with seams before the first frame (as `clothsr dataset` does).
+    pub dress: bool,
 }
 
 impl Default for Options {
@@ -40,6 +47,7 @@ impl Default for Options {
             fast: true,
             self_collision: false,
             match_contact_thickness: true,
+            dress: true,
         }
     }
 }
@@ -55,6 +63,22 @@ pub struct FrameTimes {
     pub msr_s: f64,
 }
 
+/// What the pipeline carries from one frame to the next (see [`Pipeline::resume_state`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResumeState {
+    /// The coarse state (M_int) at the end of the frame.
+    pub coarse: SimState,
+    /// The coarse simulator's seam rest lengths, m.
+    pub seam_rest_m: Vec<f64>,
+    /// The coarse simulator's collider detection margin, m.
+    pub obstacle_margin_m: f64,
+    /// The fine output of the frame.
+    pub fine: Vec<Vector3<f64>>,
+    /// The MSR module's initialisation for the next frame: (fine maps, coarse maps), each
+    /// (3, H, W) per panel grid, metres.
+    pub previous_maps: Option<(Vec<ndarray::Array3<f32>>, Vec<ndarray::Array3<f32>>)>,
+}
+
 /// A scene running through the pipeline.
 pub struct Pipeline<'a> {
     /// The coarse simulation; its state is M_int after each step when a corrector runs.
@@ -62,12 +86,18 @@ pub struct Pipeline<'a> {
     /// The fine mesh (all garments, in the coarse simulation's part order; positions are those
     /// of the last frame).
     pub fine: ClothMesh,
+    /// The fine mesh's edge length (the ISR model's pixel), m.
+    pub fine_edge_m: f64,
     /// Vertex range of each garment part in the fine mesh.
     pub fine_parts: Vec<std::ops::Range<usize>>,
     /// Each fine garment part on its own (name, mesh at rest, fabric), for writing.
     pub fine_part_meshes: Vec<(String, ClothMesh, Fabric)>,
     corrector: Option<Corrector>,
     sr: SuperResolver<'a>,
+    /// The simulator's output M_c of the last step, before the corrector (empty when no
+    /// corrector runs: M_c is then the state itself).
+    pub simulated: Vec<Vector3<f64>>,
+    upsampler: Option<Transfer>,
     /// Times of the last frame.
     pub times: FrameTimes,
 }
@@ -93,13 +123,22 @@ impl<'a> Pipeline<'a> {
         let dhat = opts
             .match_contact_thickness
             .then_some(fine_sim.sim.params.collision.dhat_m);
-        let coarse = new_simulation(
+        let mut coarse = new_simulation(
             scene,
             opts.coarse_edge_m,
             opts.self_collision,
             opts.fast,
             dhat,
         )?;
+        if opts.dress && !coarse.sim.model.mesh.seam_pairs.is_empty() {
+            let d = coarse.dress(2.0, 0.3, 1e-3)?;
+            tracing::info!(
+                "dressed: {} sewing + {} settling steps, widest seam gap {:.1} mm",
+                d.sew_steps,
+                d.settle_steps,
+                d.seam_gap_m * 1e3
+            );
+        }
         let fine = fine_sim.sim.model.mesh.clone();
         let fine_parts = fine_sim
             .sim
@@ -122,10 +161,13 @@ impl<'a> Pipeline<'a> {
         Ok(Pipeline {
             coarse,
             fine,
+            fine_edge_m: fine_edge,
             fine_parts,
             fine_part_meshes,
             corrector,
             sr,
+            simulated: Vec::new(),
+            upsampler: None,
             times: FrameTimes::default(),
         })
     }
@@ -159,6 +201,7 @@ impl<'a> Pipeline<'a> {
             self.coarse.step()?;
             sim_s += t.elapsed().as_secs_f64();
             if let Some(c) = &self.corrector {
+                self.simulated.clone_from(&self.coarse.state.x);
                 let t = Instant::now();
                 c.correct(&mut self.coarse.state, dt, &self.coarse.colliders)?;
                 cor_s += t.elapsed().as_secs_f64();
@@ -167,6 +210,57 @@ impl<'a> Pipeline<'a> {
         self.times.simulator_s = sim_s;
         self.times.corrector_s = cor_s;
         self.super_resolve()
+    }
+
+    /// The coarse state (M_int) upsampled to the fine mesh by barycentric interpolation in
+    /// material space: the baseline the paper compares with (no learned detail).
+    pub fn upsampled(&mut self) -> Result<Vec<Vector3<f64>>> {
+        if self.upsampler.is_none() {
+            self.upsampler = Some(Transfer::new(&self.coarse.sim.model.mesh, &self.fine)?);
+        }
+        let t = self.upsampler.as_ref().ok_or_else(|| {
+            Error::Invalid("the coarse-to-fine transfer could not be built".into())
+        })?;
+        Ok(t.upsample(&self.coarse.state.x))
+    }
+
+    /// Everything the next frame depends on: a resumed run restores it and continues exactly
+    /// as an uninterrupted one would.
+    pub fn resume_state(&self) -> ResumeState {
+        ResumeState {
+            coarse: self.coarse.state.clone(),
+            seam_rest_m: self.coarse.sim.seam_rest().to_vec(),
+            obstacle_margin_m: self.coarse.sim.obstacle_margin_m(),
+            fine: self.fine.positions.clone(),
+            previous_maps: self
+                .sr
+                .previous_maps()
+                .map(|(f, c)| (f.to_vec(), c.to_vec())),
+        }
+    }
+
+    /// Continues from a [`Pipeline::resume_state`] of the same scene and models.
+    pub fn restore(&mut self, s: ResumeState) -> Result<()> {
+        let (nc, nf) = (
+            self.coarse.sim.model.num_vertices(),
+            self.fine.num_vertices(),
+        );
+        if s.coarse.x.len() != nc || s.coarse.v.len() != nc || s.fine.len() != nf {
+            return Err(Error::Invalid(format!(
+                "the saved state has {} coarse and {} fine vertices, the scene {nc} and {nf}",
+                s.coarse.x.len(),
+                s.fine.len()
+            )));
+        }
+        self.coarse.sim.set_seam_rest(&s.seam_rest_m)?;
+        self.coarse.sim.set_obstacle_margin_m(s.obstacle_margin_m);
+        match s.previous_maps {
+            Some((f, c)) => self.sr.set_previous_maps(f, c)?,
+            None => self.sr.set_previous(&self.fine, &s.fine, &s.coarse.x)?,
+        }
+        self.coarse.state = s.coarse;
+        self.fine.positions = s.fine;
+        Ok(())
     }
 
     /// Positions of each fine garment part.

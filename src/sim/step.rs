@@ -346,6 +346,21 @@ impl Simulator {
         Ok(())
     }
 
+    /// The cloth–collider detection margin the next step starts with, m (adapted to the last
+    /// step's largest move; part of what a resumed run must restore to continue exactly).
+    pub fn obstacle_margin_m(&self) -> f64 {
+        self.obstacle_margin_m
+    }
+
+    /// Sets the detection margin of the next step (resuming a run); clamped to the allowed range.
+    pub fn set_obstacle_margin_m(&mut self, margin_m: f64) {
+        if margin_m.is_finite() {
+            self.obstacle_margin_m = margin_m
+                .min(MAX_OBSTACLE_MARGIN_M)
+                .max(self.params.detection_margin_m);
+        }
+    }
+
     /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
     pub fn max_seam_gap_m(&self, x: &[Vector3<f64>]) -> f64 {
         self.model

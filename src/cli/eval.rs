@@ -1,0 +1,153 @@
+//! `clothsr eval --gt FINE.usdc --pred OUT.usdc [--baseline B.usdc]…`: per-frame errors of a
+//! prediction (and baselines) against a fine simulation, a summary table, a CSV, an
+//! error-over-time plot and a Rerun heat map (see [`clothsr::eval`]).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clothsr::eval::{compare, plot, summarise, vertex_errors, write_csv, Animation, FrameMetrics};
+use clothsr::viz::{colours, Recorder};
+
+/// Arguments of `eval`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The ground truth: a fine simulation as USD (`clothsr simulate --edge-mm 2.5`), or a
+    /// `clothsr dataset` directory (its fine frames, matched to the prediction's frames 1..).
+    #[arg(long)]
+    gt: PathBuf,
+    /// The prediction: `clothsr run`'s output.
+    #[arg(long)]
+    pred: PathBuf,
+    /// Baselines on the same fine mesh (e.g. `clothsr run --upsampled-out`, or a run without
+    /// the corrector); NAME=FILE sets the label, else the file's name.
+    #[arg(long)]
+    baseline: Vec<String>,
+    /// Per-frame metrics of every series as CSV.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Error over time as a PNG plot (the paper's Fig. 11).
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// A Rerun recording: the ground truth and each series coloured by per-vertex error.
+    #[arg(long)]
+    rrd: Option<PathBuf>,
+    /// Error at which the heat map turns red, mm (default: twice the prediction's mean).
+    #[arg(long)]
+    heat_max_mm: Option<f64>,
+}
+
+fn label_and_path(s: &str) -> (String, PathBuf) {
+    match s.split_once('=') {
+        Some((name, path)) if !name.is_empty() && !name.contains('/') => {
+            (name.to_string(), PathBuf::from(path))
+        }
+        _ => {
+            let p = PathBuf::from(s);
+            let name = p
+                .file_stem()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| s.to_string());
+            (name, p)
+        }
+    }
+}
+
+/// Runs `eval`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(h) = args.heat_max_mm {
+        anyhow::ensure!(h.is_finite() && h > 0.0, "--heat-max-mm must be positive");
+    }
+    let pred_anim = Animation::read_usd(&args.pred)?;
+    let gt = if args.gt.is_dir() {
+        let start = pred_anim.time_codes.first().copied().unwrap_or(0.0);
+        Animation::read_dataset(&args.gt, start)?
+    } else {
+        Animation::read_usd(&args.gt)?
+    };
+    let mut inputs = vec![label_and_path(&format!(
+        "prediction={}",
+        args.pred.display()
+    ))];
+    inputs.extend(args.baseline.iter().map(|b| label_and_path(b)));
+    let mut series: Vec<(String, Vec<FrameMetrics>)> = Vec::new();
+    let mut anims: Vec<Animation> = Vec::new();
+    let mut pred_anim = Some(pred_anim);
+    for (name, path) in &inputs {
+        let a = match pred_anim.take() {
+            Some(a) => a,
+            None => Animation::read_usd(path)?,
+        };
+        let m = compare(&gt, &a, path)?;
+        series.push((name.clone(), m));
+        anims.push(a);
+    }
+    println!(
+        "{:<24} {:>6} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10}",
+        "series", "frames", "mean mm", "max mm", "std mm", "normal °", "jitter mm", "gt jitter"
+    );
+    let pred_mean = summarise(&series[0].1).mean_mm;
+    for (name, m) in &series {
+        let s = summarise(m);
+        println!(
+            "{:<24} {:>6} {:>9.3} {:>9.3} {:>9.3} {:>10.3} {:>10.4} {:>10.4}",
+            name,
+            s.frames,
+            s.mean_mm,
+            s.max_mm,
+            s.std_mm,
+            s.normal_deg,
+            s.jitter_mm,
+            s.gt_jitter_mm
+        );
+    }
+    for (name, m) in series.iter().skip(1) {
+        let b = summarise(m).mean_mm;
+        if b > 0.0 {
+            println!("prediction / {name}: {:.3}×", pred_mean / b);
+        }
+    }
+    if let Some(path) = &args.csv {
+        write_csv(path, &series)?;
+        tracing::info!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{} against {}", args.pred.display(), args.gt.display());
+        plot(path, &series, &title)?;
+        tracing::info!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.rrd {
+        let max_m = args.heat_max_mm.unwrap_or(2.0 * pred_mean).max(1e-3) * 1e-3;
+        let rec = Recorder::save("clothsr_eval", path)?;
+        rec.mesh_topology("world/ground_truth", &gt.triangles, colours::FINE)?;
+        for (name, _) in &series {
+            rec.mesh_topology(&format!("world/{name}"), &gt.triangles, colours::FINE)?;
+        }
+        for (k, &t) in gt.time_codes.iter().enumerate() {
+            rec.set_frame(t.round() as i64);
+            rec.mesh_positions("world/ground_truth", &gt.triangles, &gt.frames[k])?;
+            for ((name, m), a) in series.iter().zip(&anims) {
+                let Some(j) = a.frame_at(t) else { continue };
+                let e = vertex_errors(&gt.frames[k], &a.frames[j]);
+                rec.mesh_heat_map(
+                    &format!("world/{name}"),
+                    &gt.triangles,
+                    &a.frames[j],
+                    &e,
+                    max_m,
+                )?;
+                if let Some(fm) = m.iter().find(|x| (x.time_code - t).abs() < 1e-6) {
+                    rec.scalar(&format!("error_mm/{name}"), fm.mean_mm)?;
+                }
+            }
+        }
+        let written = rec.finish().context("finishing the recording")?;
+        if let Some(p) = written {
+            tracing::info!(
+                "wrote {} (heat map: blue 0 → red {:.1} mm)",
+                p.display(),
+                max_m * 1e3
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,413 @@
+//! Evaluation against a fine simulation (the paper's §4.1): per frame the vertex-wise Euclidean
+//! distance (mean, max, std), the mean angle between vertex normals, and temporal jitter
+//! (mean ‖x_{t+1} − 2x_t + x_{t−1}‖, set beside the ground truth's own); error-over-time plots
+//! (Fig. 11) and per-vertex heat maps (Fig. 9/10) through [`crate::viz`].
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+
+use crate::error::{Error, Result};
+use crate::io::usd::{read_usd, MeshRole};
+use crate::transfer::vertex_normals;
+
+/// The cloth of an animation file: every cloth mesh of the stage, concatenated in prim order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Animation {
+    /// Names of the cloth meshes (prim paths) with their vertex ranges.
+    pub parts: Vec<(String, std::ops::Range<usize>)>,
+    /// Triangles over the concatenated vertices.
+    pub triangles: Vec<[u32; 3]>,
+    /// Time code of each frame.
+    pub time_codes: Vec<f64>,
+    /// Positions per frame, metres.
+    pub frames: Vec<Vec<Vector3<f64>>>,
+}
+
+impl Animation {
+    /// Reads the cloth meshes of a USD file (garments written by `clothsr simulate` or
+    /// `clothsr run`). Fails when the file has no animated cloth or its meshes disagree on the
+    /// frames they are sampled at.
+    pub fn read_usd(path: &Path) -> Result<Animation> {
+        let stage = read_usd(path)?;
+        let cloth: Vec<_> = stage
+            .meshes
+            .into_iter()
+            .filter(|m| m.role == MeshRole::Cloth)
+            .collect();
+        if cloth.is_empty() {
+            return Err(Error::bad_input(
+                path,
+                "no cloth mesh (a mesh with clothsr's ClothGarmentAPI) in this stage",
+            ));
+        }
+        let time_codes = cloth[0].time_codes.clone();
+        let mut anim = Animation {
+            parts: Vec::new(),
+            triangles: Vec::new(),
+            time_codes: time_codes.clone(),
+            frames: vec![Vec::new(); time_codes.len().max(1)],
+        };
+        for m in &cloth {
+            if m.time_codes != time_codes {
+                return Err(Error::bad_input(
+                    path,
+                    format!(
+                        "{}: sampled at other times than {} ({} against {} samples)",
+                        m.path,
+                        cloth[0].path,
+                        m.time_codes.len(),
+                        time_codes.len()
+                    ),
+                ));
+            }
+            let base = anim.frames[0].len();
+            let n = m.frames.first().map_or(0, Vec::len);
+            anim.parts.push((m.path.clone(), base..base + n));
+            anim.triangles.extend(
+                m.triangles()
+                    .into_iter()
+                    .map(|t| t.map(|i| i + base as u32)),
+            );
+            for (out, f) in anim.frames.iter_mut().zip(&m.frames) {
+                out.extend(f.iter().map(|p| p.cast::<f64>()));
+            }
+        }
+        if anim.time_codes.is_empty() {
+            anim.time_codes.push(stage.start);
+        }
+        Ok(anim)
+    }
+
+    /// The fine simulation of a `clothsr dataset` directory: frame k (k = 1..) at time code
+    /// `start + k` (a run's frame k starts from the same scene frame); the rest frame is not
+    /// stored.
+    pub fn read_dataset(dir: &Path, start: f64) -> Result<Animation> {
+        let manifest = crate::data::read_manifest(dir)?;
+        let mesh = crate::data::read_fine_mesh(dir, &manifest)?;
+        let n = mesh.num_vertices();
+        let mut frames = Vec::with_capacity(manifest.frames_done);
+        for k in 1..=manifest.frames_done {
+            let (_, x) = crate::data::read_frame_positions(dir, k)?.fine_x;
+            if x.len() != 3 * n {
+                return Err(Error::bad_input(
+                    dir,
+                    format!("frame {k} has {} fine values for {n} vertices", x.len()),
+                ));
+            }
+            frames.push(
+                x.chunks_exact(3)
+                    .map(|c| Vector3::new(c[0] as f64, c[1] as f64, c[2] as f64))
+                    .collect(),
+            );
+        }
+        if frames.is_empty() {
+            return Err(Error::bad_input(dir, "the data set has no frame yet"));
+        }
+        Ok(Animation {
+            parts: vec![("fine".into(), 0..n)],
+            triangles: mesh.triangles,
+            time_codes: (1..=frames.len()).map(|k| start + k as f64).collect(),
+            frames,
+        })
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.frames.first().map_or(0, Vec::len)
+    }
+
+    /// Index of the frame at `time_code`.
+    pub fn frame_at(&self, time_code: f64) -> Option<usize> {
+        self.time_codes
+            .iter()
+            .position(|&t| (t - time_code).abs() < 1e-6)
+    }
+
+    /// Checks that `other` is the same cloth mesh as `self`: the same vertex count and the
+    /// same triangles (so vertex k is the same material point in both).
+    pub fn check_same_cloth(&self, other: &Animation, path: &Path) -> Result<()> {
+        if self.num_vertices() != other.num_vertices() || self.triangles != other.triangles {
+            let names = |a: &Animation| -> Vec<(String, usize)> {
+                a.parts
+                    .iter()
+                    .map(|(n, r)| (n.rsplit('/').next().unwrap_or(n).to_string(), r.len()))
+                    .collect()
+            };
+            return Err(Error::bad_input(
+                path,
+                format!(
+                    "its cloth meshes do not match the ground truth's: {} against {} \
+                     (were both made at the same edge length from the same scene?)",
+                    describe(&names(other)),
+                    describe(&names(self))
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn describe(parts: &[(String, usize)]) -> String {
+    parts
+        .iter()
+        .map(|(n, k)| format!("{n} ({k} vertices)"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Errors of one frame against the ground truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameMetrics {
+    /// Time code of the frame.
+    pub time_code: f64,
+    /// Mean vertex distance, mm.
+    pub mean_mm: f64,
+    /// Largest vertex distance, mm.
+    pub max_mm: f64,
+    /// Standard deviation of the vertex distances, mm.
+    pub std_mm: f64,
+    /// Mean angle between predicted and true vertex normals, degrees.
+    pub normal_deg: f64,
+    /// Mean ‖x_{t+1} − 2x_t + x_{t−1}‖ of the prediction, mm (None at the first and last frame).
+    pub jitter_mm: Option<f64>,
+    /// The same of the ground truth, mm.
+    pub gt_jitter_mm: Option<f64>,
+}
+
+/// Per-vertex distances between two position sets, metres.
+pub fn vertex_errors(gt: &[Vector3<f64>], pred: &[Vector3<f64>]) -> Vec<f64> {
+    gt.iter().zip(pred).map(|(a, b)| (a - b).norm()).collect()
+}
+
+/// Mean, max and standard deviation of `v`.
+pub fn mean_max_std(v: &[f64]) -> (f64, f64, f64) {
+    if v.is_empty() {
+        return (0.0, 0.0, 0.0);
+    }
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let max = v.iter().copied().fold(0.0, f64::max);
+    let var = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
+    (mean, max, var.sqrt())
+}
+
+/// Mean angle between the vertex normals of two positions of one mesh, degrees.
+pub fn normal_angle_deg(triangles: &[[u32; 3]], gt: &[Vector3<f64>], pred: &[Vector3<f64>]) -> f64 {
+    let (a, b) = (
+        vertex_normals(triangles, gt),
+        vertex_normals(triangles, pred),
+    );
+    let angles: Vec<f64> = a
+        .iter()
+        .zip(&b)
+        .filter(|(p, q)| p.norm_squared() > 0.0 && q.norm_squared() > 0.0)
+        .map(|(p, q)| p.normalize().dot(&q.normalize()).clamp(-1.0, 1.0).acos())
+        .collect();
+    if angles.is_empty() {
+        return 0.0;
+    }
+    angles.iter().sum::<f64>() / angles.len() as f64 * 180.0 / std::f64::consts::PI
+}
+
+/// Mean ‖x_{t+1} − 2x_t + x_{t−1}‖ over vertices, metres.
+pub fn jitter_m(prev: &[Vector3<f64>], cur: &[Vector3<f64>], next: &[Vector3<f64>]) -> f64 {
+    let n = cur.len().max(1) as f64;
+    prev.iter()
+        .zip(cur)
+        .zip(next)
+        .map(|((a, b), c)| (c - 2.0 * b + a).norm())
+        .sum::<f64>()
+        / n
+}
+
+/// Compares `pred` with `gt` at every time code they share. Fails when they share none or
+/// their meshes differ.
+pub fn compare(gt: &Animation, pred: &Animation, pred_path: &Path) -> Result<Vec<FrameMetrics>> {
+    gt.check_same_cloth(pred, pred_path)?;
+    let pairs: Vec<(usize, usize)> = pred
+        .time_codes
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &t)| gt.frame_at(t).map(|i| (i, j)))
+        .collect();
+    if pairs.is_empty() {
+        return Err(Error::bad_input(
+            pred_path,
+            format!(
+                "no time code in common with the ground truth (prediction {:?}..{:?}, ground truth {:?}..{:?})",
+                pred.time_codes.first(),
+                pred.time_codes.last(),
+                gt.time_codes.first(),
+                gt.time_codes.last()
+            ),
+        ));
+    }
+    let jitter = |a: &Animation, k: usize| -> Option<f64> {
+        (k > 0 && k + 1 < a.frames.len())
+            .then(|| jitter_m(&a.frames[k - 1], &a.frames[k], &a.frames[k + 1]) * 1e3)
+    };
+    Ok(pairs
+        .iter()
+        .map(|&(i, j)| {
+            let (g, p) = (&gt.frames[i], &pred.frames[j]);
+            let (mean, max, std) = mean_max_std(&vertex_errors(g, p));
+            FrameMetrics {
+                time_code: gt.time_codes[i],
+                mean_mm: mean * 1e3,
+                max_mm: max * 1e3,
+                std_mm: std * 1e3,
+                normal_deg: normal_angle_deg(&gt.triangles, g, p),
+                jitter_mm: jitter(pred, j),
+                gt_jitter_mm: jitter(gt, i),
+            }
+        })
+        .collect())
+}
+
+/// Averages over frames of one series.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Summary {
+    /// Frames compared.
+    pub frames: usize,
+    /// Mean of the per-frame mean errors, mm.
+    pub mean_mm: f64,
+    /// Largest per-frame max error, mm.
+    pub max_mm: f64,
+    /// Mean of the per-frame standard deviations, mm.
+    pub std_mm: f64,
+    /// Mean normal angle error, degrees.
+    pub normal_deg: f64,
+    /// Mean jitter of the prediction, mm.
+    pub jitter_mm: f64,
+    /// Mean jitter of the ground truth over the same frames, mm.
+    pub gt_jitter_mm: f64,
+}
+
+/// The summary of a series of frames.
+pub fn summarise(m: &[FrameMetrics]) -> Summary {
+    let n = m.len().max(1) as f64;
+    let avg = |f: &dyn Fn(&FrameMetrics) -> f64| m.iter().map(f).sum::<f64>() / n;
+    let jit: Vec<(f64, f64)> = m
+        .iter()
+        .filter_map(|x| Some((x.jitter_mm?, x.gt_jitter_mm?)))
+        .collect();
+    let k = jit.len().max(1) as f64;
+    Summary {
+        frames: m.len(),
+        mean_mm: avg(&|x| x.mean_mm),
+        max_mm: m.iter().map(|x| x.max_mm).fold(0.0, f64::max),
+        std_mm: avg(&|x| x.std_mm),
+        normal_deg: avg(&|x| x.normal_deg),
+        jitter_mm: jit.iter().map(|j| j.0).sum::<f64>() / k,
+        gt_jitter_mm: jit.iter().map(|j| j.1).sum::<f64>() / k,
+    }
+}
+
+/// Writes every series' per-frame metrics as one CSV (a `series` column names each), atomically.
+pub fn write_csv(path: &Path, series: &[(String, Vec<FrameMetrics>)]) -> Result<()> {
+    let mut s =
+        String::from("series,time_code,mean_mm,max_mm,std_mm,normal_deg,jitter_mm,gt_jitter_mm\n");
+    let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
+    for (name, ms) in series {
+        for m in ms {
+            s.push_str(&format!(
+                "{name},{},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+                m.time_code,
+                m.mean_mm,
+                m.max_mm,
+                m.std_mm,
+                m.normal_deg,
+                opt(m.jitter_mm),
+                opt(m.gt_jitter_mm)
+            ));
+        }
+    }
+    crate::io::write_atomic(path, s.as_bytes())
+}
+
+/// Plots mean error over time (±1 std) of every series to a PNG (matplotlib through the bridge).
+pub fn plot(path: &Path, series: &[(String, Vec<FrameMetrics>)], title: &str) -> Result<()> {
+    if path.extension().and_then(|e| e.to_str()) != Some("png") {
+        return Err(Error::bad_input(path, "the plot must be a .png file"));
+    }
+    let frames: Vec<f64> = series
+        .first()
+        .map(|(_, m)| m.iter().map(|x| x.time_code).collect())
+        .unwrap_or_default();
+    let data: Vec<(String, Vec<f64>, Vec<f64>)> = series
+        .iter()
+        .map(|(n, m)| {
+            (
+                n.clone(),
+                m.iter().map(|x| x.mean_mm).collect(),
+                m.iter().map(|x| x.std_mm).collect(),
+            )
+        })
+        .collect();
+    let p = path
+        .to_str()
+        .ok_or_else(|| Error::bad_input(path, "the path is not valid UTF-8"))?
+        .to_string();
+    use pyo3::types::PyAnyMethods;
+    crate::io::python::with_bridge(|_py, m| {
+        m.call_method1("plot_errors", (p.as_str(), frames, data, title))?;
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metrics_of_a_known_offset_and_a_known_acceleration() {
+        let tris = vec![[0u32, 1, 2]];
+        let gt = vec![
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+        ];
+        // Moved 3 mm along the normal: every vertex 3 mm off, normals unchanged.
+        let pred: Vec<_> = gt
+            .iter()
+            .map(|p| p + Vector3::new(0.0, 0.0, 0.003))
+            .collect();
+        let e = vertex_errors(&gt, &pred);
+        let (mean, max, std) = mean_max_std(&e);
+        assert!((mean - 0.003).abs() < 1e-12 && (max - 0.003).abs() < 1e-12 && std < 1e-12);
+        assert!(normal_angle_deg(&tris, &gt, &pred) < 1e-9);
+        // One vertex lifted until the triangle tilts 45° about the x axis.
+        let mut tilted = gt.clone();
+        tilted[2].z = 1.0;
+        let a = normal_angle_deg(&tris, &gt, &tilted);
+        assert!((a - 45.0).abs() < 1e-9, "{a}");
+        // Constant acceleration a: x_{t+1} − 2x_t + x_{t−1} = a·Δt² exactly.
+        let at = |t: f64| -> Vec<Vector3<f64>> {
+            gt.iter()
+                .map(|p| p + Vector3::new(0.0, -0.5 * 9.81 * t * t, 0.0))
+                .collect()
+        };
+        let dt = 0.1;
+        let j = jitter_m(&at(0.0), &at(dt), &at(2.0 * dt));
+        assert!((j - 9.81 * dt * dt).abs() < 1e-12, "{j}");
+    }
+
+    #[test]
+    fn summary_averages_frames_and_skips_missing_jitter() {
+        let f = |t: f64, mean: f64, j: Option<f64>| FrameMetrics {
+            time_code: t,
+            mean_mm: mean,
+            max_mm: 2.0 * mean,
+            std_mm: 0.5,
+            normal_deg: 1.0,
+            jitter_mm: j,
+            gt_jitter_mm: j.map(|x| 2.0 * x),
+        };
+        let s = summarise(&[f(1.0, 1.0, None), f(2.0, 3.0, Some(0.2)), f(3.0, 2.0, None)]);
+        assert_eq!(s.frames, 3);
+        assert!((s.mean_mm - 2.0).abs() < 1e-12);
+        assert!((s.max_mm - 6.0).abs() < 1e-12);
+        assert!((s.jitter_mm - 0.2).abs() < 1e-12 && (s.gt_jitter_mm - 0.4).abs() < 1e-12);
+    }
+}
