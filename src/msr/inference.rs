@@ -159,6 +159,16 @@ pub struct SuperResolver<'a> {
     pub times: FrameTimes,
 }
 
+/// The MSR module's memory between frames: the previous frame's fine maps and the coarse maps
+/// they went with, each (3, H, W) per panel grid, metres.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InitMaps {
+    /// Fine maps (the network's output of the previous frame).
+    pub fine: Vec<Array3<f32>>,
+    /// Coarse maps of the previous frame.
+    pub coarse: Vec<Array3<f32>>,
+}
+
 impl<'a> SuperResolver<'a> {
     /// Prepares super-resolving `coarse` (the M_int mesh) into `fine` (same panels and material
     /// space), on grids at the model's pixel size.
@@ -208,17 +218,16 @@ impl<'a> SuperResolver<'a> {
     }
 
     /// The previous frame's fine and coarse maps (the next frame's initialisation), metres.
-    pub fn previous_maps(&self) -> Option<(&[Array3<f32>], &[Array3<f32>])> {
-        Some((self.prev.as_deref()?, self.prev_coarse.as_deref()?))
+    pub fn previous_maps(&self) -> Option<InitMaps> {
+        Some(InitMaps {
+            fine: self.prev.clone()?,
+            coarse: self.prev_coarse.clone()?,
+        })
     }
 
     /// Sets the previous frame's maps exactly as [`SuperResolver::previous_maps`] gave them
     /// (resuming a run). Fails when their shapes are not those of the grids.
-    pub fn set_previous_maps(
-        &mut self,
-        fine: Vec<Array3<f32>>,
-        coarse: Vec<Array3<f32>>,
-    ) -> Result<()> {
+    pub fn set_previous_maps(&mut self, maps: InitMaps) -> Result<()> {
         let shapes_ok = |maps: &[Array3<f32>]| {
             maps.len() == self.grids.len()
                 && maps.iter().zip(&self.grids).all(|(m, g)| {
@@ -226,13 +235,13 @@ impl<'a> SuperResolver<'a> {
                     m.shape() == [3, h, w]
                 })
         };
-        if !shapes_ok(&fine) || !shapes_ok(&coarse) {
+        if !shapes_ok(&maps.fine) || !shapes_ok(&maps.coarse) {
             return Err(Error::Invalid(
                 "the saved initialisation maps do not fit this garment's grids".into(),
             ));
         }
-        self.prev = Some(fine);
-        self.prev_coarse = Some(coarse);
+        self.prev = Some(maps.fine);
+        self.prev_coarse = Some(maps.coarse);
         Ok(())
     }
 

@@ -15,6 +15,7 @@ use crate::data::new_simulation;
 use crate::error::{Error, Result};
 use crate::garment::Fabric;
 use crate::mesh::ClothMesh;
+use crate::msr::inference::InitMaps;
 use crate::msr::{Isr, SuperResolver};
 use crate::scene::Scene;
 use crate::sim::driver::Simulation;
@@ -74,9 +75,8 @@ pub struct ResumeState {
     pub obstacle_margin_m: f64,
     /// The fine output of the frame.
     pub fine: Vec<Vector3<f64>>,
-    /// The MSR module's initialisation for the next frame: (fine maps, coarse maps), each
-    /// (3, H, W) per panel grid, metres.
-    pub previous_maps: Option<(Vec<ndarray::Array3<f32>>, Vec<ndarray::Array3<f32>>)>,
+    /// The MSR module's initialisation for the next frame.
+    pub previous_maps: Option<InitMaps>,
 }
 
 /// A scene running through the pipeline.
@@ -232,10 +232,7 @@ impl<'a> Pipeline<'a> {
             seam_rest_m: self.coarse.sim.seam_rest().to_vec(),
             obstacle_margin_m: self.coarse.sim.obstacle_margin_m(),
             fine: self.fine.positions.clone(),
-            previous_maps: self
-                .sr
-                .previous_maps()
-                .map(|(f, c)| (f.to_vec(), c.to_vec())),
+            previous_maps: self.sr.previous_maps(),
         }
     }
 
@@ -255,7 +252,7 @@ impl<'a> Pipeline<'a> {
         self.coarse.sim.set_seam_rest(&s.seam_rest_m)?;
         self.coarse.sim.set_obstacle_margin_m(s.obstacle_margin_m);
         match s.previous_maps {
-            Some((f, c)) => self.sr.set_previous_maps(f, c)?,
+            Some(maps) => self.sr.set_previous_maps(maps)?,
             None => self.sr.set_previous(&self.fine, &s.fine, &s.coarse.x)?,
         }
         self.coarse.state = s.coarse;

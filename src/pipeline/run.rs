@@ -19,6 +19,7 @@ use crate::error::{Error, Result};
 use crate::io::tensors::{TensorReader, TensorWriter};
 use crate::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
 use crate::mesh::ClothMesh;
+use crate::msr::inference::InitMaps;
 use crate::scene::Scene;
 use crate::sim::step::SimState;
 use crate::viz::{colours, paths, Recorder};
@@ -110,9 +111,9 @@ fn write_resume(path: &Path, fingerprint: &str, p: &ResumePoint) -> Result<()> {
         .f64("coarse_x", &[nc, 3], &flat(&s.coarse.x))
         .f64("coarse_v", &[nc, 3], &flat(&s.coarse.v))
         .f64("fine_x", &[nf, 3], &flat(&s.fine));
-    if let Some((fine, coarse)) = &s.previous_maps {
-        w.meta("maps", &fine.len().to_string());
-        for (k, (f, c)) in fine.iter().zip(coarse).enumerate() {
+    if let Some(maps) = &s.previous_maps {
+        w.meta("maps", &maps.fine.len().to_string());
+        for (k, (f, c)) in maps.fine.iter().zip(&maps.coarse).enumerate() {
             let shape = f.shape().to_vec();
             let fv: Vec<f32> = f.iter().copied().collect();
             let cv: Vec<f32> = c.iter().copied().collect();
@@ -171,7 +172,7 @@ fn read_resume(path: &Path, fingerprint: &str) -> Result<Option<ResumePoint>> {
             let coarse = (0..n)
                 .map(|k| map(&format!("prev_coarse_{k}")))
                 .collect::<Result<Vec<_>>>()?;
-            Some((fine, coarse))
+            Some(InitMaps { fine, coarse })
         }
         None => None,
     };
