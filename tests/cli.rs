@@ -288,6 +288,18 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         dir.path().join("gt.usdc"),
     );
     run(vec![
+        "simulate".into(),
+        sample.clone().into(),
+        "--edge-mm".into(),
+        "40".into(),
+        "--fast".into(),
+        "--no-self-collision".into(),
+        "--frames".into(),
+        "2".into(),
+        "-o".into(),
+        gt.clone().into(),
+    ]);
+    run(vec![
         "run".into(),
         sample.clone().into(),
         "--models".into(),
@@ -298,6 +310,8 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "2".into(),
         "-o".into(),
         usd.clone().into(),
+        "--gt".into(),
+        gt.clone().into(),
         "--rrd".into(),
         rrd.clone().into(),
         "--upsampled-out".into(),
@@ -312,18 +326,6 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     ] {
         assert!(rec.entities.contains(entity), "{entity}: {rec:?}");
     }
-    run(vec![
-        "simulate".into(),
-        sample.clone().into(),
-        "--edge-mm".into(),
-        "40".into(),
-        "--fast".into(),
-        "--no-self-collision".into(),
-        "--frames".into(),
-        "2".into(),
-        "-o".into(),
-        gt.clone().into(),
-    ]);
     let (eval_csv, png, eval_rrd) = (
         dir.path().join("eval.csv"),
         dir.path().join("eval.png"),

@@ -13,7 +13,7 @@ use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
 use clothsr::msr::model::IsrConfig;
 use clothsr::msr::training::IsrTrainingConfig;
 use clothsr::msr::Isr;
-use clothsr::pipeline::{resume_path, run_to_files, Options, Outputs, Pipeline, Report};
+use clothsr::pipeline::{resume_path, run_to_files, Options, Outputs, Pipeline, Preview, Report};
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::{Collider, Scene};
 use clothsr::viz::{paths, read_rrd, Recorder};
@@ -80,7 +80,12 @@ fn run(
     let scene = scene();
     let mut p = Pipeline::new(&scene, isr, None, options()).expect("pipeline");
     let rec = rrd.map(|r| Recorder::save("clothsr_test", r).expect("rrd"));
-    let report = run_to_files(&mut p, &scene, frames, out, rec.as_ref(), |g| {
+    let preview = rec.as_ref().map(|r| Preview {
+        recorder: r,
+        ground_truth: None,
+        heat_max_m: 0.005,
+    });
+    let report = run_to_files(&mut p, &scene, frames, out, preview.as_ref(), |g| {
         if Some(g.frame) == stop_after {
             ControlFlow::Break(())
         } else {

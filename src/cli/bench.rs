@@ -19,9 +19,13 @@ pub struct Args {
     /// Table 1 for a scene: coarse step, corrector, ISR and fine step times).
     #[arg(default_value = "sim")]
     what: String,
-    /// `pipeline`: the scene.
-    #[arg(long, default_value = "samples/sheet_three_balls.usda")]
-    scene: std::path::PathBuf,
+    /// `pipeline`: the scenes, one row of the table each (default: the three sheet samples).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "samples/sheet_three_balls.usda,samples/sheet_table.usda,samples/sheet_sphere.usda"
+    )]
+    scene: Vec<std::path::PathBuf>,
     /// `pipeline`: the model directory (`isr/`, optional `corrector/`), as for `clothsr run`.
     #[arg(long)]
     models: Option<std::path::PathBuf>,
@@ -189,23 +193,86 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// The paper's Table 1 on this machine for one scene.
+/// One row of the paper's Table 1.
+struct TableRow {
+    name: String,
+    fine: (usize, usize),
+    coarse: (usize, usize),
+    /// Coarse step, corrector call per step, ISR per frame, fine step; seconds.
+    t_c: f64,
+    t_g: Option<f64>,
+    t_i: f64,
+    t_f: f64,
+    steps: usize,
+}
+
 fn pipeline(args: &Args) -> anyhow::Result<()> {
     use clothsr::msr::Isr;
-    use clothsr::pipeline::{Options, Pipeline};
     let models = args
         .models
         .as_ref()
         .ok_or_else(|| anyhow::anyhow!("bench pipeline needs --models DIR (isr/, corrector/)"))?;
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
-    let scene = Scene::load(&args.scene, &Fabric::default())?;
     let isr = Isr::load(&models.join("isr"))?;
+    let mut rows = Vec::new();
+    for scene in &args.scene {
+        rows.push(pipeline_row(args, models, &isr, scene)?);
+    }
+    println!(
+        "Table 1 on this machine: {} frames per scene, models {}; times in ms",
+        args.frames,
+        models.display()
+    );
+    println!(
+        "{:<20} {:>15} {:>13} {:>8} {:>8} {:>8} {:>9} {:>9} {:>10} {:>9}",
+        "scene",
+        "HR verts/tris",
+        "LR verts/tris",
+        "t_c",
+        "t_g",
+        "t_i",
+        "t_f",
+        "t_sf",
+        "t_ff",
+        "t_ff/t_sf"
+    );
+    for r in &rows {
+        let t_g = r.t_g.unwrap_or(0.0);
+        let t_sf = r.steps as f64 * (r.t_c + t_g) + r.t_i;
+        let t_ff = r.steps as f64 * r.t_f;
+        println!(
+            "{:<20} {:>15} {:>13} {:>8.2} {:>8} {:>8.1} {:>9.1} {:>9.1} {:>10.1} {:>8.2}×",
+            r.name,
+            format!("{}/{}", r.fine.0, r.fine.1),
+            format!("{}/{}", r.coarse.0, r.coarse.1),
+            r.t_c * 1e3,
+            r.t_g.map_or("-".to_string(), |g| format!("{:.2}", g * 1e3)),
+            r.t_i * 1e3,
+            r.t_f * 1e3,
+            t_sf * 1e3,
+            t_ff * 1e3,
+            t_ff / t_sf
+        );
+    }
+    println!("t_sf = steps·(t_c + t_g) + t_i (the SR frame), t_ff = steps·t_f (the fine frame)");
+    Ok(())
+}
+
+fn pipeline_row(
+    args: &Args,
+    models: &Path,
+    isr: &clothsr::msr::Isr,
+    scene_path: &Path,
+) -> anyhow::Result<TableRow> {
+    use clothsr::pipeline::{Options, Pipeline};
+    let scene = Scene::load(scene_path, &Fabric::default())?;
     let corrector_dir = models.join("corrector");
     let corrector = corrector_dir
         .join("config.json")
         .exists()
         .then_some(corrector_dir.as_path());
     let opts = Options::default();
-    let mut p = Pipeline::new(&scene, &isr, corrector, opts)?;
+    let mut p = Pipeline::new(&scene, isr, corrector, opts)?;
     p.super_resolve()?;
     let steps = p.coarse.steps_per_frame;
     let (mut tc, mut tg, mut ti) = (0.0, 0.0, 0.0);
@@ -216,7 +283,6 @@ fn pipeline(args: &Args) -> anyhow::Result<()> {
         ti += p.times.msr_s;
     }
     let n = args.frames as f64;
-    let (tc, tg, ti) = (tc / (n * steps as f64), tg / (n * steps as f64), ti / n);
     let mut fine = clothsr::data::new_simulation(
         &scene,
         isr.cfg.pixel_m,
@@ -230,34 +296,17 @@ fn pipeline(args: &Args) -> anyhow::Result<()> {
     }
     let tf = t.elapsed().as_secs_f64() / (n * fine.steps_per_frame as f64);
     let (cm, fm) = (&p.coarse.sim.model.mesh, &fine.sim.model.mesh);
-    let t_sf = steps as f64 * (tc + tg) + ti;
-    let t_ff = fine.steps_per_frame as f64 * tf;
-    println!("scene                {}", args.scene.display());
-    println!(
-        "fine                 {} verts, {} tris ({} mm)",
-        fm.num_vertices(),
-        fm.triangles.len(),
-        isr.cfg.pixel_m * 1e3
-    );
-    println!(
-        "coarse               {} verts, {} tris ({} mm)",
-        cm.num_vertices(),
-        cm.triangles.len(),
-        opts.coarse_edge_m * 1e3
-    );
-    println!("t_c  coarse step     {:.2} ms", tc * 1e3);
-    if p.has_corrector() {
-        println!("t_g  corrector       {:.2} ms", tg * 1e3);
-    } else {
-        println!("t_g  corrector       - (no corrector in the models)");
-    }
-    println!("t_i  ISR per frame   {:.1} ms", ti * 1e3);
-    println!("t_f  fine step       {:.1} ms", tf * 1e3);
-    println!(
-        "t_sf SR frame        {:.1} ms  ({steps}(t_c + t_g) + t_i)",
-        t_sf * 1e3
-    );
-    println!("t_ff fine frame      {:.1} ms", t_ff * 1e3);
-    println!("t_ff / t_sf          {:.2}×", t_ff / t_sf);
-    Ok(())
+    Ok(TableRow {
+        name: scene_path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        fine: (fm.num_vertices(), fm.triangles.len()),
+        coarse: (cm.num_vertices(), cm.triangles.len()),
+        t_c: tc / (n * steps as f64),
+        t_g: p.has_corrector().then(|| tg / (n * steps as f64)),
+        t_i: ti / n,
+        t_f: tf,
+        steps,
+    })
 }

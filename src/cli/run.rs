@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::data::Variation;
+use clothsr::eval::Animation;
 use clothsr::msr::Isr;
-use clothsr::pipeline::{run_to_files, Options, Outputs, Pipeline, Progress};
+use clothsr::pipeline::{run_to_files, Options, Outputs, Pipeline, Preview, Progress};
 use clothsr::scene::Scene;
 use clothsr::viz::Recorder;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -37,6 +38,13 @@ pub struct Args {
     /// Open it with `rerun FILE.rrd` (pip install rerun-sdk==0.36.3).
     #[arg(long, num_args = 0..=1, default_missing_value = "")]
     rrd: Option<PathBuf>,
+    /// A fine simulation of the same scene (USD, or a `clothsr dataset` directory): the Rerun
+    /// preview then colours the fine mesh by its distance to it and plots the mean.
+    #[arg(long)]
+    gt: Option<PathBuf>,
+    /// Distance shown red in that heat map, mm.
+    #[arg(long, default_value_t = 5.0)]
+    heat_max_mm: f64,
     /// Stream live to a Rerun viewer (started if none runs; needs `rerun` on the PATH).
     #[arg(long, conflicts_with = "rrd")]
     spawn: bool,
@@ -173,6 +181,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--coarse-mm must be positive"
     );
     anyhow::ensure!(
+        args.heat_max_mm.is_finite() && args.heat_max_mm > 0.0,
+        "--heat-max-mm must be positive"
+    );
+    anyhow::ensure!(
+        args.gt.is_none() || args.rrd.is_some() || args.spawn,
+        "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
+    );
+    anyhow::ensure!(
         args.garment_yaw_deg.is_finite()
             && args.clip_start_s.is_finite()
             && args.clip_start_s >= 0.0,
@@ -276,6 +292,27 @@ fn run_one(
         (None, false) => None,
     };
     // Everything that shapes the output: a resume point made with other settings is ignored.
+    let gt = match &args.gt {
+        Some(g) if g.is_dir() => Some(Animation::read_dataset(g, scene.frame_start as f64)?),
+        Some(g) => Some(Animation::read_usd(g)?),
+        None => None,
+    };
+    if let Some(g) = &gt {
+        anyhow::ensure!(
+            g.num_vertices() == p.fine.num_vertices() && g.triangles == p.fine.triangles,
+            "{}: not the fine mesh of this run ({} vertices against {}): simulate it at the ISR \
+             model's pixel size ({} mm)",
+            args.gt.as_deref().unwrap_or(Path::new("")).display(),
+            g.num_vertices(),
+            p.fine.num_vertices(),
+            isr.cfg.pixel_m * 1e3
+        );
+    }
+    let preview = rec.as_ref().map(|r| Preview {
+        recorder: r,
+        ground_truth: gt.as_ref(),
+        heat_max_m: args.heat_max_mm * 1e-3,
+    });
     let fingerprint = format!(
         "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
          colliders={:?} avatar={:?} fabric={}",
@@ -311,7 +348,7 @@ fn run_one(
         &scene,
         frames,
         &outputs,
-        rec.as_ref(),
+        preview.as_ref(),
         |g: &Progress| {
             if g.frame == 0 || Some(g.frame) == g.resumed_after {
                 bar.set_position(g.frame as u64);

@@ -23,7 +23,7 @@ use crate::sim::step::SimState;
 
 mod run;
 use crate::transfer::Transfer;
-pub use run::{resume_path, run_to_files, Outputs, Progress, Report};
+pub use run::{resume_path, run_to_files, Outputs, Preview, Progress, Report};
 
 /// How to set up the coarse simulation.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -16,6 +16,7 @@ use ndarray::Array3;
 
 use super::{FrameTimes, Pipeline, ResumeState};
 use crate::error::{Error, Result};
+use crate::eval::{vertex_errors, Animation};
 use crate::io::tensors::{TensorReader, TensorWriter};
 use crate::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
 use crate::mesh::ClothMesh;
@@ -73,6 +74,17 @@ pub struct Report {
     /// The progress callback asked to stop: the files hold the frames so far (published, not
     /// validated) and the resume point lets the next call continue.
     pub stopped: bool,
+}
+
+/// What a run shows in Rerun.
+pub struct Preview<'a> {
+    /// The recording.
+    pub recorder: &'a Recorder,
+    /// A fine simulation of the same scene: the fine mesh is then coloured by its per-vertex
+    /// distance to it (blue 0 → red `heat_max_m`), and the mean is plotted.
+    pub ground_truth: Option<&'a Animation>,
+    /// Distance shown in red, m.
+    pub heat_max_m: f64,
 }
 
 /// The resume point beside `output`.
@@ -238,7 +250,7 @@ pub fn run_to_files(
     scene: &Scene,
     frames: usize,
     out: &Outputs,
-    rec: Option<&Recorder>,
+    preview: Option<&Preview<'_>>,
     mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Report> {
     let start = scene.frame_start as f64;
@@ -317,9 +329,13 @@ pub fn run_to_files(
         writers.upsampled = Some((path.clone(), open(path, &st)?));
     }
 
+    let rec = preview.map(|v| v.recorder);
     if let Some(r) = rec {
         r.mesh_topology(paths::FINE, &p.fine.triangles, colours::FINE)?;
         r.mesh_topology(paths::M_INT, &coarse_mesh.triangles, colours::M_INT)?;
+        if let Some(g) = preview.and_then(|v| v.ground_truth) {
+            r.mesh_topology(paths::GROUND_TRUTH, &g.triangles, colours::GROUND_TRUTH)?;
+        }
         if p.has_corrector() {
             r.mesh_topology(paths::COARSE, &coarse_mesh.triangles, colours::COARSE)?;
         }
@@ -336,7 +352,18 @@ pub fn run_to_files(
     let log_frame = |p: &mut Pipeline<'_>, f: usize| -> Result<()> {
         let Some(r) = rec else { return Ok(()) };
         r.set_frame(start as i64 + f as i64);
-        r.mesh_positions(paths::FINE, &p.fine.triangles, &p.fine.positions)?;
+        let t = start + f as f64;
+        let gt = preview.and_then(|v| v.ground_truth.map(|g| (g, v.heat_max_m)));
+        match gt.and_then(|(g, max)| Some((g.frame_at(t)?, g, max))) {
+            Some((k, g, max_m)) if g.num_vertices() == p.fine.num_vertices() => {
+                let e = vertex_errors(&g.frames[k], &p.fine.positions);
+                r.mesh_heat_map(paths::FINE, &p.fine.triangles, &p.fine.positions, &e, max_m)?;
+                r.mesh_positions(paths::GROUND_TRUTH, &g.triangles, &g.frames[k])?;
+                let mean = e.iter().sum::<f64>() / e.len().max(1) as f64;
+                r.scalar("error_mm/fine", mean * 1e3)?;
+            }
+            _ => r.mesh_positions(paths::FINE, &p.fine.triangles, &p.fine.positions)?,
+        }
         r.mesh_positions(paths::M_INT, &coarse_mesh.triangles, &p.coarse.state.x)?;
         if p.has_corrector() && !p.simulated.is_empty() {
             r.mesh_positions(paths::COARSE, &coarse_mesh.triangles, &p.simulated)?;

@@ -23,6 +23,8 @@ pub mod paths {
     pub const COARSE: &str = "world/coarse/m_c";
     /// The corrected coarse mesh M_int.
     pub const M_INT: &str = "world/coarse/m_int";
+    /// The ground truth's fine mesh, when one is given.
+    pub const GROUND_TRUTH: &str = "world/ground_truth";
     /// Colliders (avatars, obstacles) live under this path.
     pub const COLLIDERS: &str = "world/colliders";
     /// Per-stage timings, seconds per frame.
@@ -37,6 +39,8 @@ pub mod colours {
     pub const COARSE: u32 = 0x60_90_E0_FF;
     /// Corrected coarse mesh.
     pub const M_INT: u32 = 0x60_C0_80_FF;
+    /// The ground truth.
+    pub const GROUND_TRUTH: u32 = 0xD0_D0_A0_FF;
     /// Colliders.
     pub const COLLIDER: u32 = 0xB0_B0_B0_FF;
 }
