@@ -3,6 +3,8 @@
 //! finite correction, window rollout training and the rollout evaluation run beside the real
 //! coarse simulator.
 
+mod common;
+
 use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector};
@@ -13,24 +15,12 @@ use clothsr::corrector::{CorrectorConfig, TrainingConfig};
 use clothsr::data::{coarse_simulation, generate, Options, Variation};
 use clothsr::garment::Fabric;
 use clothsr::scene::samples::flat_sheet;
-use clothsr::scene::{Collider, Scene};
+use clothsr::scene::Scene;
 use nalgebra::Vector3;
 use std::ops::ControlFlow;
 
 fn scene() -> Scene {
-    let mut s = Scene {
-        garments: vec![flat_sheet(
-            "sheet",
-            0.3,
-            0.3,
-            Vector3::new(0.0, 0.17, 0.0),
-            Fabric::preset("silk").expect("preset"),
-        )],
-        ..Scene::default()
-    };
-    s.colliders
-        .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
-    s
+    common::sheet_over_ball("silk", 0.17)
 }
 
 /// A 4-frame data set at 40 mm / 15 mm (coarse ~80 vertices), made once per test binary.

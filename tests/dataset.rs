@@ -1,27 +1,14 @@
 //! `clothsr::data`: training data from a fine simulation, downsampled to M_int, with one
 //! coarse step from each M_int (M_c); resumable.
 
+mod common;
+
 use clothsr::data::{generate, read_frame_positions, read_manifest, Options, Variation};
-use clothsr::garment::Fabric;
 use clothsr::io::tensors::TensorReader;
-use clothsr::scene::samples::flat_sheet;
-use clothsr::scene::{Collider, Scene};
-use nalgebra::Vector3;
+use clothsr::scene::Scene;
 
 fn scene() -> Scene {
-    let mut s = Scene {
-        garments: vec![flat_sheet(
-            "sheet",
-            0.3,
-            0.3,
-            Vector3::new(0.0, 0.18, 0.0),
-            Fabric::preset("cotton").expect("preset"),
-        )],
-        ..Scene::default()
-    };
-    s.colliders
-        .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
-    s
+    common::sheet_over_ball("cotton", 0.18)
 }
 
 fn opts(frames: usize) -> Options {

@@ -3,12 +3,13 @@
 //! save → load gives identical outputs, and super-resolution of a tiny data set is invariant to
 //! moving the garment.
 
+mod common;
+
 use std::ops::ControlFlow;
 
 use burn::tensor::{Tensor, TensorData};
 use clothsr::corrector::inference::default_device;
 use clothsr::data::{generate, Options, Variation};
-use clothsr::garment::Fabric;
 use clothsr::msr::data::IsrSequence;
 use clothsr::msr::eval::evaluate;
 use clothsr::msr::gradients::gradient_l1;
@@ -19,25 +20,12 @@ use clothsr::msr::training::{
     gradient_mask, isr_loss, save_model, train, Batch, IsrTrainingConfig,
 };
 use clothsr::msr::{Isr, SuperResolver};
-use clothsr::scene::samples::flat_sheet;
-use clothsr::scene::{Collider, Scene};
+use clothsr::scene::Scene;
 use nalgebra::Vector3;
 use ndarray::{Array2, Array3};
 
 fn scene() -> Scene {
-    let mut s = Scene {
-        garments: vec![flat_sheet(
-            "sheet",
-            0.3,
-            0.3,
-            Vector3::new(0.0, 0.17, 0.0),
-            Fabric::preset("silk").expect("preset"),
-        )],
-        ..Scene::default()
-    };
-    s.colliders
-        .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
-    s
+    common::sheet_over_ball("silk", 0.17)
 }
 
 const FINE_M: f64 = 0.01;

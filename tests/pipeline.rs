@@ -3,38 +3,26 @@
 //! every stage's meshes and timings, a stopped run resumes to exactly the uninterrupted result,
 //! and `eval` measures the output against the upsampled baseline.
 
+mod common;
+
 use std::ops::ControlFlow;
 use std::path::Path;
 
 use clothsr::corrector::inference::default_device;
 use clothsr::eval::{compare, summarise, Animation};
-use clothsr::garment::Fabric;
 use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
 use clothsr::msr::model::IsrConfig;
 use clothsr::msr::training::IsrTrainingConfig;
 use clothsr::msr::Isr;
 use clothsr::pipeline::{resume_path, run_to_files, Options, Outputs, Pipeline, Preview, Report};
-use clothsr::scene::samples::flat_sheet;
-use clothsr::scene::{Collider, Scene};
+use clothsr::scene::Scene;
 use clothsr::viz::{paths, read_rrd, Recorder};
 use nalgebra::Vector3;
 
 const FINE_M: f64 = 0.01;
 
 fn scene() -> Scene {
-    let mut s = Scene {
-        garments: vec![flat_sheet(
-            "sheet",
-            0.3,
-            0.3,
-            Vector3::new(0.0, 0.17, 0.0),
-            Fabric::preset("silk").expect("preset"),
-        )],
-        ..Scene::default()
-    };
-    s.colliders
-        .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
-    s
+    common::sheet_over_ball("silk", 0.17)
 }
 
 /// An untrained tiny ISR network (its zero-initialised output layer returns the coarse map).

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clothsr::data::{generate, Options, SceneSource, Variation};
+use clothsr::data::{generate, Options, SceneSource};
 use clothsr::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -34,18 +34,8 @@ pub struct Args {
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
     fabric: String,
-    /// Variation: move the garments by x,y,z metres (e.g. a drop height).
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    garment_offset: Option<Vec<f64>>,
-    /// Variation: move the colliders by x,y,z metres.
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    collider_offset: Option<Vec<f64>>,
-    /// Variation: turn the garments about the vertical axis, degrees.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    garment_yaw_deg: f64,
-    /// Variation: start animated colliders (an avatar's clip) this many seconds in.
-    #[arg(long, default_value_t = 0.0)]
-    clip_start_s: f64,
+    #[command(flatten)]
+    variation: super::VariationArgs,
     /// Disable cloth self-collision.
     #[arg(long)]
     no_self_collision: bool,
@@ -75,12 +65,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.fine_mm
     );
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
-    anyhow::ensure!(
-        args.garment_yaw_deg.is_finite()
-            && args.clip_start_s.is_finite()
-            && args.clip_start_s >= 0.0,
-        "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
-    );
+    let variation = args.variation.variation()?;
     let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
     for c in &args.collider {
         scene.add_collider_file(c)?;
@@ -94,12 +79,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames: args.frames,
         dress: !args.no_dress,
         self_collision: !args.no_self_collision,
-        variation: Variation {
-            garment_offset_m: super::triple(&args.garment_offset)?,
-            collider_offset_m: super::triple(&args.collider_offset)?,
-            garment_yaw_deg: args.garment_yaw_deg,
-            clip_start_s: args.clip_start_s,
-        },
+        variation,
         fast: args.fast,
         match_contact_thickness: !args.coarse_contact_thickness,
         source: Some(SceneSource {

@@ -123,10 +123,46 @@ pub(crate) fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
 }
 
 /// Three numbers x,y,z from a comma-separated option; zero when absent.
-pub(crate) fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
+fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
     match v {
         None => Ok([0.0; 3]),
         Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
         Some(v) => anyhow::bail!("expected three finite numbers x,y,z, got {v:?}"),
+    }
+}
+
+/// A variation of a scene, as `clothsr dataset` makes training sequences and `clothsr run`
+/// replays them.
+#[derive(Debug, clap::Args)]
+pub(crate) struct VariationArgs {
+    /// Variation: move the garments by x,y,z metres (e.g. a drop height).
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
+    garment_offset: Option<Vec<f64>>,
+    /// Variation: move the colliders by x,y,z metres.
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
+    collider_offset: Option<Vec<f64>>,
+    /// Variation: turn the garments about the vertical axis, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    garment_yaw_deg: f64,
+    /// Variation: start animated colliders (an avatar's clip) this many seconds in.
+    #[arg(long, default_value_t = 0.0)]
+    clip_start_s: f64,
+}
+
+impl VariationArgs {
+    /// The validated variation.
+    pub(crate) fn variation(&self) -> anyhow::Result<clothsr::data::Variation> {
+        anyhow::ensure!(
+            self.garment_yaw_deg.is_finite()
+                && self.clip_start_s.is_finite()
+                && self.clip_start_s >= 0.0,
+            "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
+        );
+        Ok(clothsr::data::Variation {
+            garment_offset_m: triple(&self.garment_offset)?,
+            collider_offset_m: triple(&self.collider_offset)?,
+            garment_yaw_deg: self.garment_yaw_deg,
+            clip_start_s: self.clip_start_s,
+        })
     }
 }

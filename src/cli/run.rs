@@ -77,18 +77,8 @@ pub struct Args {
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
     fabric: String,
-    /// Move the garments by x,y,z metres (as `clothsr dataset`'s variations).
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    garment_offset: Option<Vec<f64>>,
-    /// Move the colliders by x,y,z metres.
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    collider_offset: Option<Vec<f64>>,
-    /// Turn the garments about the vertical axis, degrees.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    garment_yaw_deg: f64,
-    /// Start animated colliders (an avatar's clip) this many seconds in.
-    #[arg(long, default_value_t = 0.0)]
-    clip_start_s: f64,
+    #[command(flatten)]
+    variation: super::VariationArgs,
     /// Skip sewing and settling garments with seams before the first frame.
     #[arg(long)]
     no_dress: bool,
@@ -188,12 +178,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
     );
-    anyhow::ensure!(
-        args.garment_yaw_deg.is_finite()
-            && args.clip_start_s.is_finite()
-            && args.clip_start_s >= 0.0,
-        "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
-    );
+    let variation = args.variation.variation()?;
     let jobs = jobs(&args)?;
     for extra in [&args.coarse_out, &args.upsampled_out]
         .into_iter()
@@ -212,12 +197,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let corrector_dir = args.models.join("corrector");
     let corrector = (!args.no_corrector && corrector_dir.join("config.json").exists())
         .then_some(corrector_dir.as_path());
-    let variation = Variation {
-        garment_offset_m: super::triple(&args.garment_offset)?,
-        collider_offset_m: super::triple(&args.collider_offset)?,
-        garment_yaw_deg: args.garment_yaw_deg,
-        clip_start_s: args.clip_start_s,
-    };
     let opts = Options {
         coarse_edge_m: args.coarse_mm * 1e-3,
         fast: !args.converged,
