@@ -104,12 +104,15 @@ fn a_run_writes_valid_usd_and_rerun_files_and_resumes_exactly() {
     let isr = tiny_isr();
     let frames = 3;
 
-    // Uninterrupted, with a recording.
+    // Uninterrupted, with a recording. A temporary file that a killed writer left is removed.
     let rrd = dir.path().join("full.rrd");
     let full = outputs(dir.path(), "full");
+    let stale = dir.path().join(".full.clothsr-tmp-2147483600.usdc");
+    std::fs::write(&stale, b"left by a killed run").expect("write");
     let report = run(&isr, &full, frames, None, Some(&rrd));
     assert!(!report.stopped && report.frames_computed == frames);
     assert!(!resume_path(&full.fine).exists(), "resume point left");
+    assert!(!stale.exists(), "stale temporary file left");
     for path in [
         &full.fine,
         full.coarse.as_ref().expect("coarse"),

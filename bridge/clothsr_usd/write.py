@@ -19,7 +19,30 @@ WORLD = "/World"
 
 
 def _temp_path(path: pathlib.Path) -> pathlib.Path:
+    _remove_stale(path)
     return path.with_name(f".{path.stem}.clothsr-tmp-{os.getpid()}{path.suffix}")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_stale(path: pathlib.Path):
+    """Removes the temporary files a killed writer of ``path`` left (their process is gone)."""
+    for kind in ("tmp", "pub"):
+        for f in path.parent.glob(f".{path.stem}.clothsr-{kind}-*{path.suffix}"):
+            pid = f.name[len(f".{path.stem}.clothsr-{kind}-") : len(f.name) - len(path.suffix)]
+            if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+                try:
+                    f.unlink()
+                except OSError:
+                    pass
 
 
 def _format_args(path: pathlib.Path, ascii_: bool):

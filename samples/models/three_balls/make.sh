@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Regenerates samples/models/three_balls/ from nothing but this repository: training data from
+# Regenerates samples/models/three_balls/ (this folder) from this repository alone: training data from
 # our own fine simulations of samples/sheet_three_balls.usda (20 mm coarse / 2.5 mm fine), then
 # the ISR network and the corrector, each with its config, log and the data manifests it was
-# trained on. About 1.5 h on 2 CPU cores.
+# trained on. About 1.2 h on 2 CPU cores.
 #
-#   CLOTHSR=path/to/clothsr DATA=/tmp/three_balls_data bash samples/models/make_three_balls.sh
+#   CLOTHSR=path/to/clothsr DATA=/tmp/three_balls_data bash samples/models/three_balls/make.sh
 set -euo pipefail
-cd "$(dirname "$0")/../.."
+cd "$(dirname "$0")/../../.."
 BIN=${CLOTHSR:-clothsr}
 DATA=${DATA:-data/three_balls}
 OUT=${OUT:-samples/models/three_balls}
