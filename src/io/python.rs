@@ -123,10 +123,12 @@ pub fn with_bridge<T>(
     f: impl for<'py> FnOnce(Python<'py>, &Bound<'py, PyModule>) -> PyResult<T>,
 ) -> Result<T> {
     static INIT: OnceLock<std::result::Result<(), String>> = OnceLock::new();
+    // Initialise before taking the GIL for the call: a thread waiting on the OnceLock must not
+    // hold the GIL, which the initialising thread (importing modules) gives up and takes back.
+    INIT.get_or_init(|| Python::attach(init))
+        .clone()
+        .map_err(Error::Bridge)?;
     Python::attach(|py| {
-        INIT.get_or_init(|| init(py))
-            .clone()
-            .map_err(Error::Bridge)?;
         let module = py.import(BRIDGE).map_err(|e| to_error(py, e))?;
         f(py, &module).map_err(|e| to_error(py, e))
     })
