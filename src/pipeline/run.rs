@@ -241,7 +241,7 @@ fn split<'x>(x: &'x [Vector3<f64>], parts: &[std::ops::Range<usize>]) -> Vec<&'x
     parts.iter().map(|r| &x[r.clone()]).collect()
 }
 
-/// Runs `frames` frames of `p` (set up on `scene`) into `out`, logging to `rec` when given.
+/// Runs `frames` frames of `p` (set up on `scene`) into `out`, shown in `preview` when given.
 /// `progress` is called after every frame; returning `Break` stops the run after publishing
 /// everything and a resume point. On failure every file keeps the frames published before it
 /// and the resume point stays for the next call.
@@ -268,16 +268,6 @@ pub fn run_to_files(
         .parts
         .iter()
         .map(|q| q.vertices.clone())
-        .collect();
-    let coarse_part_meshes: Vec<_> = (0..p.coarse.sim.model.parts.len())
-        .map(|i| {
-            let q = &p.coarse.sim.model.parts[i];
-            (
-                q.name.clone(),
-                p.coarse.sim.model.part_mesh(i),
-                q.fabric.clone(),
-            )
-        })
         .collect();
     let fine_edge = p.fine_edge_m;
     let stage = |meshes: Vec<MeshOut>, what: &str| {
@@ -315,6 +305,13 @@ pub fn run_to_files(
         upsampled: None,
     };
     if let Some(path) = &out.coarse {
+        let model = &p.coarse.sim.model;
+        let coarse_part_meshes: Vec<_> = (0..model.parts.len())
+            .map(|i| {
+                let q = &model.parts[i];
+                (q.name.clone(), model.part_mesh(i), q.fabric.clone())
+            })
+            .collect();
         let st = stage(
             part_meshes(&coarse_part_meshes, p.coarse.edge_m),
             "coarse M_int",
