@@ -25,7 +25,7 @@ mkdir -p "$OUT"
 "$BIN" train isr --data "$DATA/train_a" --data "$DATA/train_b" -o "$OUT/isr" --steps 2500 &
 "$BIN" train corrector --data "$DATA/train_a" --data "$DATA/train_b" -o "$OUT/corrector" \
   --steps 2000 --batch 2 --lr-start 1e-3 --lr-end 1e-5 --mp-steps 4 \
-  --rollout-iters 300 --window 8 --rollout-lr 1e-4 &
+  --rollout-iters 800 --window 12 --rollout-lr 1e-4 &
 wait
 
 # What the models came from, and no training leftovers in the repository.
