@@ -231,11 +231,13 @@ fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
         .collect()
 }
 
-fn flat64(x: &[Vector3<f64>]) -> Vec<f64> {
+/// Positions as a flat (N·3) array, for tensor files.
+pub(crate) fn flat64(x: &[Vector3<f64>]) -> Vec<f64> {
     x.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
 }
 
-fn unflat(v: &[f64]) -> Vec<Vector3<f64>> {
+/// The inverse of [`flat64`].
+pub(crate) fn unflat(v: &[f64]) -> Vec<Vector3<f64>> {
     v.chunks_exact(3)
         .map(|c| Vector3::new(c[0], c[1], c[2]))
         .collect()

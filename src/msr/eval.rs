@@ -68,11 +68,8 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 
 /// Mean and max vertex distance, mm.
 pub fn vertex_error_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
-    let d: Vec<f64> = a.iter().zip(b).map(|(p, q)| (p - q).norm() * 1e3).collect();
-    (
-        mean(d.iter().copied()),
-        d.iter().copied().fold(0.0, f64::max),
-    )
+    let (mean_m, max_m, _) = crate::eval::mean_max_std(&crate::eval::vertex_errors(a, b));
+    (mean_m * 1e3, max_m * 1e3)
 }
 
 /// Super-resolves `seq`'s frames in order and measures them; `progress(done, total)` may stop

@@ -15,6 +15,7 @@ use nalgebra::Vector3;
 use ndarray::Array3;
 
 use super::{FrameTimes, Pipeline, ResumeState};
+use crate::data::{flat64, unflat};
 use crate::error::{Error, Result};
 use crate::eval::{vertex_errors, Animation};
 use crate::io::tensors::{TensorReader, TensorWriter};
@@ -101,16 +102,6 @@ struct ResumePoint {
     state: ResumeState,
 }
 
-fn flat(x: &[Vector3<f64>]) -> Vec<f64> {
-    x.iter().flat_map(|p| [p.x, p.y, p.z]).collect()
-}
-
-fn unflat(v: &[f64]) -> Vec<Vector3<f64>> {
-    v.chunks_exact(3)
-        .map(|c| Vector3::new(c[0], c[1], c[2]))
-        .collect()
-}
-
 fn write_resume(path: &Path, fingerprint: &str, p: &ResumePoint) -> Result<()> {
     let s = &p.state;
     let (nc, nf) = (s.coarse.x.len(), s.fine.len());
@@ -120,9 +111,9 @@ fn write_resume(path: &Path, fingerprint: &str, p: &ResumePoint) -> Result<()> {
         .f64("t_s", &[1], &[s.coarse.t_s])
         .f64("obstacle_margin_m", &[1], &[s.obstacle_margin_m])
         .f64("seam_rest_m", &[s.seam_rest_m.len()], &s.seam_rest_m)
-        .f64("coarse_x", &[nc, 3], &flat(&s.coarse.x))
-        .f64("coarse_v", &[nc, 3], &flat(&s.coarse.v))
-        .f64("fine_x", &[nf, 3], &flat(&s.fine));
+        .f64("coarse_x", &[nc, 3], &flat64(&s.coarse.x))
+        .f64("coarse_v", &[nc, 3], &flat64(&s.coarse.v))
+        .f64("fine_x", &[nf, 3], &flat64(&s.fine));
     if let Some(maps) = &s.previous_maps {
         w.meta("maps", &maps.fine.len().to_string());
         for (k, (f, c)) in maps.fine.iter().zip(&maps.coarse).enumerate() {
@@ -261,14 +252,6 @@ pub fn run_to_files(
         None
     };
     let coarse_mesh = p.coarse.sim.model.mesh.clone();
-    let coarse_parts: Vec<std::ops::Range<usize>> = p
-        .coarse
-        .sim
-        .model
-        .parts
-        .iter()
-        .map(|q| q.vertices.clone())
-        .collect();
     let fine_edge = p.fine_edge_m;
     let stage = |meshes: Vec<MeshOut>, what: &str| {
         let mut meshes = meshes;
@@ -381,11 +364,9 @@ pub fn run_to_files(
     };
     let write_frame = |p: &mut Pipeline<'_>, w: &mut Writers, f: usize| -> Result<()> {
         let t = start + f as f64;
-        w.fine
-            .1
-            .write_frame(t, &split(&p.fine.positions, &p.fine_parts))?;
+        w.fine.1.write_frame(t, &p.fine_part_positions())?;
         if let Some((_, cw)) = &mut w.coarse {
-            cw.write_frame(t, &split(&p.coarse.state.x, &coarse_parts))?;
+            cw.write_frame(t, &p.coarse.part_positions())?;
         }
         if w.upsampled.is_some() {
             let up = p.upsampled()?;
