@@ -10,6 +10,7 @@ use clothsr::garment::Fabric;
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::{Collider, Scene};
 use clothsr::sim::driver::Simulation;
+use clothsr::sim::step::LinearSolver;
 use nalgebra::Vector3;
 
 /// Arguments of `bench`.
@@ -53,6 +54,15 @@ pub struct Args {
     /// Linear-solve iterations at most (default: the simulator's).
     #[arg(long)]
     cg_max: Option<usize>,
+    /// Preconditioner: `jacobi`, `two-level` or `cholesky` (default: the simulator's).
+    #[arg(long)]
+    solver: Option<String>,
+    /// `two-level`: vertices per aggregate.
+    #[arg(long, default_value_t = 16)]
+    aggregate: usize,
+    /// `two-level`, `cholesky`: CG iterations above which the next Newton iteration refactors.
+    #[arg(long, default_value_t = 0)]
+    refactor_above: usize,
 }
 
 fn parse_size(s: &str) -> anyhow::Result<f64> {
@@ -77,6 +87,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "unknown benchmark '{}' (known: sim, pipeline)",
         args.what
     );
+    let solver = match args.solver.as_deref() {
+        None => None,
+        Some("jacobi") => Some(LinearSolver::JacobiPcg),
+        Some("two-level") => Some(LinearSolver::TwoLevelPcg {
+            aggregate: args.aggregate,
+            refactor_above: args.refactor_above,
+        }),
+        Some("cholesky") => Some(LinearSolver::CholeskyPcg {
+            refactor_above: args.refactor_above,
+        }),
+        Some(s) => anyhow::bail!("unknown solver '{s}' (known: jacobi, two-level, cholesky)"),
+    };
     for m in &args.modes {
         anyhow::ensure!(
             m == "converged" || m == "fast",
@@ -117,6 +139,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             if let Some(m) = args.cg_max {
                 p.cg_max_iters = m;
+            }
+            if let Some(s) = solver {
+                p.linear_solver = s;
             }
         })?;
         sim.steps_per_frame = 1;
