@@ -239,11 +239,13 @@ pub struct Simulator {
     seam_rest_m: Vec<f64>,
     /// Rest lengths of the step being solved, m.
     seam_rest_step_m: Vec<f64>,
-    /// Small meshes solve their linear systems on one thread: conjugate gradients make many
-    /// short passes, whose rayon hand-offs cost more than their work there (assembly and
-    /// detection, coarser grained, still use every thread: measured at 3K vertices, two
-    /// threads cut them from 7.4 to 4.6 ms and from 2.8 to 1.7 ms per Newton iteration, and
-    /// slow CG from 0.14 to 0.27 ms per iteration).
+    /// Small meshes run on one thread. Rayon's hand-offs cost more than CG's short passes
+    /// there, and one thread keeps small runs (the pipeline's coarse mesh) the same from run to
+    /// run and machine to machine: the line search's energy sums are reductions whose order
+    /// follows rayon's splits. Two threads for assembly and detection alone were measured
+    /// (3K vertices: 7.4 → 4.6 ms and 2.8 → 1.7 ms a Newton iteration), and not kept: the
+    /// pencil skirt's dressing, a stalled and rounding-sensitive state, then ended 65 mm
+    /// open instead of 36 mm.
     serial: Option<std::sync::Arc<rayon::ThreadPool>>,
     /// Detection margin for cloth–collider contacts, m: at least `detection_margin_m`, widened
     /// to 2.5× the largest Newton displacement of the previous step (at most 1 cm), so that
@@ -257,7 +259,7 @@ const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
 /// From this many vertices [`LinearSolver::Auto`] adds the two-level coarse correction.
 const TWO_LEVEL_FROM_VERTICES: usize = 10_000;
 
-/// Below this many vertices the linear solve runs on a single thread.
+/// Below this many vertices a step runs on a single thread.
 const SERIAL_BELOW_VERTICES: usize = 4000;
 
 fn gather3(x: &[Vector3<f64>], v: [u32; 3]) -> [Vector3<f64>; 3] {
@@ -441,16 +443,23 @@ impl Simulator {
     ) -> Result<(SimState, StepStats)> {
         let mut stats = StepStats::default();
         let h = self.params.dt_s;
-        let next = self.advance(
-            state,
-            colliders_start,
-            colliders_end,
-            0.0,
-            1.0,
-            h,
-            0,
-            &mut stats,
-        )?;
+        let pool = self.serial.clone();
+        let mut run = || {
+            self.advance(
+                state,
+                colliders_start,
+                colliders_end,
+                0.0,
+                1.0,
+                h,
+                0,
+                &mut stats,
+            )
+        };
+        let next = match pool {
+            Some(pool) => pool.install(run)?,
+            None => run()?,
+        };
         Ok((next, stats))
     }
 
@@ -926,10 +935,7 @@ impl Simulator {
             rhs.clear();
             rhs.extend(self.grad.iter().map(|g| -g));
             let mut dx = std::mem::take(&mut self.dx);
-            let cg = match self.serial.clone() {
-                Some(pool) => pool.install(|| self.linear_solve(&rhs, &mut dx)),
-                None => self.linear_solve(&rhs, &mut dx),
-            };
+            let cg = self.linear_solve(&rhs, &mut dx);
             self.rhs = rhs;
             stats.cg_iters += cg.iterations;
             stats.newton_iters += 1;
