@@ -265,12 +265,18 @@ impl CgBuffers {
     }
 }
 
+/// z = D⁻¹ r with the inverted diagonal blocks `inv`.
+fn apply_jacobi(inv: &[Matrix3<f64>], r: &[Vector3<f64>], z: &mut [Vector3<f64>]) {
+    z.par_iter_mut()
+        .enumerate()
+        .for_each(|(i, zi)| *zi = inv[i] * r[i]);
+}
+
 impl Pcg {
     /// The inverse of each free vertex's 3×3 diagonal block (plus extra diagonal terms).
     fn update_jacobi(&mut self, a: &BlockCsr, free: &[bool]) {
         let n = a.n();
         self.inv_diag.resize(n, Matrix3::zeros());
-        // Block-Jacobi: the inverse of each vertex's 3×3 diagonal block (plus extra diagonal terms).
         let mut diag: Vec<Matrix3<f64>> =
             (0..n).map(|i| a.blocks[a.diag_index(i as u32)]).collect();
         for (i, j, m) in &a.extra {
@@ -312,11 +318,7 @@ impl Pcg {
     ) -> CgStats {
         self.update_jacobi(a, free);
         let inv = &self.inv_diag;
-        let jacobi = |r: &[Vector3<f64>], z: &mut [Vector3<f64>]| {
-            z.par_iter_mut()
-                .enumerate()
-                .for_each(|(i, zi)| *zi = inv[i] * r[i]);
-        };
+        let jacobi = |r: &[Vector3<f64>], z: &mut [Vector3<f64>]| apply_jacobi(inv, r, z);
         self.bufs.run(a, b, x, free, jacobi, rel_tol, max_iters)
     }
 
@@ -341,9 +343,7 @@ impl Pcg {
             x,
             free,
             |r, z| {
-                z.par_iter_mut()
-                    .enumerate()
-                    .for_each(|(i, zi)| *zi = inv[i] * r[i]);
+                apply_jacobi(inv, r, z);
                 coarse.add_correction(r, z, free);
             },
             rel_tol,
