@@ -800,7 +800,7 @@ pub struct TwoLevel {
     /// Coarse slot of every fine pattern block.
     slot: Vec<usize>,
     coarse: BlockCsr,
-    factor: Option<CholeskyPreconditioner>,
+    factor: CholeskyPreconditioner,
     coarse_free: Vec<bool>,
     rc: Vec<Vector3<f64>>,
     zc: Vec<Vector3<f64>>,
@@ -839,7 +839,7 @@ impl TwoLevel {
             aggregate,
             slot,
             coarse,
-            factor: Some(factor),
+            factor,
             coarse_free: vec![true; nc],
             rc: vec![Vector3::zeros(); nc],
             zc: vec![Vector3::zeros(); nc],
@@ -878,24 +878,21 @@ impl TwoLevel {
         for (c, f) in self.coarse_free.iter_mut().enumerate() {
             *f = self.coarse.blocks[self.coarse.diag[c]] != Matrix3::zeros();
         }
-        match self.factor.as_mut() {
-            Some(f) => f.factorize(&self.coarse, &self.coarse_free),
-            None => false,
-        }
+        self.factor.factorize(&self.coarse, &self.coarse_free)
     }
 
     /// z += P A_c⁻¹ Pᵀ r (free vertices only).
     pub fn add_correction(&mut self, r: &[Vector3<f64>], z: &mut [Vector3<f64>], free: &[bool]) {
-        let Some(factor) = self.factor.as_mut().filter(|f| f.is_factored()) else {
+        if !self.factor.is_factored() {
             return;
-        };
+        }
         self.rc.iter_mut().for_each(|v| *v = Vector3::zeros());
         for ((ri, &g), f) in r.iter().zip(&self.aggregate).zip(free) {
             if *f {
                 self.rc[g as usize] += ri;
             }
         }
-        factor.apply(&self.rc, &mut self.zc, &self.coarse_free);
+        self.factor.apply(&self.rc, &mut self.zc, &self.coarse_free);
         for ((zi, &g), f) in z.iter_mut().zip(&self.aggregate).zip(free) {
             if *f {
                 *zi += self.zc[g as usize];
