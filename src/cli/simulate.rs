@@ -110,10 +110,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .dress(args.dress_max_s, args.settle_s, 1e-3)
             .context("dressing the garments (sewing before the animation)")?;
         tracing::info!(
-            "dressed: {} sewing + {} settling steps in {:.1} s; widest seam gap {:.2} mm, penetration {:.2} mm",
+            "dressed: {} panels rolled around the body; {} sewing + {} settling steps in {:.1} s; widest seam gap {:.1} → {:.2} mm, penetration {:.2} mm",
+            d.wrapped_panels,
             d.sew_steps,
             d.settle_steps,
             t.elapsed().as_secs_f64(),
+            d.initial_seam_gap_m * 1e3,
             d.seam_gap_m * 1e3,
             d.max_penetration_m * 1e3
         );

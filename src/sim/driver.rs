@@ -3,6 +3,7 @@
 
 use nalgebra::Vector3;
 
+use super::arrange::{wrap_panels_around_body, WrapOptions};
 use super::model::ClothModel;
 use super::step::{ColliderFrame, SimParams, SimState, Simulator, StepStats};
 use crate::error::{Error, Result};
@@ -45,6 +46,10 @@ pub struct DressStats {
     pub sew_steps: usize,
     /// Steps run settling under gravity.
     pub settle_steps: usize,
+    /// Panels rolled around the body before sewing ([`super::arrange`]).
+    pub wrapped_panels: usize,
+    /// Widest seam gap before sewing (after rolling), m.
+    pub initial_seam_gap_m: f64,
     /// Widest seam gap at the end, m.
     pub seam_gap_m: f64,
     /// Deepest collider penetration in the last settling step, m.
@@ -165,8 +170,9 @@ impl Simulation {
         Ok(frame)
     }
 
-    /// Dresses the garments before the animation, as a tailor would: colliders held at the
-    /// first frame and gravity off while the seams close (GarmentCode places panels flat around
+    /// Dresses the garments before the animation, as a tailor would: flat panels that face the
+    /// body are first rolled around it ([`super::arrange`]), then, with the colliders held at
+    /// the first frame and gravity off, the seams close (GarmentCode places panels flat around
     /// the body, up to tens of centimetres apart; under gravity they would fall before the
     /// seams close), then `settle_s` of draping under gravity, still on the first frame's
     /// colliders. The state's time goes back to the start, with zero velocity. Stops sewing
@@ -189,8 +195,49 @@ impl Simulation {
             })
             .collect();
         let mut out = DressStats::default();
+        let garments: Vec<std::ops::Range<usize>> = self
+            .sim
+            .model
+            .parts
+            .iter()
+            .map(|p| p.vertices.clone())
+            .collect();
+        let wrapped = wrap_panels_around_body(
+            &self.sim.model.mesh,
+            &garments,
+            &mut self.state.x,
+            &frames,
+            &WrapOptions::default(),
+        );
+        for w in &wrapped {
+            tracing::info!(
+                "dressing: panel '{}' rolled around the body (radius {:.0} mm, {:.0}°)",
+                self.sim.model.mesh.panel_names[w.panel],
+                w.radius_m * 1e3,
+                w.span_deg
+            );
+        }
+        out.wrapped_panels = wrapped.len();
+        if !wrapped.is_empty() {
+            // Seams start at rest at their new length (they shrink from there as they close):
+            // rest lengths kept from the flat placement would push the rolled panels apart.
+            let gaps: Vec<f64> = self
+                .sim
+                .model
+                .mesh
+                .seam_pairs
+                .iter()
+                .map(|p| (self.state.x[p[0] as usize] - self.state.x[p[1] as usize]).norm())
+                .collect();
+            self.sim.set_seam_rest(&gaps)?;
+        }
+        out.initial_seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
         let max_steps = (max_s / dt).ceil() as usize;
         self.sim.params.gravity_m_s2 = Vector3::zeros();
+        // Panels slide around the body as their seams pull them closed: without friction, as
+        // a dresser smooths cloth into place (with it the hem of a pencil skirt stuck on the
+        // legs, 105 mm open).
+        let friction = std::mem::replace(&mut self.sim.params.friction, 0.0);
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
@@ -215,7 +262,11 @@ impl Simulation {
             Ok(())
         })();
         self.sim.params.gravity_m_s2 = gravity;
+        self.sim.params.friction = friction;
         sewing?;
+        if out.seam_gap_m > gap_m {
+            self.log_widest_seam();
+        }
         let settle_steps = (settle_s / dt).ceil() as usize;
         for _ in 0..settle_steps {
             let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
@@ -227,6 +278,31 @@ impl Simulation {
         self.state.t_s = t_start;
         self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
         Ok(out)
+    }
+
+    /// Says where the widest seam gap is (which panels, where): what a user needs to see why
+    /// a garment did not close.
+    fn log_widest_seam(&self) {
+        let mesh = &self.sim.model.mesh;
+        let x = &self.state.x;
+        let widest = mesh.seam_pairs.iter().max_by(|p, q| {
+            let gap = |s: &&[u32; 2]| (x[s[0] as usize] - x[s[1] as usize]).norm();
+            gap(p).total_cmp(&gap(q))
+        });
+        if let Some([a, b]) = widest {
+            let (a, b) = (*a as usize, *b as usize);
+            let name = |v: usize| &mesh.panel_names[mesh.panel_of_vertex[v] as usize];
+            let mid = (x[a] + x[b]) * 0.5;
+            tracing::warn!(
+                "dressing: widest seam gap {:.1} mm, between '{}' and '{}' at ({:.3}, {:.3}, {:.3}) m",
+                (x[a] - x[b]).norm() * 1e3,
+                name(a),
+                name(b),
+                mid.x,
+                mid.y,
+                mid.z
+            );
+        }
     }
 
     /// Positions of each garment part, in the order of `sim.model.parts`.

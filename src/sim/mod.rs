@@ -2,6 +2,7 @@
 //! potential, Baraff-Witkin membrane, Discrete-Shells bending, sewing springs, BVH collision
 //! detection with quadratic repulsion against bodies and the cloth itself.
 
+pub mod arrange;
 pub mod collide;
 pub mod driver;
 pub mod energy;

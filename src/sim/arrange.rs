@@ -1,0 +1,465 @@
+//! Arranging flat sewing-pattern panels around a body before sewing, as garment CAD tools do
+//! with their arrangement cylinders: a flat, upright panel that faces the body is rolled onto a
+//! vertical cylinder around the body's axis, without stretching it.
+//!
+//! GarmentCode places panels flat, in front of and behind the body (tens of centimetres
+//! apart). Sewn as they are, a front and a back panel close their side seams along straight
+//! lines that run through the hips: the cloth is pressed into the body by the seams' pull and
+//! stalls open (the pencil skirt on the walking avatar stopped 36 mm open). Rolled around the
+//! body first, the same panels form an open tube whose side seams close tangentially, around
+//! the body rather than through it.
+
+use std::ops::Range;
+
+use nalgebra::Vector3;
+
+use super::step::ColliderFrame;
+use crate::mesh::ClothMesh;
+
+/// When and how panels are rolled ([`wrap_panels_around_body`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WrapOptions {
+    /// Gap kept between a rolled panel and every body point near it, m.
+    pub clearance_m: f64,
+    /// Panels whose normal leans more than this from horizontal are left flat, degrees.
+    pub max_tilt_deg: f64,
+    /// Panels whose normal points more than this away from the body's axis (a sleeve beside
+    /// the torso) are left flat, degrees.
+    pub max_facing_deg: f64,
+    /// Panels that would cover a wider angle than this around the axis (a circle skirt's
+    /// panels) are left flat, degrees.
+    pub max_span_deg: f64,
+    /// Panels that are not flat to within this are left as they are (already draped), m.
+    pub flatness_m: f64,
+    /// Panels that would have to move out further than this to clear the body are left flat, m.
+    pub max_push_m: f64,
+}
+
+impl Default for WrapOptions {
+    fn default() -> Self {
+        WrapOptions {
+            clearance_m: 0.01,
+            max_tilt_deg: 15.0,
+            max_facing_deg: 35.0,
+            max_span_deg: 200.0,
+            flatness_m: 1e-3,
+            max_push_m: 0.05,
+        }
+    }
+}
+
+/// One panel rolled onto a cylinder.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WrappedPanel {
+    /// Panel index in the mesh.
+    pub panel: usize,
+    /// Cylinder radius, m (the panel's distance from the axis, or more to clear the body).
+    pub radius_m: f64,
+    /// Angle the panel covers around the axis, degrees.
+    pub span_deg: f64,
+}
+
+/// Rolls the flat, upright panels of each garment (`garments`: vertex ranges of `mesh`) that
+/// face the body onto vertical cylinders about the body's axis, writing into `x` (positions of
+/// all of `mesh`'s vertices). The axis of a garment passes through the area-weighted median
+/// (x, z) of the body surface (`body`: collider meshes) within the garment's height, so that
+/// finely meshed hands do not pull it aside. Each panel keeps its distance from the axis, so
+/// its centre stays where it was placed; a panel whose cylinder would pass within
+/// `clearance_m` of a body point of its sector moves out until it clears them, and stays flat
+/// if that takes it more than `max_push_m` out (an arm beside the hips). Mesh edges keep their
+/// lengths along the cylinder (the map is an isometry of the plane), so the rolled panel is
+/// unstretched; only its bending energy changes.
+pub fn wrap_panels_around_body(
+    mesh: &ClothMesh,
+    garments: &[Range<usize>],
+    x: &mut [Vector3<f64>],
+    body: &[ColliderFrame<'_>],
+    opts: &WrapOptions,
+) -> Vec<WrappedPanel> {
+    let mut out = Vec::new();
+    for g in garments {
+        let (y_lo, y_hi) = x[g.clone()]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.y), hi.max(p.y))
+            });
+        // Triangle centroids in the garment's height range, weighted by area.
+        let mut cx: Vec<(f64, f64)> = Vec::new();
+        let mut cz: Vec<(f64, f64)> = Vec::new();
+        for b in body {
+            for t in b.triangles {
+                let [p, q, r] = t.map(|v| b.points[v as usize]);
+                let c = (p + q + r) / 3.0;
+                if c.y < y_lo || c.y > y_hi {
+                    continue;
+                }
+                let area = 0.5 * (q - p).cross(&(r - p)).norm();
+                if area.is_finite() && area > 0.0 {
+                    cx.push((c.x, area));
+                    cz.push((c.z, area));
+                }
+            }
+        }
+        let band: Vec<Vector3<f64>> = body
+            .iter()
+            .flat_map(|b| b.points.iter())
+            .filter(|p| p.y >= y_lo - opts.clearance_m && p.y <= y_hi + opts.clearance_m)
+            .copied()
+            .collect();
+        let (Some(ax), Some(az)) = (weighted_median(cx), weighted_median(cz)) else {
+            continue;
+        };
+        let mut panels: Vec<usize> = mesh.panel_of_vertex[g.clone()]
+            .iter()
+            .map(|&p| p as usize)
+            .collect();
+        panels.sort_unstable();
+        panels.dedup();
+        for panel in panels {
+            let verts: Vec<usize> = g
+                .clone()
+                .filter(|&i| mesh.panel_of_vertex[i] as usize == panel)
+                .collect();
+            match wrap_panel(mesh, panel, &verts, x, (ax, az), &band, opts) {
+                Ok(w) => out.push(w),
+                Err(why) => {
+                    tracing::debug!("panel '{}' left as placed: {why}", mesh.panel_names[panel])
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The value below which half the weight lies (None when empty).
+fn weighted_median(mut v: Vec<(f64, f64)>) -> Option<f64> {
+    v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let half = 0.5 * v.iter().map(|p| p.1).sum::<f64>();
+    let mut acc = 0.0;
+    for (value, w) in &v {
+        acc += w;
+        if acc >= half {
+            return Some(*value);
+        }
+    }
+    v.last().map(|p| p.0)
+}
+
+/// Rolls one panel (its vertices `verts`) about the vertical axis through `axis` (x, z), or
+/// says why it stays as placed.
+fn wrap_panel(
+    mesh: &ClothMesh,
+    panel: usize,
+    verts: &[usize],
+    x: &mut [Vector3<f64>],
+    axis: (f64, f64),
+    band: &[Vector3<f64>],
+    opts: &WrapOptions,
+) -> Result<WrappedPanel, String> {
+    if verts.len() < 3 {
+        return Err("fewer than 3 vertices".into());
+    }
+    let c = verts.iter().map(|&i| x[i]).sum::<Vector3<f64>>() / verts.len() as f64;
+    // Area-weighted normal of the panel's triangles.
+    let n = mesh
+        .triangles
+        .iter()
+        .filter(|t| mesh.panel_of_vertex[t[0] as usize] as usize == panel)
+        .map(|t| {
+            let [a, b, d] = t.map(|v| x[v as usize]);
+            (b - a).cross(&(d - a))
+        })
+        .sum::<Vector3<f64>>()
+        .try_normalize(1e-12)
+        .ok_or("no area")?;
+    if verts
+        .iter()
+        .any(|&i| (x[i] - c).dot(&n).abs() > opts.flatness_m)
+    {
+        return Err("not flat".into());
+    }
+    let up = Vector3::y();
+    if n.dot(&up).abs() > opts.max_tilt_deg.to_radians().sin() {
+        return Err("not upright".into());
+    }
+    let a = Vector3::new(axis.0, 0.0, axis.1);
+    let r = Vector3::new(c.x, 0.0, c.z) - a;
+    let placed_r = r.norm();
+    let r_hat = r.try_normalize(1e-3).ok_or("centred on the body's axis")?;
+    let n_h = Vector3::new(n.x, 0.0, n.z)
+        .try_normalize(1e-12)
+        .ok_or("not upright")?;
+    if n_h.dot(&r_hat).abs() < opts.max_facing_deg.to_radians().cos() {
+        return Err("does not face the body's axis".into());
+    }
+    let t_hat = up.cross(&r_hat);
+    let u: Vec<f64> = verts.iter().map(|&i| (x[i] - c).dot(&t_hat)).collect();
+    let (u_lo, u_hi) = u
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    // Body points of the panel's height range, as (angle from r̂, distance from the axis).
+    let (y_lo, y_hi) = verts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
+            (lo.min(x[i].y), hi.max(x[i].y))
+        });
+    let near: Vec<(f64, f64)> = band
+        .iter()
+        .filter(|p| p.y >= y_lo - opts.clearance_m && p.y <= y_hi + opts.clearance_m)
+        .map(|p| {
+            let q = Vector3::new(p.x, 0.0, p.z) - a;
+            (q.dot(&t_hat).atan2(q.dot(&r_hat)), q.norm())
+        })
+        .collect();
+    // Move out past every body point of the sector that lies within the clearance of the
+    // cylinder (the sector of the starting radius holds those of every larger one).
+    let margin = opts.clearance_m / placed_r;
+    let (lo, hi) = (u_lo / placed_r - margin, u_hi / placed_r + margin);
+    let mut sector: Vec<f64> = near
+        .iter()
+        .filter(|(phi, _)| *phi >= lo && *phi <= hi)
+        .map(|&(_, rho)| rho)
+        .collect();
+    sector.sort_unstable_by(f64::total_cmp);
+    let mut radius = placed_r;
+    for &rho in &sector {
+        if rho > radius + opts.clearance_m {
+            break;
+        }
+        radius = radius.max(rho + opts.clearance_m);
+    }
+    if radius > placed_r + opts.max_push_m {
+        return Err(format!(
+            "clearing the body would take it from {:.0} to {:.0} mm from the axis",
+            placed_r * 1e3,
+            radius * 1e3
+        ));
+    }
+    let span = (u_hi - u_lo) / radius;
+    if span.to_degrees() > opts.max_span_deg {
+        return Err(format!(
+            "would cover {:.0}° around the body",
+            span.to_degrees()
+        ));
+    }
+    // The foot of the panel's centre on the axis.
+    let foot = a + up * c.y;
+    for (&i, &ui) in verts.iter().zip(&u) {
+        // What is not along the roll: the height and the (sub-millimetre) offset off the plane.
+        let rest = x[i] - c - t_hat * ui;
+        let phi = ui / radius;
+        x[i] = foot + r_hat * (radius * phi.cos()) + t_hat * (radius * phi.sin()) + rest;
+    }
+    Ok(WrappedPanel {
+        panel,
+        radius_m: radius,
+        span_deg: span.to_degrees(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::garment::{EdgeRef, Fabric, Garment, Seam};
+    use crate::mesh::{mesh_garment, MeshOptions};
+    use crate::scene::samples::flat_sheet;
+
+    /// Two `w` × 0.2 m panels facing each other across the y axis at z = ±`d`, sewn along
+    /// both vertical sides (as the sewing test's tube), meshed at 2 cm.
+    fn tube(w: f64, d: f64) -> ClothMesh {
+        let mut front = flat_sheet("f", w, 0.2, Vector3::zeros(), Fabric::default())
+            .panels
+            .remove(0);
+        front.name = "front".into();
+        front.placement.rotation_xyz_deg = Vector3::zeros();
+        front.placement.translation_m = Vector3::new(-0.5 * w, 0.0, d);
+        let mut back = front.clone();
+        back.name = "back".into();
+        back.placement.rotation_xyz_deg = Vector3::new(0.0, 180.0, 0.0);
+        back.placement.translation_m = Vector3::new(0.5 * w, 0.0, -d);
+        let mut g = Garment {
+            name: "tube".into(),
+            panels: vec![front, back],
+            seams: vec![
+                Seam {
+                    a: EdgeRef { panel: 0, edge: 1 },
+                    b: EdgeRef { panel: 1, edge: 3 },
+                    reversed: true,
+                },
+                Seam {
+                    a: EdgeRef { panel: 0, edge: 3 },
+                    b: EdgeRef { panel: 1, edge: 1 },
+                    reversed: true,
+                },
+            ],
+            fabric: Fabric::default(),
+        };
+        g.orient_seams_by_placement();
+        mesh_garment(&g, &MeshOptions::with_edge(0.02)).expect("mesh")
+    }
+
+    /// A vertical cylinder of radius `r` about the y axis, y from -0.1 to 0.3 m: points and
+    /// triangles.
+    fn cylinder(r: f64) -> (Vec<Vector3<f64>>, Vec<[u32; 3]>) {
+        let (rings, around) = (41u32, 72u32);
+        let mut points = Vec::new();
+        for k in 0..rings {
+            for j in 0..around {
+                let a = j as f64 * std::f64::consts::TAU / around as f64;
+                points.push(Vector3::new(
+                    r * a.cos(),
+                    -0.1 + 0.01 * k as f64,
+                    r * a.sin(),
+                ));
+            }
+        }
+        let mut triangles = Vec::new();
+        for k in 0..rings - 1 {
+            for j in 0..around {
+                let (p, q) = (k * around + j, k * around + (j + 1) % around);
+                triangles.push([p, q + around, q]);
+                triangles.push([p, p + around, q + around]);
+            }
+        }
+        (points, triangles)
+    }
+
+    fn frame<'a>(body: &'a (Vec<Vector3<f64>>, Vec<[u32; 3]>)) -> [ColliderFrame<'a>; 1] {
+        [ColliderFrame {
+            points: &body.0,
+            triangles: &body.1,
+        }]
+    }
+
+    fn widest_seam_gap(mesh: &ClothMesh, x: &[Vector3<f64>]) -> f64 {
+        mesh.seam_pairs
+            .iter()
+            .map(|p| (x[p[0] as usize] - x[p[1] as usize]).norm())
+            .fold(0.0, f64::max)
+    }
+
+    fn horizontal_radius(p: &Vector3<f64>) -> f64 {
+        p.x.hypot(p.z)
+    }
+
+    #[test]
+    fn facing_panels_roll_onto_cylinders_without_stretching() {
+        let mesh = tube(0.3, 0.15);
+        let mut x = mesh.positions.clone();
+        let body = cylinder(0.1);
+        let n = x.len();
+        let wrapped = wrap_panels_around_body(
+            &mesh,
+            &[0..n],
+            &mut x,
+            &frame(&body),
+            &WrapOptions::default(),
+        );
+        assert_eq!(wrapped.len(), 2, "both panels face the body: {wrapped:?}");
+        for w in &wrapped {
+            assert!((w.radius_m - 0.15).abs() < 1e-9, "kept its distance: {w:?}");
+            // 0.3 m of cloth around a radius of 0.15 m: 2 rad.
+            assert!((w.span_deg - 2f64.to_degrees()).abs() < 0.5, "{w:?}");
+        }
+        for p in &x {
+            assert!(
+                (horizontal_radius(p) - 0.15).abs() < 1e-9,
+                "off the cylinder: {p}"
+            );
+        }
+        // Edges become chords of their arcs: at most (θ²/24) shorter, θ = 2 cm / 15 cm.
+        for e in mesh.edges() {
+            let (i, j) = (e[0] as usize, e[1] as usize);
+            let before = (mesh.positions[i] - mesh.positions[j]).norm();
+            let after = (x[i] - x[j]).norm();
+            assert!(
+                after <= before + 1e-12 && after > before * (1.0 - 1e-3),
+                "{before} → {after}"
+            );
+        }
+        // The side seams now close around the body, not across it.
+        let (g0, g1) = (
+            widest_seam_gap(&mesh, &mesh.positions),
+            widest_seam_gap(&mesh, &x),
+        );
+        assert!(g1 < 0.75 * g0, "widest seam gap {g0} → {g1}");
+    }
+
+    #[test]
+    fn panels_move_out_to_clear_the_body() {
+        let mesh = tube(0.3, 0.15);
+        let mut x = mesh.positions.clone();
+        let body = cylinder(0.145);
+        let n = x.len();
+        let opts = WrapOptions::default();
+        let wrapped = wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts);
+        assert_eq!(wrapped.len(), 2);
+        for w in &wrapped {
+            assert!(w.radius_m >= 0.145 + opts.clearance_m - 1e-9, "{w:?}");
+        }
+        for p in &x {
+            assert!(
+                horizontal_radius(p) >= 0.145 + opts.clearance_m - 1e-9,
+                "{p}"
+            );
+        }
+        // Body all the way out from the panel's radius (an arm beside its path): the panel
+        // stays flat rather than move far out.
+        let layers: Vec<_> = (0..6).map(|k| cylinder(0.15 + 0.015 * k as f64)).collect();
+        let frames: Vec<ColliderFrame<'_>> = layers.iter().map(|b| frame(b)[0]).collect();
+        let mut x = mesh.positions.clone();
+        assert!(wrap_panels_around_body(&mesh, &[0..n], &mut x, &frames, &opts).is_empty());
+        assert_eq!(x, mesh.positions);
+    }
+
+    #[test]
+    fn panels_that_do_not_face_the_body_stay_flat() {
+        let body = cylinder(0.1);
+        // Beside the body (a sleeve): facing along z but 0.4 m off to the side.
+        let mut mesh = tube(0.1, 0.15);
+        for p in &mut mesh.positions {
+            p.x += 0.4;
+        }
+        let mut x = mesh.positions.clone();
+        let n = x.len();
+        let opts = WrapOptions::default();
+        let wrapped = wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts);
+        assert!(wrapped.is_empty(), "{wrapped:?}");
+        assert_eq!(x, mesh.positions);
+        // Too wide to roll around the body (a circle skirt's panel).
+        let mesh = tube(1.5, 0.15);
+        let mut x = mesh.positions.clone();
+        let n = x.len();
+        assert!(wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts).is_empty());
+        assert_eq!(x, mesh.positions);
+        // Lying flat (normal along y), and already bent (not flat).
+        let mut flat = tube(0.3, 0.15);
+        let mut bent = flat.clone();
+        for p in &mut flat.positions {
+            *p = Vector3::new(p.x, 0.1 + p.z * 0.01, p.y);
+        }
+        for p in &mut bent.positions {
+            p.z += 0.2 * p.x * p.x * p.z.signum();
+        }
+        for mesh in [flat, bent] {
+            let mut x = mesh.positions.clone();
+            let n = x.len();
+            assert!(
+                wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts).is_empty()
+            );
+            assert_eq!(x, mesh.positions);
+        }
+        // No body at the garment's height.
+        let mesh = tube(0.3, 0.15);
+        let mut x = mesh.positions.clone();
+        let high = (
+            body.0.iter().map(|p| p + Vector3::y()).collect(),
+            body.1.clone(),
+        );
+        let n = x.len();
+        assert!(wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&high), &opts).is_empty());
+        assert_eq!(x, mesh.positions);
+    }
+}
