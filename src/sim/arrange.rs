@@ -340,6 +340,11 @@ mod tests {
             .fold(0.0, f64::max)
     }
 
+    /// One garment made of every vertex.
+    fn whole(n: usize) -> Vec<Range<usize>> {
+        std::iter::once(0..n).collect()
+    }
+
     fn horizontal_radius(p: &Vector3<f64>) -> f64 {
         p.x.hypot(p.z)
     }
@@ -352,7 +357,7 @@ mod tests {
         let n = x.len();
         let wrapped = wrap_panels_around_body(
             &mesh,
-            &[0..n],
+            &whole(n),
             &mut x,
             &frame(&body),
             &WrapOptions::default(),
@@ -394,7 +399,7 @@ mod tests {
         let body = cylinder(0.145);
         let n = x.len();
         let opts = WrapOptions::default();
-        let wrapped = wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts);
+        let wrapped = wrap_panels_around_body(&mesh, &whole(n), &mut x, &frame(&body), &opts);
         assert_eq!(wrapped.len(), 2);
         for w in &wrapped {
             assert!(w.radius_m >= 0.145 + opts.clearance_m - 1e-9, "{w:?}");
@@ -410,7 +415,7 @@ mod tests {
         let layers: Vec<_> = (0..6).map(|k| cylinder(0.15 + 0.015 * k as f64)).collect();
         let frames: Vec<ColliderFrame<'_>> = layers.iter().map(|b| frame(b)[0]).collect();
         let mut x = mesh.positions.clone();
-        assert!(wrap_panels_around_body(&mesh, &[0..n], &mut x, &frames, &opts).is_empty());
+        assert!(wrap_panels_around_body(&mesh, &whole(n), &mut x, &frames, &opts).is_empty());
         assert_eq!(x, mesh.positions);
     }
 
@@ -425,14 +430,14 @@ mod tests {
         let mut x = mesh.positions.clone();
         let n = x.len();
         let opts = WrapOptions::default();
-        let wrapped = wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts);
+        let wrapped = wrap_panels_around_body(&mesh, &whole(n), &mut x, &frame(&body), &opts);
         assert!(wrapped.is_empty(), "{wrapped:?}");
         assert_eq!(x, mesh.positions);
         // Too wide to roll around the body (a circle skirt's panel).
         let mesh = tube(1.5, 0.15);
         let mut x = mesh.positions.clone();
         let n = x.len();
-        assert!(wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts).is_empty());
+        assert!(wrap_panels_around_body(&mesh, &whole(n), &mut x, &frame(&body), &opts).is_empty());
         assert_eq!(x, mesh.positions);
         // Lying flat (normal along y), and already bent (not flat).
         let mut flat = tube(0.3, 0.15);
@@ -447,7 +452,7 @@ mod tests {
             let mut x = mesh.positions.clone();
             let n = x.len();
             assert!(
-                wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&body), &opts).is_empty()
+                wrap_panels_around_body(&mesh, &whole(n), &mut x, &frame(&body), &opts).is_empty()
             );
             assert_eq!(x, mesh.positions);
         }
@@ -459,7 +464,7 @@ mod tests {
             body.1.clone(),
         );
         let n = x.len();
-        assert!(wrap_panels_around_body(&mesh, &[0..n], &mut x, &frame(&high), &opts).is_empty());
+        assert!(wrap_panels_around_body(&mesh, &whole(n), &mut x, &frame(&high), &opts).is_empty());
         assert_eq!(x, mesh.positions);
     }
 }

@@ -264,9 +264,6 @@ impl Simulation {
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
         sewing?;
-        if out.seam_gap_m > gap_m {
-            self.log_widest_seam();
-        }
         let settle_steps = (settle_s / dt).ceil() as usize;
         for _ in 0..settle_steps {
             let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
@@ -275,6 +272,9 @@ impl Simulation {
             out.max_penetration_m = stats.max_penetration_m;
         }
         out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
+        if out.seam_gap_m > gap_m {
+            self.log_widest_seam();
+        }
         self.state.t_s = t_start;
         self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
         Ok(out)
