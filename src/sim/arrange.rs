@@ -131,14 +131,24 @@ pub fn wrap_panels_around_body(
     out
 }
 
-/// The value below which half the weight lies (None when empty).
+/// The weighted median (None when empty): the value below which half the weight lies. When
+/// the weight splits evenly between two neighbouring values (to rounding: a symmetric body
+/// always does), their midpoint, so that a symmetric body's axis is its centre and not a
+/// triangle's width to one side of it, whichever way the sum's last bit rounds.
 fn weighted_median(mut v: Vec<(f64, f64)>) -> Option<f64> {
     v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    let half = 0.5 * v.iter().map(|p| p.1).sum::<f64>();
+    let total = v.iter().map(|p| p.1).sum::<f64>();
+    let half = 0.5 * total;
+    let tie = 1e-9 * total;
     let mut acc = 0.0;
-    for (value, w) in &v {
+    for (k, (value, w)) in v.iter().enumerate() {
         acc += w;
-        if acc >= half {
+        if acc >= half - tie {
+            if acc <= half + tie {
+                if let Some((next, _)) = v.get(k + 1) {
+                    return Some(0.5 * (value + next));
+                }
+            }
             return Some(*value);
         }
     }
@@ -183,17 +193,25 @@ fn wrap_panel(
         return Err("not upright".into());
     }
     let a = Vector3::new(axis.0, 0.0, axis.1);
-    let r = Vector3::new(c.x, 0.0, c.z) - a;
-    let placed_r = r.norm();
-    let r_hat = r.try_normalize(1e-3).ok_or("centred on the body's axis")?;
+    let to_centre = (Vector3::new(c.x, 0.0, c.z) - a)
+        .try_normalize(1e-3)
+        .ok_or("centred on the body's axis")?;
     let n_h = Vector3::new(n.x, 0.0, n.z)
         .try_normalize(1e-12)
         .ok_or("not upright")?;
-    if n_h.dot(&r_hat).abs() < opts.max_facing_deg.to_radians().cos() {
+    if n_h.dot(&to_centre).abs() < opts.max_facing_deg.to_radians().cos() {
         return Err("does not face the body's axis".into());
     }
+    // The roll is about the panel's plane's nearest line to the axis: the cylinder touches the
+    // plane there, so the panel's distance from the axis and its sideways placement are kept
+    // exactly, however unevenly its vertices are spread.
+    let r_hat = if n_h.dot(&to_centre) > 0.0 { n_h } else { -n_h };
+    let placed_r = (c - a).dot(&r_hat);
+    if placed_r < 1e-3 {
+        return Err("its plane passes through the body's axis".into());
+    }
     let t_hat = up.cross(&r_hat);
-    let u: Vec<f64> = verts.iter().map(|&i| (x[i] - c).dot(&t_hat)).collect();
+    let u: Vec<f64> = verts.iter().map(|&i| (x[i] - a).dot(&t_hat)).collect();
     let (u_lo, u_hi) = u
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
@@ -244,13 +262,13 @@ fn wrap_panel(
             span.to_degrees()
         ));
     }
-    // The foot of the panel's centre on the axis.
-    let foot = a + up * c.y;
+    // Where the plane touches its starting cylinder, at the axis' foot (y = 0).
+    let touch = a + r_hat * placed_r;
     for (&i, &ui) in verts.iter().zip(&u) {
         // What is not along the roll: the height and the (sub-millimetre) offset off the plane.
-        let rest = x[i] - c - t_hat * ui;
+        let rest = x[i] - touch - t_hat * ui;
         let phi = ui / radius;
-        x[i] = foot + r_hat * (radius * phi.cos()) + t_hat * (radius * phi.sin()) + rest;
+        x[i] = a + r_hat * (radius * phi.cos()) + t_hat * (radius * phi.sin()) + rest;
     }
     Ok(WrappedPanel {
         panel,
@@ -350,6 +368,24 @@ mod tests {
     }
 
     #[test]
+    fn weighted_median_splits_even_ties_and_follows_the_weight() {
+        assert_eq!(weighted_median(Vec::new()), None);
+        assert_eq!(weighted_median(vec![(3.0, 1.0)]), Some(3.0));
+        // Half the weight on each side: the midpoint, whatever the order given.
+        assert_eq!(weighted_median(vec![(2.0, 1.0), (-1.0, 1.0)]), Some(0.5));
+        // 0.1 + 0.2 is not 0.3 in binary, yet it splits {0.1, 0.2 | 0.3} evenly.
+        assert_eq!(
+            weighted_median(vec![(1.0, 0.1), (2.0, 0.2), (3.0, 0.3)]),
+            Some(2.5)
+        );
+        // A heavy value wins.
+        assert_eq!(
+            weighted_median(vec![(1.0, 1.0), (5.0, 3.0), (9.0, 1.0)]),
+            Some(5.0)
+        );
+    }
+
+    #[test]
     fn facing_panels_roll_onto_cylinders_without_stretching() {
         let mesh = tube(0.3, 0.15);
         let mut x = mesh.positions.clone();
@@ -374,13 +410,15 @@ mod tests {
                 "off the cylinder: {p}"
             );
         }
-        // Edges become chords of their arcs: at most (θ²/24) shorter, θ = 2 cm / 15 cm.
+        // Edges become chords of their arcs: at most θ²/24 shorter, θ = length / 15 cm (the
+        // arc is no longer than the edge).
         for e in mesh.edges() {
             let (i, j) = (e[0] as usize, e[1] as usize);
             let before = (mesh.positions[i] - mesh.positions[j]).norm();
             let after = (x[i] - x[j]).norm();
+            let theta = before / 0.15;
             assert!(
-                after <= before + 1e-12 && after > before * (1.0 - 1e-3),
+                after <= before + 1e-12 && after >= before * (1.0 - theta * theta / 24.0) - 1e-12,
                 "{before} → {after}"
             );
         }
