@@ -285,3 +285,55 @@ fn sheet_drapes_over_the_bunny_without_penetrating() {
     );
     assert!(lowest < highest - 0.05, "drapes: {lowest} .. {highest}");
 }
+
+/// A run gives the same bits on one, two and three threads: every parallel sum of a step is
+/// taken in fixed chunks (`sim::reduce`) and contacts come out in one order, so small meshes
+/// can use every core and still come out the same on every machine.
+#[test]
+fn a_drop_on_a_ball_is_bit_identical_on_one_two_and_three_threads() {
+    // Positions after the run and every step's energy (the line search's sums), as bits.
+    let run = |threads: usize| -> (Vec<[u64; 3]>, Vec<u64>, usize) {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let mut scene = sheet_scene(0.6, 0.16, Fabric::preset("silk").expect("preset"));
+            scene.colliders.push(Collider::sphere(
+                "ball",
+                Vector3::new(0.05, 0.05, 0.0),
+                0.1,
+                3,
+            ));
+            let mut sim =
+                Simulation::new(&scene, 0.015, |p| p.newton_exact = false).expect("setup");
+            // Longer than one chunk of every sum, so that the chunking is what is tested.
+            assert!(sim.sim.model.num_vertices() > 2 * clothsr::sim::reduce::CHUNK);
+            let (mut contacts, mut energies) = (0, Vec::new());
+            for _ in 0..4 {
+                sim.advance_frame(|s| {
+                    contacts = contacts.max(s.contacts);
+                    energies.push(s.energy_j.to_bits());
+                })
+                .expect("frame");
+            }
+            let bits = sim
+                .state
+                .x
+                .iter()
+                .map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+                .collect();
+            (bits, energies, contacts)
+        })
+    };
+    let (one, energies, contacts) = run(1);
+    assert!(
+        contacts > 100,
+        "the sheet reached the ball: {contacts} contacts"
+    );
+    for threads in [2, 3] {
+        let (x, e, _) = run(threads);
+        assert!(e == energies, "{threads} threads gave other step energies");
+        assert!(x == one, "{threads} threads gave other positions");
+    }
+}

@@ -7,6 +7,7 @@ pub mod collide;
 pub mod driver;
 pub mod energy;
 pub mod model;
+pub mod reduce;
 pub mod scatter;
 pub mod sparse;
 pub mod step;

@@ -199,18 +199,14 @@ impl ClothModel {
 
     /// Elastic energy (membrane + bending) at positions `x`, joules.
     pub fn elastic_energy(&self, x: &[Vector3<f64>]) -> f64 {
-        use rayon::prelude::*;
-        let mem: f64 = self
-            .membranes
-            .par_iter()
-            .zip(self.membrane_k.par_iter())
-            .map(|(m, k)| m.energy(k, &m.v.map(|v| x[v as usize])))
-            .sum();
-        let bend: f64 = self
-            .hinges
-            .par_iter()
-            .map(|h| bending::energy(h, &h.v.map(|v| x[v as usize])))
-            .sum();
+        let mem = super::reduce::sum(self.membranes.len(), |k| {
+            let m = &self.membranes[k];
+            m.energy(&self.membrane_k[k], &m.v.map(|v| x[v as usize]))
+        });
+        let bend = super::reduce::sum(self.hinges.len(), |k| {
+            let h = &self.hinges[k];
+            bending::energy(h, &h.v.map(|v| x[v as usize]))
+        });
         mem + bend
     }
 }

@@ -161,7 +161,9 @@ impl<const N: usize, const NN: usize> ColouredElements<N, NN> {
                     }
                     sum
                 })
-                .sum::<f64>();
+                .collect::<Vec<f64>>()
+                .into_iter()
+                .fold(0.0, |acc, s| acc + s);
         }
         energy
     }
@@ -177,14 +179,22 @@ pub fn for_each_vertex(
     let (blocks, diag) = matrix.blocks_and_diag_mut();
     assert_eq!(grad.len(), diag.len(), "gradient of another mesh");
     let blocks = DisjointWriter::new(blocks);
-    grad.par_iter_mut()
+    // Fixed chunks added in order: the same bits on any number of threads (see reduce).
+    let parts = grad
+        .par_chunks_mut(super::reduce::CHUNK)
         .enumerate()
-        .map(|(i, g)| {
-            // SAFETY: diagonal slots of distinct rows are distinct.
-            let d = unsafe { blocks.get(diag[i]) };
-            f(i, g, d)
+        .map(|(c, gs)| {
+            let mut sum = 0.0;
+            for (k, g) in gs.iter_mut().enumerate() {
+                let i = c * super::reduce::CHUNK + k;
+                // SAFETY: diagonal slots of distinct rows are distinct.
+                let d = unsafe { blocks.get(diag[i]) };
+                sum += f(i, g, d);
+            }
+            sum
         })
-        .sum()
+        .collect();
+    super::reduce::in_order(parts)
 }
 
 /// Shared mutable access to a slice for writers that never touch the same entry at the same

@@ -23,6 +23,7 @@ use super::scatter::{for_each_vertex, ColouredElements};
 /// Triangles (3 vertices, 9 blocks) and hinges (4 vertices, 16 blocks) for the coloured scatter.
 type MembraneSet = ColouredElements<3, 9>;
 type HingeSet = ColouredElements<4, 16>;
+use super::reduce;
 use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg, TwoLevel};
 use crate::error::{Error, Result};
 
@@ -239,14 +240,6 @@ pub struct Simulator {
     seam_rest_m: Vec<f64>,
     /// Rest lengths of the step being solved, m.
     seam_rest_step_m: Vec<f64>,
-    /// Small meshes run on one thread. Rayon's hand-offs cost more than CG's short passes
-    /// there, and one thread keeps small runs (the pipeline's coarse mesh) the same from run to
-    /// run and machine to machine: the line search's energy sums are reductions whose order
-    /// follows rayon's splits. Two threads for assembly and detection alone were measured
-    /// (3K vertices: 7.4 → 4.6 ms and 2.8 → 1.7 ms a Newton iteration), and not kept: the
-    /// pencil skirt's dressing, a stalled and rounding-sensitive state, then ended 65 mm
-    /// open instead of 36 mm.
-    serial: Option<std::sync::Arc<rayon::ThreadPool>>,
     /// Detection margin for cloth–collider contacts, m: at least `detection_margin_m`, widened
     /// to 2.5× the largest Newton displacement of the previous step (at most 1 cm), so that
     /// cloth hitting a body at speed can take its full Newton step.
@@ -259,7 +252,7 @@ const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
 /// From this many vertices [`LinearSolver::Auto`] adds the two-level coarse correction.
 const TWO_LEVEL_FROM_VERTICES: usize = 10_000;
 
-/// Below this many vertices a step runs on a single thread.
+/// Below this many vertices the Newton systems are solved on a single thread.
 const SERIAL_BELOW_VERTICES: usize = 4000;
 
 fn gather3(x: &[Vector3<f64>], v: [u32; 3]) -> [Vector3<f64>; 3] {
@@ -336,21 +329,24 @@ impl Simulator {
                         .norm()
                 })
                 .collect(),
-            serial: (n < SERIAL_BELOW_VERTICES)
-                .then(|| {
-                    rayon::ThreadPoolBuilder::new()
-                        .num_threads(1)
-                        .build()
-                        .ok()
-                        .map(std::sync::Arc::new)
-                })
-                .flatten(),
             obstacle_margin_m: params.detection_margin_m,
             model,
             params,
             pins: Vec::new(),
             matrix,
-            pcg: Pcg::default(),
+            // Small meshes solve their Newton systems on the step's own thread: rayon's
+            // hand-offs cost more than CG's short passes there (3K vertices: 0.27 vs 0.14 ms
+            // an iteration on two threads; a one-thread pool of its own took 9–11 ms a solve
+            // against 7 ms inline: the matrix then lives in the other core's cache).
+            // Detection, assembly and the line search use every thread at any size; their sums
+            // are taken in fixed chunks ([`super::reduce`]), so a run gives the same bits on
+            // any number of threads (a step's sums used to follow rayon's splits: the pencil
+            // skirt's rounding-sensitive dressing ended 65 mm open on two threads, 36 on one).
+            pcg: {
+                let mut pcg = Pcg::default();
+                pcg.set_single_threaded(n < SERIAL_BELOW_VERTICES);
+                pcg
+            },
         }
     }
 
@@ -443,8 +439,9 @@ impl Simulator {
     ) -> Result<(SimState, StepStats)> {
         let mut stats = StepStats::default();
         let h = self.params.dt_s;
-        let pool = self.serial.clone();
-        let mut run = || {
+        // On a worker of rayon's pool: the step's many short parallel passes then start from
+        // inside the pool instead of each waking it from the caller's thread.
+        let next = rayon::scope(|_| {
             self.advance(
                 state,
                 colliders_start,
@@ -455,11 +452,7 @@ impl Simulator {
                 0,
                 &mut stats,
             )
-        };
-        let next = match pool {
-            Some(pool) => pool.install(run)?,
-            None => run()?,
-        };
+        })?;
         Ok((next, stats))
     }
 
@@ -571,33 +564,23 @@ impl Simulator {
     ) -> f64 {
         let m = &self.model;
         let air = self.params.air_damping_per_s * h;
-        let inertia: f64 = (0..x.len())
-            .into_par_iter()
-            .map(|i| {
-                0.5 * m.mass_kg[i]
-                    * ((x[i] - x_tilde[i]).norm_squared() + air * (x[i] - x_n[i]).norm_squared())
-            })
-            .sum::<f64>()
-            / (h * h);
+        // Every sum in fixed chunks (reduce::sum): the Armijo test compares these energies,
+        // and their bits must not depend on the thread count.
+        let inertia: f64 = reduce::sum(x.len(), |i| {
+            0.5 * m.mass_kg[i]
+                * ((x[i] - x_tilde[i]).norm_squared() + air * (x[i] - x_n[i]).norm_squared())
+        }) / (h * h);
         let elastic = m.elastic_energy(x);
-        let damp_mem: f64 = m
-            .membranes
-            .par_iter()
-            .zip(damping.mem.par_iter())
-            .map(|(el, (rows, c))| {
-                let d: Vec9 = stack(&gather3(x, el.v)) - stack::<3, 9>(&gather3(x_n, el.v));
-                (0..3).map(|k| c[k] * rows[k].dot(&d).powi(2)).sum::<f64>()
-            })
-            .sum();
-        let damp_hinge: f64 = m
-            .hinges
-            .par_iter()
-            .zip(damping.hinge.par_iter())
-            .map(|(hg, (row, c))| {
-                let d: Vec12 = stack(&gather4(x, hg.v)) - stack::<4, 12>(&gather4(x_n, hg.v));
-                c * row.dot(&d).powi(2)
-            })
-            .sum();
+        let damp_mem: f64 = reduce::sum(m.membranes.len(), |k| {
+            let (el, (rows, c)) = (&m.membranes[k], &damping.mem[k]);
+            let d: Vec9 = stack(&gather3(x, el.v)) - stack::<3, 9>(&gather3(x_n, el.v));
+            (0..3).map(|q| c[q] * rows[q].dot(&d).powi(2)).sum::<f64>()
+        });
+        let damp_hinge: f64 = reduce::sum(m.hinges.len(), |k| {
+            let (hg, (row, c)) = (&m.hinges[k], &damping.hinge[k]);
+            let d: Vec12 = stack(&gather4(x, hg.v)) - stack::<4, 12>(&gather4(x_n, hg.v));
+            c * row.dot(&d).powi(2)
+        });
         let sew: f64 = m
             .mesh
             .seam_pairs
@@ -612,10 +595,9 @@ impl Simulator {
                 )
             })
             .sum();
-        let contact: f64 = contacts
-            .par_iter()
-            .map(|c| c.energy(x, &self.params.collision))
-            .sum();
+        let contact: f64 = reduce::sum(contacts.len(), |k| {
+            contacts[k].energy(x, &self.params.collision)
+        });
         inertia + elastic + (damp_mem + damp_hinge) / (2.0 * h) + sew + contact
     }
 

@@ -623,7 +623,10 @@ fn par_traverse<T: Send>(
     start: Task,
     f: &(impl Fn(u32, u32) -> Option<T> + Sync),
 ) -> Vec<T> {
-    let target = 256 * rayon::current_num_threads();
+    // A fixed task count, not one per thread: the pairs found while expanding come first in
+    // the output, so the order (and with it every later sum over contacts) would otherwise
+    // depend on the thread count.
+    let target = 1024;
     let mut out: Vec<T> = Vec::new();
     let mut tasks = vec![start];
     while !tasks.is_empty() && tasks.len() < target {
