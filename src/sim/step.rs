@@ -76,10 +76,12 @@ pub struct SimParams {
 /// How the Newton system is solved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LinearSolver {
-    /// Block-Jacobi PCG below 10K vertices, two-level PCG (aggregates of 64) from there:
-    /// measured on the sheet-on-sphere bench, the coarse correction halves the iterations at
-    /// 3K and 40K vertices alike (71 → 36, 117 → 63) but pays off in time only at 40K
-    /// (276–287 → 224–273 ms a step), where the matrix products dominate.
+    /// Block-Jacobi PCG below 2,500 vertices, two-level PCG from there (aggregates of 32
+    /// below 5K vertices, 64 above): measured on the sheet-on-sphere bench, the coarse
+    /// correction cuts the iterations by a third to a half (3K: 70 → 46; 40K: 117 → 63) and
+    /// pays off in time from about 2.5K vertices (3K: 13.6 → 11.6 ms a step; 40K: 276–287 →
+    /// 224–273 ms). Smaller aggregates (8) cut more iterations at 3K but their coarse solve
+    /// costs as much as a product.
     Auto,
     /// Conjugate gradients with a block-Jacobi preconditioner.
     JacobiPcg,
@@ -249,8 +251,11 @@ pub struct Simulator {
 /// Upper bound of the adaptive cloth–collider detection margin, m.
 const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
 
-/// From this many vertices [`LinearSolver::Auto`] adds the two-level coarse correction.
-const TWO_LEVEL_FROM_VERTICES: usize = 10_000;
+/// From this many vertices [`LinearSolver::Auto`] adds the two-level coarse correction
+/// (bench sim, fast mode, ms a step, block-Jacobi vs two-level with aggregates of 32 / 64:
+/// 1K vertices 3.96 vs 4.52 / 4.48; 2K 8.49 vs 8.55 / 8.66; 3K 13.6 vs 11.6 / 12.2; 6K 24.4 vs
+/// 23.9 / 21.1).
+const TWO_LEVEL_FROM_VERTICES: usize = 2_500;
 
 /// Below this many vertices the Newton systems are solved on a single thread.
 const SERIAL_BELOW_VERTICES: usize = 4000;
@@ -711,7 +716,7 @@ impl Simulator {
         let solver = match self.params.linear_solver {
             LinearSolver::Auto if self.model.num_vertices() >= TWO_LEVEL_FROM_VERTICES => {
                 LinearSolver::TwoLevelPcg {
-                    aggregate: 64,
+                    aggregate: if self.model.num_vertices() < 5_000 { 32 } else { 64 },
                     refactor_above: 0,
                 }
             }
