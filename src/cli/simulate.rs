@@ -42,6 +42,12 @@ pub struct Args {
     /// Time step in seconds (default: the scene's, else 1/300).
     #[arg(long)]
     dt: Option<f64>,
+    /// Stiffness κ of the contact repulsion ½κ(d̂ − d)², N/m (default 2000)
+    #[arg(long)]
+    contact_stiffness: Option<f64>,
+    /// Coulomb friction coefficient against colliders (default 0.3)
+    #[arg(long)]
+    friction: Option<f64>,
     /// Disable cloth self-collision.
     #[arg(long)]
     no_self_collision: bool,
@@ -96,9 +102,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "nothing to simulate: give --frames N (the scene's frame range is empty)"
     );
     let (no_self, fast) = (args.no_self_collision, args.fast);
+    if let Some(mu) = args.friction {
+        anyhow::ensure!(
+            mu.is_finite() && mu >= 0.0,
+            "--friction must be a coefficient ≥ 0, not {mu}"
+        );
+    }
+    if let Some(k) = args.contact_stiffness {
+        anyhow::ensure!(
+            k.is_finite() && k > 0.0,
+            "--contact-stiffness must be a positive number of N/m, not {k}"
+        );
+    }
     let mut sim = Simulation::new(&scene, args.edge_mm * 1e-3, |p| {
         p.collision.self_collision = !no_self;
         p.newton_exact = !fast;
+        if let Some(k) = args.contact_stiffness {
+            p.collision.kappa = k;
+        }
+        if let Some(mu) = args.friction {
+            p.friction = mu;
+        }
     })?;
     if !args.no_dress && !sim.sim.model.mesh.seam_pairs.is_empty() {
         anyhow::ensure!(

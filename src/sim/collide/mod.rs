@@ -68,6 +68,9 @@ pub enum Contact {
         v: u32,
         /// Collider triangle points, counter-clockwise seen from outside.
         tri: [Vector3<f64>; 3],
+        /// Which collider (index in the detector's input) and which of its triangles: where
+        /// the body's own motion is read (friction acts on the velocity relative to it).
+        face: [u32; 2],
     },
     /// Cloth vertex `v` against cloth triangle `t` (v not in t).
     VertexTriangle {
@@ -119,7 +122,7 @@ impl Contact {
     /// The contact's four points at cloth positions `x` (vertex + triangle, or edge + edge).
     pub fn points(&self, x: &[Vector3<f64>]) -> [Vector3<f64>; 4] {
         match self {
-            Contact::VertexObstacle { v, tri } => [x[*v as usize], tri[0], tri[1], tri[2]],
+            Contact::VertexObstacle { v, tri, .. } => [x[*v as usize], tri[0], tri[1], tri[2]],
             Contact::EdgeObstacle { a, edge } => {
                 [x[a[0] as usize], x[a[1] as usize], edge[0], edge[1]]
             }
@@ -500,13 +503,14 @@ impl CollisionDetector {
             .map_init(Vec::new, |scratch, (v, p)| {
                 let mut out = Vec::new();
                 let mut depth: f64 = 0.0;
-                for (cache, (pts, tris)) in caches.iter().zip(colliders) {
+                for (k, (cache, (pts, tris))) in caches.iter().zip(colliders).enumerate() {
                     let bvh = &cache.bvh;
                     let d =
                         classify_vertex(p, pts, tris, bvh, obstacle_dhat, search, scratch, |t| {
                             out.push(Contact::VertexObstacle {
                                 v: v as u32,
                                 tri: tri_points(pts, &tris[t as usize]),
+                                face: [k as u32, t],
                             })
                         });
                     depth = depth.max(d);
