@@ -160,37 +160,8 @@ fn sheet_dropped_on_a_sphere_stays_outside_and_finite() {
 
 #[test]
 fn sewing_closes_a_two_panel_tube() {
-    use clothsr::garment::{EdgeRef, Garment, Seam};
-    use clothsr::scene::samples::flat_sheet;
     // Two 0.2 m × 0.2 m panels facing each other 6 cm apart, sewn along both vertical sides.
-    let mut front = flat_sheet("f", 0.2, 0.2, Vector3::zeros(), Fabric::default())
-        .panels
-        .remove(0);
-    front.name = "front".into();
-    front.placement.rotation_xyz_deg = Vector3::zeros();
-    front.placement.translation_m = Vector3::new(-0.1, 0.0, 0.03);
-    let mut back = front.clone();
-    back.name = "back".into();
-    back.placement.rotation_xyz_deg = Vector3::new(0.0, 180.0, 0.0);
-    back.placement.translation_m = Vector3::new(0.1, 0.0, -0.03);
-    let mut g = Garment {
-        name: "tube".into(),
-        panels: vec![front, back],
-        seams: vec![
-            Seam {
-                a: EdgeRef { panel: 0, edge: 1 },
-                b: EdgeRef { panel: 1, edge: 3 },
-                reversed: true,
-            },
-            Seam {
-                a: EdgeRef { panel: 0, edge: 3 },
-                b: EdgeRef { panel: 1, edge: 1 },
-                reversed: true,
-            },
-        ],
-        fabric: Fabric::default(),
-    };
-    g.orient_seams_by_placement();
+    let g = clothsr::scene::samples::two_panel_tube(0.2, 0.2, 0.03, Fabric::default());
     let mesh = mesh_garment(&g, &MeshOptions::with_edge(0.02)).expect("mesh");
     let gap = |x: &[Vector3<f64>]| {
         mesh.seam_pairs

@@ -140,13 +140,7 @@ impl<'a> Pipeline<'a> {
             );
         }
         let fine = fine_sim.sim.model.mesh.clone();
-        let fine_parts = fine_sim
-            .sim
-            .model
-            .parts
-            .iter()
-            .map(|p| p.vertices.clone())
-            .collect();
+        let fine_parts = fine_sim.sim.model.part_ranges();
         let model = &fine_sim.sim.model;
         let fine_part_meshes = (0..model.parts.len())
             .map(|i| {

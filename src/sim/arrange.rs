@@ -280,41 +280,14 @@ fn wrap_panel(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::garment::{EdgeRef, Fabric, Garment, Seam};
+    use crate::garment::Fabric;
     use crate::mesh::{mesh_garment, MeshOptions};
-    use crate::scene::samples::flat_sheet;
+    use crate::scene::samples::two_panel_tube;
 
     /// Two `w` × 0.2 m panels facing each other across the y axis at z = ±`d`, sewn along
     /// both vertical sides (as the sewing test's tube), meshed at 2 cm.
     fn tube(w: f64, d: f64) -> ClothMesh {
-        let mut front = flat_sheet("f", w, 0.2, Vector3::zeros(), Fabric::default())
-            .panels
-            .remove(0);
-        front.name = "front".into();
-        front.placement.rotation_xyz_deg = Vector3::zeros();
-        front.placement.translation_m = Vector3::new(-0.5 * w, 0.0, d);
-        let mut back = front.clone();
-        back.name = "back".into();
-        back.placement.rotation_xyz_deg = Vector3::new(0.0, 180.0, 0.0);
-        back.placement.translation_m = Vector3::new(0.5 * w, 0.0, -d);
-        let mut g = Garment {
-            name: "tube".into(),
-            panels: vec![front, back],
-            seams: vec![
-                Seam {
-                    a: EdgeRef { panel: 0, edge: 1 },
-                    b: EdgeRef { panel: 1, edge: 3 },
-                    reversed: true,
-                },
-                Seam {
-                    a: EdgeRef { panel: 0, edge: 3 },
-                    b: EdgeRef { panel: 1, edge: 1 },
-                    reversed: true,
-                },
-            ],
-            fabric: Fabric::default(),
-        };
-        g.orient_seams_by_placement();
+        let g = two_panel_tube(w, 0.2, d, Fabric::default());
         mesh_garment(&g, &MeshOptions::with_edge(0.02)).expect("mesh")
     }
 

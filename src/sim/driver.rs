@@ -195,13 +195,7 @@ impl Simulation {
             })
             .collect();
         let mut out = DressStats::default();
-        let garments: Vec<std::ops::Range<usize>> = self
-            .sim
-            .model
-            .parts
-            .iter()
-            .map(|p| p.vertices.clone())
-            .collect();
+        let garments = self.sim.model.part_ranges();
         let wrapped = wrap_panels_around_body(
             &self.sim.model.mesh,
             &garments,

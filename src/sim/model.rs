@@ -197,6 +197,11 @@ impl ClothModel {
         pairs
     }
 
+    /// The vertex range of each part (garment or cloth piece), in order.
+    pub fn part_ranges(&self) -> Vec<std::ops::Range<usize>> {
+        self.parts.iter().map(|p| p.vertices.clone()).collect()
+    }
+
     /// Elastic energy (membrane + bending) at positions `x`, joules.
     pub fn elastic_energy(&self, x: &[Vector3<f64>]) -> f64 {
         let mem = super::reduce::sum(self.membranes.len(), |k| {
