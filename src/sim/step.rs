@@ -464,6 +464,11 @@ impl Simulator {
         }
     }
 
+    /// The collision detector (its tuning and counters).
+    pub fn detector_mut(&mut self) -> &mut CollisionDetector {
+        &mut self.detector
+    }
+
     /// Advances `state` by one time step; colliders are given at the start and the end of the
     /// step (linearly interpolated inside when the step is subdivided).
     pub fn step(

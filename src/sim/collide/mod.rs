@@ -211,7 +211,7 @@ pub fn max_penetration(cloth_x: &[Vector3<f64>], colliders: &[Collider<'_>]) -> 
             bvhs.iter()
                 .zip(colliders)
                 .map(|(bvh, (pts, tris))| {
-                    classify_vertex(p, pts, tris, bvh, 0.0, OBSTACLE_SEARCH_M, scratch, |_| {})
+                    classify_vertex(p, pts, tris, bvh, 0.0, OBSTACLE_SEARCH_M, scratch, |_| {}).0
                 })
                 .fold(0.0, f64::max)
         })
@@ -322,7 +322,7 @@ fn classify_vertex(
     search: f64,
     cands: &mut Vec<(u32, ObstacleEval)>,
     mut emit: impl FnMut(u32),
-) -> f64 {
+) -> (f64, f64) {
     let tri = |t: u32| tri_points(pts, &tris[t as usize]);
     let tie = |u: f64| 1e-12 + 1e-9 * u;
     // Gathers the faces within `r`, returning the nearest distance among them.
@@ -352,7 +352,7 @@ fn classify_vertex(
             let [a, b, c] = tri(t);
             point_triangle(p, &a, &b, &c).dist
         }) else {
-            return 0.0;
+            return (0.0, search);
         };
         rho = u + dhat;
         umin = gather(rho, cands);
@@ -388,15 +388,29 @@ fn classify_vertex(
                 emit(*t);
             }
         }
-        umin
+        (umin, 0.0)
     } else {
         for (t, e) in cands.iter() {
             if e.signed_plane >= 0.0 && e.closest.dist < dhat {
                 emit(*t);
             }
         }
-        0.0
+        (0.0, umin)
     }
+}
+
+/// What [`CollisionDetector`] knows of a cloth vertex's distance to the colliders: when it
+/// was last classified, it lay outside every collider, at least `clear_m` from the nearest
+/// face; it has travelled `travel_m` since, and the colliders had travelled `body_mark_m`
+/// (the detector's running total) by then. Distance to a surface is 1-Lipschitz in the point
+/// and in the surface's points, so while clear − travel − (colliders' travel since) stays
+/// above the detection distance, the vertex is still outside and has no contact: it is
+/// skipped. The contacts are exactly those of a full classification.
+#[derive(Debug, Clone, Copy, Default)]
+struct Clearance {
+    clear_m: f64,
+    travel_m: f64,
+    body_mark_m: f64,
 }
 
 /// A hierarchy kept between calls, refitted while its primitives' indices stay the same.
@@ -440,7 +454,18 @@ pub struct CollisionDetector {
     /// (default 0). A solver whose vertices move fast against bodies widens this alone,
     /// without widening the (denser) cloth–cloth search.
     pub obstacle_extra_m: f64,
+    /// Skip cloth vertices certified far from every collider (default true); see
+    /// [`Clearance`]. Off, every vertex is classified on every call: the contacts are the
+    /// same, only slower (tests compare the two).
+    pub skip_clear_vertices: bool,
     colliders: Vec<CachedBvh>,
+    clearance: Vec<Clearance>,
+    clearance_x: Vec<Vector3<f64>>,
+    clearance_bodies: Vec<Vec<Vector3<f64>>>,
+    /// Sum over calls of the largest collider point displacement since the previous call, m:
+    /// an upper bound of how far any collider point has travelled.
+    body_travel_m: f64,
+    skipped: usize,
     cloth_tris: CachedBvh,
     cloth_edges: CachedBvh,
     max_penetration: f64,
@@ -458,7 +483,13 @@ impl CollisionDetector {
         CollisionDetector {
             rebuild_every: 16,
             obstacle_extra_m: 0.0,
+            skip_clear_vertices: true,
             colliders: Vec::new(),
+            clearance: Vec::new(),
+            clearance_x: Vec::new(),
+            clearance_bodies: Vec::new(),
+            body_travel_m: 0.0,
+            skipped: 0,
             cloth_tris: CachedBvh::default(),
             cloth_edges: CachedBvh::default(),
             max_penetration: 0.0,
@@ -469,6 +500,54 @@ impl CollisionDetector {
     /// (as [`max_penetration`], searched to max(d̂, [`OBSTACLE_SEARCH_M`])).
     pub fn max_penetration(&self) -> f64 {
         self.max_penetration
+    }
+
+    /// Cloth vertices the last [`CollisionDetector::find_contacts`] skipped as certified far
+    /// from every collider ([`Clearance`]).
+    pub fn skipped_vertices(&self) -> usize {
+        self.skipped
+    }
+
+    /// Adds each cloth vertex's and the colliders' displacement since the previous call to
+    /// their travelled distances ([`Clearance`]); starts over (nothing certified) when the
+    /// cloth or the colliders are not the ones of the previous call.
+    fn track_travel(&mut self, cloth_x: &[Vector3<f64>], colliders: &[Collider<'_>]) {
+        let same = self.clearance.len() == cloth_x.len()
+            && self.clearance_bodies.len() == colliders.len()
+            && self
+                .clearance_bodies
+                .iter()
+                .zip(colliders)
+                .all(|(a, (b, _))| a.len() == b.len());
+        if !same {
+            self.clearance = vec![Clearance::default(); cloth_x.len()];
+            self.clearance_x = cloth_x.to_vec();
+            self.clearance_bodies = colliders.iter().map(|(p, _)| p.to_vec()).collect();
+            self.body_travel_m = 0.0;
+            return;
+        }
+        let moved = self
+            .clearance_bodies
+            .iter_mut()
+            .zip(colliders)
+            .map(|(old, (new, _))| {
+                let m = old
+                    .par_iter()
+                    .zip(new.par_iter())
+                    .map(|(a, b)| (a - b).norm())
+                    .reduce(|| 0.0, f64::max);
+                old.copy_from_slice(new);
+                m
+            })
+            .fold(0.0, f64::max);
+        self.body_travel_m += moved;
+        self.clearance
+            .par_iter_mut()
+            .zip(self.clearance_x.par_iter_mut().zip(cloth_x.par_iter()))
+            .for_each(|(c, (old, new))| {
+                c.travel_m += (new - *old).norm();
+                *old = *new;
+            });
     }
 
     /// As [`find_contacts`], reusing (refitting) the hierarchies of the previous call.
@@ -496,16 +575,25 @@ impl CollisionDetector {
                 rebuild_every,
             );
         }
+        self.track_travel(cloth_x, colliders);
         let caches = &self.colliders;
-        let per_vertex: Vec<(f64, Vec<Contact>)> = cloth_x
+        let (clearance, body_travel) = (&self.clearance, self.body_travel_m);
+        let skip = self.skip_clear_vertices;
+        // (depth, contacts, new clearance when classified)
+        type PerVertex = (f64, Vec<Contact>, Option<f64>);
+        let per_vertex: Vec<PerVertex> = cloth_x
             .par_iter()
             .enumerate()
             .map_init(Vec::new, |scratch, (v, p)| {
+                let c = &clearance[v];
+                if skip && c.clear_m - c.travel_m - (body_travel - c.body_mark_m) > obstacle_dhat {
+                    return (0.0, Vec::new(), None);
+                }
                 let mut out = Vec::new();
-                let mut depth: f64 = 0.0;
+                let (mut depth, mut clear): (f64, f64) = (0.0, f64::INFINITY);
                 for (k, (cache, (pts, tris))) in caches.iter().zip(colliders).enumerate() {
                     let bvh = &cache.bvh;
-                    let d =
+                    let (d, u) =
                         classify_vertex(p, pts, tris, bvh, obstacle_dhat, search, scratch, |t| {
                             out.push(Contact::VertexObstacle {
                                 v: v as u32,
@@ -514,11 +602,22 @@ impl CollisionDetector {
                             })
                         });
                     depth = depth.max(d);
+                    clear = clear.min(u);
                 }
-                (depth, out)
+                (depth, out, Some(if depth > 0.0 { 0.0 } else { clear }))
             })
             .collect();
         self.max_penetration = per_vertex.iter().map(|p| p.0).fold(0.0, f64::max);
+        self.skipped = per_vertex.iter().filter(|p| p.2.is_none()).count();
+        for (c, (_, _, new)) in self.clearance.iter_mut().zip(&per_vertex) {
+            if let Some(clear_m) = *new {
+                *c = Clearance {
+                    clear_m,
+                    travel_m: 0.0,
+                    body_mark_m: body_travel,
+                };
+            }
+        }
         let mut contacts: Vec<Contact> = per_vertex.into_iter().flat_map(|p| p.1).collect();
 
         // Sharp collider edges (creases) against cloth edges.
