@@ -510,9 +510,16 @@ impl CollisionDetector {
 
     /// Adds each cloth vertex's and the colliders' displacement since the previous call to
     /// their travelled distances ([`Clearance`]); starts over (nothing certified) when the
-    /// cloth or the colliders are not the ones of the previous call.
-    fn track_travel(&mut self, cloth_x: &[Vector3<f64>], colliders: &[Collider<'_>]) {
-        let same = self.clearance.len() == cloth_x.len()
+    /// cloth or the colliders (`same_meshes`: their triangles) are not the ones of the previous
+    /// call.
+    fn track_travel(
+        &mut self,
+        cloth_x: &[Vector3<f64>],
+        colliders: &[Collider<'_>],
+        same_meshes: bool,
+    ) {
+        let same = same_meshes
+            && self.clearance.len() == cloth_x.len()
             && self.clearance_bodies.len() == colliders.len()
             && self
                 .clearance_bodies
@@ -566,6 +573,14 @@ impl CollisionDetector {
         let search = OBSTACLE_SEARCH_M.max(obstacle_dhat);
         let rebuild_every = self.rebuild_every;
 
+        // The same collider meshes as last call (their points may move): what the clearance
+        // bounds of the cloth vertices were measured against.
+        let same_meshes = self.colliders.len() == colliders.len()
+            && self
+                .colliders
+                .iter()
+                .zip(colliders)
+                .all(|(cache, (_, tris))| cache.valid && cache.key == tris.as_flattened());
         self.colliders
             .resize_with(colliders.len(), CachedBvh::default);
         for (cache, (pts, tris)) in self.colliders.iter_mut().zip(colliders) {
@@ -575,7 +590,7 @@ impl CollisionDetector {
                 rebuild_every,
             );
         }
-        self.track_travel(cloth_x, colliders);
+        self.track_travel(cloth_x, colliders, same_meshes);
         let caches = &self.colliders;
         let (clearance, body_travel) = (&self.clearance, self.body_travel_m);
         let skip = self.skip_clear_vertices;
@@ -694,6 +709,47 @@ impl CollisionDetector {
             contacts.extend(ee);
         }
         contacts
+    }
+}
+
+#[cfg(test)]
+mod clearance_tests {
+    use super::*;
+
+    /// A vertex certified far from a collider is classified again when the collider's
+    /// triangles change, even with the same points: its clearance was measured against the
+    /// old faces.
+    #[test]
+    fn new_collider_triangles_void_the_clearance_of_every_vertex() {
+        let pts = [
+            // A square 1 m below the vertex.
+            Vector3::new(-1.0, -1.0, -1.0),
+            Vector3::new(1.0, -1.0, -1.0),
+            Vector3::new(1.0, -1.0, 1.0),
+            Vector3::new(-1.0, -1.0, 1.0),
+            // A small triangle 1 mm below it.
+            Vector3::new(-0.1, -0.001, -0.1),
+            Vector3::new(0.1, -0.001, -0.1),
+            Vector3::new(0.0, -0.001, 0.1),
+        ];
+        let far = [[0u32, 2, 1], [0, 3, 2]];
+        let near = [[4u32, 6, 5]];
+        let cloth = [Vector3::zeros()];
+        let params = CollisionParams {
+            dhat_m: 0.003,
+            kappa: 1000.0,
+            self_collision: false,
+        };
+        let mut det = CollisionDetector::new();
+        for _ in 0..2 {
+            assert!(det
+                .find_contacts(&cloth, &[], &[], &[(&pts, &far)], &params)
+                .is_empty());
+        }
+        assert_eq!(det.skipped_vertices(), 1, "certified far from the square");
+        let c = det.find_contacts(&cloth, &[], &[], &[(&pts, &near)], &params);
+        assert_eq!(det.skipped_vertices(), 0);
+        assert_eq!(c.len(), 1, "{c:?}");
     }
 }
 
