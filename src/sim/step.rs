@@ -1126,12 +1126,13 @@ impl Simulator {
             return;
         }
         let p = &self.params.collision;
-        let mut nearest: Vec<(f64, usize)> = vec![(p.dhat_m, usize::MAX); x.len()];
+        // The nearest face by |d|: for a vertex inside a body, the face it is least deep under.
+        let mut nearest: Vec<(f64, usize)> = vec![(f64::INFINITY, usize::MAX); x.len()];
         for (k, c) in contacts.iter().enumerate() {
             if let Contact::VertexObstacle { v: i, .. } = c {
                 let d = c.distance(x);
                 let slot = &mut nearest[*i as usize];
-                if d < slot.0 {
+                if d < p.dhat_m && d.abs() < slot.0.abs() {
                     *slot = (d, k);
                 }
             }

@@ -352,7 +352,18 @@ fn classify_vertex(
             let [a, b, c] = tri(t);
             point_triangle(p, &a, &b, &c).dist
         }) else {
-            return (0.0, search);
+            // No face within the search: far outside, or deeper inside than the search
+            // reaches, where a full pass finds it (inside) once it comes within the search of
+            // a face. Its side is unknown, so what is certified is how far it may move before
+            // it can come within the search of a face: its distance beyond the search (looked
+            // up to 4× the search), which the caller's test against d̂ then takes on top.
+            let beyond = bvh
+                .nearest(p, 4.0 * search, |t| {
+                    let [a, b, c] = tri(t);
+                    point_triangle(p, &a, &b, &c).dist
+                })
+                .map_or(3.0 * search, |(_, u)| u - search);
+            return (0.0, beyond.max(0.0));
         };
         rho = u + dhat;
         umin = gather(rho, cands);
@@ -405,7 +416,9 @@ fn classify_vertex(
 /// (the detector's running total) by then. Distance to a surface is 1-Lipschitz in the point
 /// and in the surface's points, so while clear − travel − (colliders' travel since) stays
 /// above the detection distance, the vertex is still outside and has no contact: it is
-/// skipped. The contacts are exactly those of a full classification.
+/// skipped. The contacts are exactly those of a full classification for closed, consistently
+/// oriented colliders; around the boundary of an open one, a vertex's side can change without
+/// passing within d̂ of a face, and it is then classified when it next comes within d̂ of one.
 #[derive(Debug, Clone, Copy, Default)]
 struct Clearance {
     clear_m: f64,
@@ -715,6 +728,32 @@ impl CollisionDetector {
 #[cfg(test)]
 mod clearance_tests {
     use super::*;
+
+    /// A vertex deeper inside a body than the search reaches is certified only for the
+    /// distance it may move before it comes within the search of a face: moved closer, it is
+    /// found inside and pushed, as a full pass would.
+    #[test]
+    fn a_vertex_deep_inside_is_found_once_it_comes_within_the_search() {
+        let ball = crate::scene::Collider::sphere("ball", Vector3::zeros(), 0.3, 3);
+        let pts: Vec<Vector3<f64>> = ball.frames[0].iter().map(|p| p.cast::<f64>()).collect();
+        let params = CollisionParams {
+            dhat_m: 0.003,
+            kappa: 1000.0,
+            self_collision: false,
+        };
+        let mut det = CollisionDetector::new();
+        let body = [(pts.as_slice(), ball.triangles.as_slice())];
+        // 6 cm under the top (the polyhedron's faces sit a little inside the sphere).
+        let mut x = [Vector3::new(0.0, 0.24, 0.0)];
+        assert!(det.find_contacts(&x, &[], &[], &body, &params).is_empty());
+        assert_eq!(det.max_penetration(), 0.0, "beyond the search");
+        // 2 cm closer to the surface: within the search, found inside.
+        x[0].y += 0.02;
+        let c = det.find_contacts(&x, &[], &[], &body, &params);
+        assert_eq!(det.skipped_vertices(), 0);
+        assert!(!c.is_empty());
+        assert!(det.max_penetration() > 0.03, "{}", det.max_penetration());
+    }
 
     /// A vertex certified far from a collider is classified again when the collider's
     /// triangles change, even with the same points: its clearance was measured against the
