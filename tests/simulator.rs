@@ -22,6 +22,15 @@ fn sheet_scene(size_m: f64, height_m: f64, fabric: Fabric) -> Scene {
     }
 }
 
+/// The positions' exact bits.
+fn position_bits(sim: &Simulation) -> Vec<[u64; 3]> {
+    sim.state
+        .x
+        .iter()
+        .map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+        .collect()
+}
+
 fn gravity_pe(sim: &Simulation) -> f64 {
     let g = sim.sim.params.gravity_m_s2;
     sim.state
@@ -288,12 +297,7 @@ fn a_drop_on_a_ball_is_bit_identical_on_one_two_and_three_threads() {
                 })
                 .expect("frame");
             }
-            let bits = sim
-                .state
-                .x
-                .iter()
-                .map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
-                .collect();
+            let bits = position_bits(&sim);
             (bits, energies, contacts)
         })
     };
@@ -332,14 +336,9 @@ fn skipping_vertices_far_from_a_moving_ball_gives_the_same_bits() {
         for _ in 0..12 {
             sim.advance_frame(|s| contacts = contacts.max(s.contacts))
                 .expect("frame");
-            skipped = skipped.max(sim.sim.detector_mut().skipped_vertices());
+            skipped = skipped.max(sim.sim.detector().skipped_vertices());
         }
-        let bits = sim
-            .state
-            .x
-            .iter()
-            .map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
-            .collect();
+        let bits = position_bits(&sim);
         (bits, skipped, contacts)
     };
     let (with, skipped, contacts) = run(true);

@@ -135,7 +135,7 @@ impl<const N: usize, const NN: usize> ColouredElements<N, NN> {
         let grad = DisjointWriter::new(grad);
         let mut energy = 0.0;
         for colour in &self.colours {
-            energy += colour
+            let sums: Vec<f64> = colour
                 .par_iter()
                 .map(|&c| {
                     let first = c as usize * CHUNK;
@@ -161,9 +161,8 @@ impl<const N: usize, const NN: usize> ColouredElements<N, NN> {
                     }
                     sum
                 })
-                .collect::<Vec<f64>>()
-                .into_iter()
-                .fold(0.0, |acc, s| acc + s);
+                .collect();
+            energy += super::reduce::in_order(sums);
         }
         energy
     }

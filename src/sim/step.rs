@@ -19,12 +19,12 @@ use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
 use super::energy::bending::{self, BendingHessian};
 use super::energy::{sewing, Mat12, Vec12, Vec9};
 use super::model::ClothModel;
+use super::reduce;
 use super::scatter::{for_each_vertex, ColouredElements};
 
 /// Triangles (3 vertices, 9 blocks) and hinges (4 vertices, 16 blocks) for the coloured scatter.
 type MembraneSet = ColouredElements<3, 9>;
 type HingeSet = ColouredElements<4, 16>;
-use super::reduce;
 use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg, TwoLevel};
 use crate::error::{Error, Result};
 
@@ -464,7 +464,12 @@ impl Simulator {
         }
     }
 
-    /// The collision detector (its tuning and counters).
+    /// The collision detector (its counters).
+    pub fn detector(&self) -> &CollisionDetector {
+        &self.detector
+    }
+
+    /// The collision detector (its tuning).
     pub fn detector_mut(&mut self) -> &mut CollisionDetector {
         &mut self.detector
     }
@@ -1070,7 +1075,7 @@ impl Simulator {
             .min(MAX_OBSTACLE_MARGIN_M)
             .max(self.params.detection_margin_m);
         let mut v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
-        self.apply_friction(&mut x, &mut v, &contacts, motion, h);
+        self.apply_friction(&x, &mut v, &contacts, motion, h);
         if let Some(i) = x
             .iter()
             .chain(&v)
@@ -1115,7 +1120,7 @@ impl Simulator {
     /// frame 9; braking the relative velocity alone keeps it clean (`tests/dressing.rs`).
     fn apply_friction(
         &self,
-        x: &mut [Vector3<f64>],
+        x: &[Vector3<f64>],
         v: &mut [Vector3<f64>],
         contacts: &[Contact],
         motion: &BodyMotion<'_, '_>,

@@ -347,23 +347,20 @@ fn classify_vertex(
         f64::INFINITY
     };
     if umin.is_infinite() || umin + tie(umin) > dhat {
-        // None within d̂: is the vertex deep inside, or just away?
-        let Some((_, u)) = bvh.nearest(p, search, |t| {
+        // None within d̂: is the vertex deep inside, or just away? One query, out to 4× the
+        // search: beyond the search only the clearance needs the distance.
+        let nearest = bvh.nearest(p, 4.0 * search, |t| {
             let [a, b, c] = tri(t);
             point_triangle(p, &a, &b, &c).dist
-        }) else {
+        });
+        let u = match nearest {
+            Some((_, u)) if u <= search => u,
             // No face within the search: far outside, or deeper inside than the search
             // reaches, where a full pass finds it (inside) once it comes within the search of
             // a face. Its side is unknown, so what is certified is how far it may move before
-            // it can come within the search of a face: its distance beyond the search (looked
-            // up to 4× the search), which the caller's test against d̂ then takes on top.
-            let beyond = bvh
-                .nearest(p, 4.0 * search, |t| {
-                    let [a, b, c] = tri(t);
-                    point_triangle(p, &a, &b, &c).dist
-                })
-                .map_or(3.0 * search, |(_, u)| u - search);
-            return (0.0, beyond.max(0.0));
+            // it can come within the search of a face: its distance beyond the search, which
+            // the caller's test against d̂ then takes on top.
+            _ => return (0.0, nearest.map_or(3.0 * search, |(_, u)| u - search)),
         };
         rho = u + dhat;
         umin = gather(rho, cands);
