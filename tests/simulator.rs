@@ -67,8 +67,11 @@ fn hanging_sheet_pinned_at_two_corners_comes_to_rest() {
         .collect();
     assert_eq!(pins.len(), 2);
     sim.sim.set_pins(pins.clone());
+    // Air damping (α = 1/s) takes the swing's energy down by about e^{-αt}: 10 s for 10⁻³
+    // and more (the Newton loop used to drop steps shorter than its tolerance, which stopped
+    // slow motion dead and brought the same sheet to rest in 5 s).
     let mut ke = Vec::new();
-    for _ in 0..150 {
+    for _ in 0..300 {
         sim.advance_frame(|_| {}).expect("frame");
         ke.push(sim.kinetic_energy_j());
     }
@@ -351,4 +354,68 @@ fn skipping_vertices_far_from_a_moving_ball_gives_the_same_bits() {
         with.len()
     );
     assert!(with == without, "skipping changed the positions");
+}
+
+/// With self-collision on, a falling sheet far from any other cloth takes its whole step in one
+/// Newton iteration: the cloth–cloth detection margin widens with the cloth's speed, and only
+/// vertices near other cloth are held to ½ d̂ an iteration. With the fixed ½ d̂ limit this sheet
+/// (d̂ = 3.75 mm) needed two iterations a step once it fell faster than 0.56 m/s.
+#[test]
+fn a_falling_sheet_with_self_collision_takes_one_newton_iteration_a_step() {
+    let scene = sheet_scene(0.4, 1.0, Fabric::preset("cotton").expect("preset"));
+    let mut sim = Simulation::new(&scene, 0.025, |p| {
+        p.newton_exact = false;
+        p.collision.self_collision = true;
+    })
+    .expect("setup");
+    let half_dhat = 0.5 * sim.sim.params.collision.dhat_m;
+    let mut fastest: f64 = 0.0;
+    for frame in 0..6 {
+        let f = sim.advance_frame(|_| {}).expect("frame");
+        fastest = sim.state.v.iter().map(|v| v.norm()).fold(fastest, f64::max);
+        assert_eq!(
+            f.steps.newton_iters, f.step_count,
+            "frame {frame}: {} Newton iterations in {} steps",
+            f.steps.newton_iters, f.step_count
+        );
+    }
+    // The test means something only if the sheet outran the old limit.
+    assert!(
+        fastest * sim.sim.params.dt_s > 1.5 * half_dhat,
+        "the sheet fell at {fastest:.2} m/s only"
+    );
+}
+
+/// A sheet in free fall accelerates as implicit Euler with air damping says,
+/// v ← (v + g h) / (1 + α h), to the simulator's tolerance. The Newton loop used to drop its
+/// last step when it was shorter than the tolerance, and with it the step's gravity once
+/// h²(g − αv) fell below it: the sheet stopped accelerating at 0.81 m/s.
+#[test]
+fn a_free_falling_sheet_keeps_accelerating() {
+    for exact in [false, true] {
+        let scene = sheet_scene(0.3, 2.0, Fabric::preset("cotton").expect("preset"));
+        let mut sim = Simulation::new(&scene, 0.03, |p| {
+            p.newton_exact = exact;
+            p.collision.self_collision = false;
+        })
+        .expect("setup");
+        let (g, alpha, h) = (
+            -sim.sim.params.gravity_m_s2.y,
+            sim.sim.params.air_damping_per_s,
+            sim.sim.params.dt_s,
+        );
+        let mut expected = 0.0;
+        for _ in 0..15 {
+            let f = sim.advance_frame(|_| {}).expect("frame");
+            for _ in 0..f.step_count {
+                expected = (expected + g * h) / (1.0 + alpha * h);
+            }
+        }
+        let n = sim.state.v.len() as f64;
+        let mean = -sim.state.v.iter().map(|v| v.y).sum::<f64>() / n;
+        assert!(
+            expected > 3.5 && (mean - expected).abs() < 0.01 * expected,
+            "newton_exact {exact}: falling at {mean:.3} m/s after 0.5 s, expected {expected:.3}"
+        );
+    }
 }

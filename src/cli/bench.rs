@@ -43,6 +43,11 @@ pub struct Args {
     /// Skip the Newton 1.8 side-by-side run.
     #[arg(long)]
     no_peer: bool,
+    /// Cloth self-collision on, on both sides (clothsr's vertex-triangle and edge-edge
+    /// repulsion; Style3D's default self-collision, XPBD's particle contacts). Off by default:
+    /// the sheet on a sphere barely touches itself, so the default times the solvers alone.
+    #[arg(long)]
+    self_collision: bool,
     /// Solver modes to time: `converged` (Newton to tolerance, the simulator's default, for
     /// ground truth) and `fast` (one full Newton step when the line search accepts it, as in
     /// Baraff & Witkin and Style3D; the pipeline's coarse simulation, which the corrector fixes).
@@ -132,7 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .colliders
             .push(Collider::sphere("sphere", Vector3::zeros(), 0.3, 4));
         let mut sim = Simulation::new(&scene, edge_m, |p| {
-            p.collision.self_collision = false;
+            p.collision.self_collision = args.self_collision;
             p.newton_exact = mode == "converged";
             if let Some(t) = args.cg_tol {
                 p.cg_rel_tol = t;
@@ -176,15 +181,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("Newton 1.8 peer: not installed (run `bash benches/setup-newton.sh`)");
         return Ok(());
     }
-    println!("Newton 1.8 on the same scene (Warp CPU):");
-    let out = Command::new(&python)
-        .arg(&script)
+    println!(
+        "Newton 1.8 on the same scene (Warp CPU), self-collision {}:",
+        if args.self_collision { "on" } else { "off" }
+    );
+    let mut peer = Command::new(&python);
+    peer.arg(&script)
         .arg("--res")
         .arg(args.sizes.join(","))
         .arg("--steps")
         .arg(args.steps.min(10).to_string())
-        .current_dir(Path::new(&root))
-        .output()?;
+        .current_dir(Path::new(&root));
+    if args.self_collision {
+        peer.arg("--self-collision");
+    }
+    let out = peer.output()?;
     anyhow::ensure!(
         out.status.success(),
         "Newton peer failed: {}",

@@ -232,6 +232,12 @@ impl Simulation {
         // a dresser smooths cloth into place (with it the hem of a pencil skirt stuck on the
         // legs, 105 mm open).
         let friction = std::mem::replace(&mut self.sim.params.friction, 0.0);
+        // A dresser moves cloth slowly: the seams' pull is capped at half d̂ per Newton
+        // iteration, as every move was before the contact margin adapted to the cloth's speed.
+        let move_cap = std::mem::replace(
+            &mut self.sim.params.move_cap_m,
+            0.5 * self.sim.params.collision.dhat_m,
+        );
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
@@ -257,14 +263,22 @@ impl Simulation {
         })();
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
-        sewing?;
-        let settle_steps = (settle_s / dt).ceil() as usize;
-        for _ in 0..settle_steps {
-            let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
-            self.state = next;
-            out.settle_steps += 1;
-            out.max_penetration_m = stats.max_penetration_m;
+        if let Err(e) = sewing {
+            self.sim.params.move_cap_m = move_cap;
+            return Err(e);
         }
+        let settle_steps = (settle_s / dt).ceil() as usize;
+        let settling: Result<()> = (|| {
+            for _ in 0..settle_steps {
+                let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
+                self.state = next;
+                out.settle_steps += 1;
+                out.max_penetration_m = stats.max_penetration_m;
+            }
+            Ok(())
+        })();
+        self.sim.params.move_cap_m = move_cap;
+        settling?;
         out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
         if out.seam_gap_m > gap_m {
             self.log_widest_seam();

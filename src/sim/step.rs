@@ -55,6 +55,11 @@ pub struct SimParams {
     pub air_damping_per_s: f64,
     /// Newton iterations at most per step.
     pub newton_max_iters: usize,
+    /// Most any vertex moves in one Newton iteration, m, on top of the limits that keep the
+    /// contact set valid (default: no cap). Dressing caps it at ½ d̂: seam springs pulled
+    /// tight accelerate the light cloth to metres per second, and uncapped the panels slam
+    /// together and crumple.
+    pub move_cap_m: f64,
     /// Iterate Newton to `newton_tol_m` (ground truth). When false (the default), a step ends
     /// after its first Newton iteration whose full step (α = 1) decreases the energy, as in
     /// Baraff & Witkin; further iterations run only when the line search or the per-iteration
@@ -123,6 +128,7 @@ impl SimParams {
             friction: 0.3,
             air_damping_per_s: 1.0,
             newton_max_iters: 8,
+            move_cap_m: f64::INFINITY,
             newton_exact: true,
             // 1 cm/s of velocity error: far below what shows in an animation.
             newton_tol_m: 3e-2 * crate::scene::DEFAULT_DT_S,
@@ -212,7 +218,68 @@ struct DampingRows {
     mem: Vec<([Vec9; 3], [f64; 3])>,
     /// Per hinge: ∇θ and β · 2w.
     hinge: Vec<(Vec12, f64)>,
+    /// Friction against bodies, lagged at the start of the step.
+    friction: Vec<FrictionPoint>,
 }
+
+/// Coulomb friction of one cloth vertex against a body as a dissipative potential in the
+/// Newton system (lagged friction of IPC, Li et al. 2020): the normal force and the tangent
+/// plane are those at the start of the step, the sliding is the vertex's tangential
+/// displacement relative to the body surface under it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrictionPoint {
+    /// Cloth vertex.
+    pub v: u32,
+    /// μ × normal force, N.
+    pub mu_lambda_n: f64,
+    /// Unit normal of the body face.
+    pub n: Vector3<f64>,
+    /// Where the vertex is without sliding: its start-of-step position moved with the body.
+    pub anchor: Vector3<f64>,
+    /// Sliding displacement below which friction is static-like (ε_v h), m.
+    pub eps_m: f64,
+}
+
+impl FrictionPoint {
+    /// Dissipation potential μλ f₀(‖u‖), u = (I − n nᵀ)(x − anchor), with IPC's C¹ mollifier
+    /// f₀(y) = y²/ε − y³/(3ε²) + ε/3 below ε and y above; its gradient μλ f₁(y)/y u (the
+    /// friction force, μλ in magnitude when sliding) and the PSD part of its Hessian,
+    /// μλ f₁(y)/y (I − n nᵀ) (the term along u, negative, is dropped as IPC does).
+    pub fn energy_gradient_hessian(&self, x: &Vector3<f64>) -> (f64, Vector3<f64>, Matrix3<f64>) {
+        let (e, f1_over_y, u) = self.eval(x);
+        let p = Matrix3::identity() - self.n * self.n.transpose();
+        (
+            e,
+            u * (self.mu_lambda_n * f1_over_y),
+            p * (self.mu_lambda_n * f1_over_y),
+        )
+    }
+
+    /// The potential alone.
+    pub fn energy(&self, x: &Vector3<f64>) -> f64 {
+        self.eval(x).0
+    }
+
+    fn eval(&self, x: &Vector3<f64>) -> (f64, f64, Vector3<f64>) {
+        let r = x - self.anchor;
+        let u = r - self.n * self.n.dot(&r);
+        let y = u.norm();
+        let eps = self.eps_m.max(f64::MIN_POSITIVE);
+        let (f0, f1_over_y) = if y >= eps {
+            (y, 1.0 / y)
+        } else {
+            (
+                y * y / eps - y * y * y / (3.0 * eps * eps) + eps / 3.0,
+                2.0 / eps - y / (eps * eps),
+            )
+        };
+        (self.mu_lambda_n * f0, f1_over_y, u)
+    }
+}
+
+/// Sliding speed below which friction holds like static friction (IPC's ε_v), m/s: cloth
+/// under a tangential load smaller than μ N creeps at most this fast.
+const FRICTION_EPS_M_S: f64 = 1e-3;
 
 /// The simulator: rest data, settings, pins and reusable buffers.
 #[derive(Debug, Clone)]
@@ -247,6 +314,8 @@ pub struct Simulator {
     /// to 2.5× the largest Newton displacement of the previous step (at most 1 cm), so that
     /// cloth hitting a body at speed can take its full Newton step.
     obstacle_margin_m: f64,
+    /// Upper bound of the cloth–cloth detection margin, m (see [`Simulator::self_margin_m`]).
+    self_margin_cap_m: f64,
 }
 
 /// Where the colliders are at the start and the end of a whole time step (they move linearly
@@ -289,6 +358,55 @@ const TWO_LEVEL_FROM_VERTICES: usize = 2_500;
 
 /// Below this many vertices the Newton systems are solved on a single thread.
 const SERIAL_BELOW_VERTICES: usize = 4000;
+
+/// Per-vertex move limits of one Newton iteration, m, with self-collision on. Contacts are
+/// detected within d̂ plus a margin, so pairs that were not found are at least that far apart:
+/// while every vertex moves at most half the margin (`wide`), none of them comes within d̂. A
+/// pair that was found (cloth–cloth or cloth–body), at distance d, may close by at most
+/// max(d, 2 × `narrow`): each of its cloth vertices moves at most max(d/2, `narrow`)
+/// (`narrow` = ½ d̂, the limit every vertex had when the margin was d̂). The quadratic
+/// repulsion is finite, so a pair allowed to close by more than its gap could pass through
+/// each other in one iteration to where nothing pushes them back. Only cloth near cloth or a
+/// body is slowed: a falling sheet takes its whole step.
+fn move_limits(
+    x: &[Vector3<f64>],
+    contacts: &[Contact],
+    narrow: f64,
+    wide: f64,
+    limit: &mut [f64],
+) {
+    limit.iter_mut().for_each(|l| *l = wide);
+    if narrow >= wide {
+        return;
+    }
+    for c in contacts {
+        let l_pair = (0.5 * c.distance(x)).max(narrow);
+        for v in c.cloth_dofs().into_iter().flatten() {
+            if let Some(l) = limit.get_mut(v as usize) {
+                *l = l.min(l_pair);
+            }
+        }
+    }
+}
+
+/// The cap of [`Simulator::self_margin_m`]: half the 10th percentile of the rest edge lengths
+/// (material space). Pairs of neighbouring triangles of flat cloth are about 0.4–0.9 edge
+/// lengths apart; wider, most of them would become contact candidates.
+fn self_margin_cap(model: &ClothModel) -> f64 {
+    let m = &model.mesh.material;
+    let mut len: Vec<f64> = model
+        .edges
+        .iter()
+        .map(|e| (m[e[0] as usize] - m[e[1] as usize]).norm())
+        .filter(|l| l.is_finite() && *l > 0.0)
+        .collect();
+    if len.is_empty() {
+        return 0.0;
+    }
+    let k = len.len() / 10;
+    let (_, p10, _) = len.select_nth_unstable_by(k, f64::total_cmp);
+    *p10 / 2.0
+}
 
 fn gather3(x: &[Vector3<f64>], v: [u32; 3]) -> [Vector3<f64>; 3] {
     v.map(|i| x[i as usize])
@@ -365,6 +483,7 @@ impl Simulator {
                 })
                 .collect(),
             obstacle_margin_m: params.detection_margin_m,
+            self_margin_cap_m: self_margin_cap(&model),
             model,
             params,
             pins: Vec::new(),
@@ -407,6 +526,18 @@ impl Simulator {
     /// step's largest move; part of what a resumed run must restore to continue exactly).
     pub fn obstacle_margin_m(&self) -> f64 {
         self.obstacle_margin_m
+    }
+
+    /// The cloth–cloth detection margin of the next step, m: pairs closer than d̂ plus this are
+    /// contact candidates, so a vertex may move half of it per Newton iteration. It follows the
+    /// obstacle margin (2.5× the last step's largest move), from `detection_margin_m` up to
+    /// half the mesh's short edges (see `self_margin_cap`). With the fixed
+    /// `detection_margin_m` (d̂) every vertex moved at most ½ d̂ (0.075 edge lengths) per Newton
+    /// iteration; now only those near other cloth do (see `move_limits`).
+    pub fn self_margin_m(&self) -> f64 {
+        self.obstacle_margin_m
+            .min(self.self_margin_cap_m)
+            .max(self.params.detection_margin_m)
     }
 
     /// Sets the detection margin of the next step (resuming a run); clamped to the allowed range.
@@ -599,7 +730,11 @@ impl Simulator {
                 (grad, beta * 2.0 * hg.weight)
             })
             .collect();
-        DampingRows { mem, hinge }
+        DampingRows {
+            mem,
+            hinge,
+            friction: Vec::new(),
+        }
     }
 
     /// Total incremental potential at `x` with a fixed contact set.
@@ -649,7 +784,11 @@ impl Simulator {
         let contact: f64 = reduce::sum(contacts.len(), |k| {
             contacts[k].energy(x, &self.params.collision)
         });
-        inertia + elastic + (damp_mem + damp_hinge) / (2.0 * h) + sew + contact
+        let friction: f64 = reduce::sum(damping.friction.len(), |k| {
+            let f = &damping.friction[k];
+            f.energy(&x[f.v as usize])
+        });
+        inertia + elastic + (damp_mem + damp_hinge) / (2.0 * h) + sew + contact + friction
     }
 
     /// Assembles gradient and Hessian at `x`; returns the potential.
@@ -739,6 +878,13 @@ impl Simulator {
                     }
                 }
             }
+        }
+        for f in &damping.friction {
+            let i = f.v as usize;
+            let (e, g, hm) = f.energy_gradient_hessian(&x[i]);
+            energy += e;
+            self.grad[i] += g;
+            self.matrix.add(f.v, f.v, &hm);
         }
         for (gi, f) in self.grad.iter_mut().zip(&self.free) {
             if !f {
@@ -855,9 +1001,9 @@ impl Simulator {
     fn contacts(&mut self, x: &[Vector3<f64>], colliders: &[ColliderFrame<'_>]) -> Vec<Contact> {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
         let mut params = self.params.collision;
-        params.dhat_m += self.params.detection_margin_m;
-        self.detector.obstacle_extra_m =
-            (self.obstacle_margin_m - self.params.detection_margin_m).max(0.0);
+        let self_margin = self.self_margin_m();
+        params.dhat_m += self_margin;
+        self.detector.obstacle_extra_m = (self.obstacle_margin_m - self_margin).max(0.0);
         let mut contacts = self.detector.find_contacts(
             x,
             &self.model.mesh.triangles,
@@ -936,17 +1082,21 @@ impl Simulator {
             x[pin.v as usize] = p;
             x_tilde[pin.v as usize] = p;
         }
-        let damping = self.damping_rows(x_n);
-        // Per Newton iteration no vertex moves further than keeps its contact set valid.
-        // Cloth–cloth pairs both move, so with self-collision a vertex moves at most half the
-        // narrow margin; colliders stand still within a step's solve, so without it a vertex
-        // may move by the whole obstacle margin and still meet no face it was not tested
-        // against (it used to be half: 1.47 Newton iterations a step at 3K, now 1.03–1.20).
-        let max_move = if self.params.collision.self_collision {
-            0.5 * self.params.detection_margin_m
+        let mut damping = self.damping_rows(x_n);
+        // Per Newton iteration no vertex moves further than keeps its contact set valid
+        // (see `move_limits`).
+        let (narrow_move, wide_move) = if self.params.collision.self_collision {
+            (
+                0.5 * self.params.detection_margin_m,
+                0.5 * self.self_margin_m(),
+            )
         } else {
-            self.obstacle_margin_m.max(self.params.detection_margin_m)
+            let m = self.obstacle_margin_m.max(self.params.detection_margin_m);
+            (m, m)
         };
+        let cap = self.params.move_cap_m.max(0.0);
+        let (narrow_move, wide_move) = (narrow_move.min(cap), wide_move.min(cap));
+        let mut max_move = vec![wide_move; n];
         let x_start = x.clone();
         let mut contacts = Vec::new();
         let mut energy = f64::NAN;
@@ -959,6 +1109,10 @@ impl Simulator {
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
             contacts = self.contacts(&x, colliders);
+            if it == 0 {
+                damping.friction = self.friction_points(x_n, &contacts, motion, h);
+            }
+            move_limits(&x, &contacts, narrow_move, wide_move, &mut max_move);
             let t_assemble = std::time::Instant::now();
             energy = self.assemble(&x, x_n, &x_tilde, h, &damping, &contacts);
             let t_solve = std::time::Instant::now();
@@ -987,7 +1141,19 @@ impl Simulator {
                     state.t_s
                 )));
             }
-            if longest < self.params.newton_tol_m || slope >= 0.0 {
+            if slope >= 0.0 {
+                self.dx = dx;
+                break;
+            }
+            if longest < self.params.newton_tol_m {
+                // Converged: the last, short Newton step is still taken. Dropped, it was each
+                // step's gravity increment once air damping nearly balanced it (h²(g − αv) <
+                // tol): free-falling cloth stopped accelerating at 0.81 m/s.
+                x.par_iter_mut()
+                    .zip(dx.par_iter())
+                    .for_each(|(xi, d)| *xi += d);
+                energy = self.potential(&x, x_n, &x_tilde, h, &damping, &contacts);
+                dx.iter_mut().for_each(|d| *d = Vector3::zeros());
                 self.dx = dx;
                 break;
             }
@@ -995,23 +1161,32 @@ impl Simulator {
             // (a fold pushed out of a body) no longer shrink everybody else's step, which
             // stalled whole garments at α ≈ 0.1 for every iteration. The clipped direction is
             // still a descent direction when its slope is negative; otherwise scale uniformly.
-            let clip = |d: &Vector3<f64>| -> f64 {
-                let l = d.norm();
-                if l > max_move {
-                    max_move / l
-                } else {
-                    1.0
-                }
-            };
-            let mut step: Vec<Vector3<f64>> = dx.par_iter().map(|d| d * clip(d)).collect();
-            let mut clipped = longest > max_move;
+            let mut step: Vec<Vector3<f64>> = dx
+                .par_iter()
+                .zip(max_move.par_iter())
+                .map(|(d, &m)| {
+                    let l = d.norm();
+                    if l > m {
+                        d * (m / l)
+                    } else {
+                        *d
+                    }
+                })
+                .collect();
+            let mut clipped = dx.iter().zip(&max_move).any(|(d, &m)| d.norm() > m);
             let mut step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
             if clipped && step_slope >= 0.0 {
-                let s = max_move / longest;
+                // Uniform scaling by the tightest vertex's ratio keeps every vertex within its
+                // limit.
+                let s = dx
+                    .iter()
+                    .zip(&max_move)
+                    .map(|(d, &m)| m / d.norm().max(f64::MIN_POSITIVE))
+                    .fold(1.0, f64::min);
                 step.iter_mut().zip(&dx).for_each(|(o, d)| *o = d * s);
                 step_slope = slope * s;
             }
-            let step_longest = longest.min(max_move);
+            let step_longest = step.iter().map(|d| d.norm()).fold(0.0, f64::max);
             let mut alpha = 1.0;
             let mut trial: Vec<Vector3<f64>> = x.clone();
             let mut accepted = false;
@@ -1074,8 +1249,7 @@ impl Simulator {
         self.obstacle_margin_m = (2.5 * travelled)
             .min(MAX_OBSTACLE_MARGIN_M)
             .max(self.params.detection_margin_m);
-        let mut v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
-        self.apply_friction(&x, &mut v, &contacts, motion, h);
+        let v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
         if let Some(i) = x
             .iter()
             .chain(&v)
@@ -1105,45 +1279,39 @@ impl Simulator {
         })
     }
 
-    /// Coulomb friction against bodies, applied to velocities after the solve: the velocity of
-    /// a vertex relative to the body surface under it (the nearest face it touches, moving as
-    /// the colliders move over the step) loses up to μ times the velocity change its
-    /// repulsion force imparts over the step, tangentially. Once per vertex, from its nearest
-    /// face: a vertex touching five faces of a body is not braked five times. Positions stay
-    /// as solved: they are the ones the contact set was checked for.
-    ///
-    /// This used to brake the world velocity, once per touching face, and to move positions
-    /// by the change. On the walking avatar that held the pencil skirt back against the legs
-    /// striding under it and slid vertices along faces into the body between the thighs: the
-    /// skirt crumpled from frame 5, and by frame 10 it lay 40 mm inside the legs with 10⁵
-    /// self-contacts. Braking the relative velocity but still moving positions crumpled it by
-    /// frame 9; braking the relative velocity alone keeps it clean (`tests/dressing.rs`).
-    fn apply_friction(
+    /// The lagged friction of a step ([`FrictionPoint`]): one per free cloth vertex touching a
+    /// body, against the face it is least deep under (nearest by |d|), with the normal force
+    /// of all its body contacts, κ Σ (d̂ − d), at the start-of-step positions `x_n`.
+    fn friction_points(
         &self,
-        x: &[Vector3<f64>],
-        v: &mut [Vector3<f64>],
+        x_n: &[Vector3<f64>],
         contacts: &[Contact],
         motion: &BodyMotion<'_, '_>,
         h: f64,
-    ) {
+    ) -> Vec<FrictionPoint> {
         let mu = self.params.friction;
         if mu <= 0.0 {
-            return;
+            return Vec::new();
         }
         let p = &self.params.collision;
-        // The nearest face by |d|: for a vertex inside a body, the face it is least deep under.
-        let mut nearest: Vec<(f64, usize)> = vec![(f64::INFINITY, usize::MAX); x.len()];
+        // (nearest |d|, its contact, Σ normal force) per vertex
+        let mut per: Vec<(f64, usize, f64)> = vec![(f64::INFINITY, usize::MAX, 0.0); x_n.len()];
         for (k, c) in contacts.iter().enumerate() {
             if let Contact::VertexObstacle { v: i, .. } = c {
-                let d = c.distance(x);
-                let slot = &mut nearest[*i as usize];
-                if d < p.dhat_m && d.abs() < slot.0.abs() {
-                    *slot = (d, k);
+                let d = c.distance(x_n);
+                if d >= p.dhat_m {
+                    continue;
+                }
+                let slot = &mut per[*i as usize];
+                slot.2 += p.kappa * (p.dhat_m - d);
+                if d.abs() < slot.0.abs() {
+                    (slot.0, slot.1) = (d, k);
                 }
             }
         }
-        for (i, &(d, k)) in nearest.iter().enumerate() {
-            if k == usize::MAX || !self.free[i] {
+        let mut out = Vec::new();
+        for (i, &(_, k, force)) in per.iter().enumerate() {
+            if k == usize::MAX || !self.free[i] || force <= 0.0 {
                 continue;
             }
             let Contact::VertexObstacle { tri, face, .. } = &contacts[k] else {
@@ -1155,18 +1323,74 @@ impl Simulator {
             else {
                 continue;
             };
-            let body_v =
-                motion.velocity(face, &point_triangle(&x[i], &tri[0], &tri[1], &tri[2]).bary);
-            let impulse_dv = p.kappa * (p.dhat_m - d) * h / self.model.mass_kg[i];
-            let rel = v[i] - body_v;
-            let vt = rel - n * n.dot(&rel);
-            let speed = vt.norm();
-            if speed <= 0.0 {
-                continue;
-            }
-            let cut = (mu * impulse_dv).min(speed);
-            let dv = -vt * (cut / speed);
-            v[i] += dv;
+            let bary = point_triangle(&x_n[i], &tri[0], &tri[1], &tri[2]).bary;
+            out.push(FrictionPoint {
+                v: i as u32,
+                mu_lambda_n: mu * force,
+                n,
+                anchor: x_n[i] + motion.velocity(face, &bary) * h,
+                eps_m: FRICTION_EPS_M_S * h,
+            });
         }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::energy::fd;
+    use nalgebra::{SMatrix, SVector};
+
+    fn point(eps_m: f64) -> FrictionPoint {
+        FrictionPoint {
+            v: 0,
+            mu_lambda_n: 0.7,
+            n: Vector3::new(0.2, 1.0, -0.3).normalize(),
+            anchor: Vector3::new(0.01, -0.02, 0.005),
+            eps_m,
+        }
+    }
+
+    /// The friction potential's gradient matches finite differences where it is static-like
+    /// (sliding below ε) and where it slides; its Hessian is the exact one (from differences
+    /// of the gradient) plus a positive rank-one term along the sliding direction, and PSD.
+    #[test]
+    fn friction_derivatives_match_finite_differences() {
+        let eps = 1e-3;
+        let f = point(eps);
+        let t1 = f.n.cross(&Vector3::x()).normalize();
+        for slide in [0.3 * eps, 0.9 * eps, 4.0 * eps] {
+            let x = f.anchor + t1 * slide + f.n * 0.002;
+            let to3 = |y: &SVector<f64, 3>| Vector3::new(y[0], y[1], y[2]);
+            let x3 = SVector::<f64, 3>::from_column_slice(x.as_slice());
+            let (_, g, h) = f.energy_gradient_hessian(&x);
+            let g3 = SVector::<f64, 3>::from_column_slice(g.as_slice());
+            fd::check_gradient(|y| f.energy(&to3(y)), &g3, &x3, 1e-7 * eps, 1e-6);
+            fd::check_psd(&SMatrix::<f64, 3, 3>::from_column_slice(h.as_slice()));
+            // Exact Hessian by central differences of the gradient.
+            let step = 1e-6 * eps;
+            let mut exact = Matrix3::zeros();
+            for k in 0..3 {
+                let mut d = Vector3::zeros();
+                d[k] = step;
+                let gp = f.energy_gradient_hessian(&(x + d)).1;
+                let gm = f.energy_gradient_hessian(&(x - d)).1;
+                exact.set_column(k, &((gp - gm) / (2.0 * step)));
+            }
+            // Across the sliding direction (in the tangent plane) and along the normal the
+            // two agree; along the sliding direction the PSD one is the larger.
+            let t2 = f.n.cross(&t1);
+            for w in [t2, f.n] {
+                let diff = (h * w - exact * w).norm();
+                assert!(diff <= 1e-5 * h.norm(), "slide {slide}: {diff} along {w:?}");
+            }
+            assert!(t1.dot(&(h * t1)) >= t1.dot(&(exact * t1)) - 1e-9 * h.norm());
+        }
+        // Sliding: the force is μλ, in the tangent plane, against the sliding.
+        let x = f.anchor + t1 * (10.0 * eps) + f.n * 0.004;
+        let g = f.energy_gradient_hessian(&x).1;
+        assert!((g.norm() - f.mu_lambda_n).abs() < 1e-12);
+        assert!(g.dot(&f.n).abs() < 1e-12 && g.dot(&t1) > 0.0);
     }
 }
