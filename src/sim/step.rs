@@ -389,6 +389,25 @@ fn move_limits(
     }
 }
 
+/// How deep the deepest cloth vertex is inside a body at positions `x` (the end of a step),
+/// m: per vertex, the depth under the body face of its contacts it is least deep under
+/// (nearest by |d|, as friction picks it). The detector's own figure is that of the iterate
+/// it was called on, the start of the last Newton iteration: with one iteration a step, the
+/// inertial prediction, before any contact pushed it out.
+fn penetration(x: &[Vector3<f64>], contacts: &[Contact]) -> f64 {
+    let mut nearest: std::collections::HashMap<u32, f64> = std::collections::HashMap::new();
+    for c in contacts {
+        if let Contact::VertexObstacle { v, .. } = c {
+            let d = c.distance(x);
+            let slot = nearest.entry(*v).or_insert(f64::INFINITY);
+            if d.abs() < slot.abs() {
+                *slot = d;
+            }
+        }
+    }
+    nearest.values().map(|d| -d).fold(0.0, f64::max)
+}
+
 /// The cap of [`Simulator::self_margin_m`]: half the 10th percentile of the rest edge lengths
 /// (material space). Pairs of neighbouring triangles of flat cloth are about 0.4–0.9 edge
 /// lengths apart; wider, most of them would become contact candidates.
@@ -1265,7 +1284,7 @@ impl Simulator {
         stats.substeps += 1;
         self.seam_rest_m.clone_from(&self.seam_rest_step_m);
         stats.energy_j = energy;
-        stats.max_penetration_m = stats.max_penetration_m.max(self.detector.max_penetration());
+        stats.max_penetration_m = stats.max_penetration_m.max(penetration(&x, &contacts));
         tracing::trace!(
             prelude_ms,
             newton_ms = (t_epilogue - t_newton).as_secs_f64() * 1e3,
