@@ -232,12 +232,12 @@ impl Simulation {
         // a dresser smooths cloth into place (with it the hem of a pencil skirt stuck on the
         // legs, 105 mm open).
         let friction = std::mem::replace(&mut self.sim.params.friction, 0.0);
-        // A dresser moves cloth slowly: the seams' pull is capped at half d̂ per Newton
-        // iteration, as every move was before the contact margin adapted to the cloth's speed.
-        let move_cap = std::mem::replace(
-            &mut self.sim.params.move_cap_m,
-            0.5 * self.sim.params.collision.dhat_m,
-        );
+        // A dresser moves cloth slowly: through sewing and settling, no vertex moves more
+        // than ½ d̂ per Newton iteration (as every vertex did before the contact margin adapted
+        // to the cloth's speed). Uncapped, seam springs pulled tight fling the light panels
+        // together and they crumple.
+        let move_cap = self.sim.params.move_cap_m;
+        self.sim.params.move_cap_m = move_cap.min(0.5 * self.sim.params.collision.dhat_m);
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);

@@ -2,19 +2,22 @@
 //!
 //! x⁺ = argmin ½h⁻²‖x − x̃‖²_M + E(x) + D(x),  x̃ = xₙ + h vₙ + h² g,
 //!
-//! with E the membrane, bending, sewing and contact-repulsion energies, and D a Rayleigh-style
-//! damping potential: D(x) = Σ_c β k_c / (2h) · (∇C_c(xₙ) · (x − xₙ))² over every elastic condition
-//! C_c (weft, warp, shear of each triangle, angle of each hinge), i.e. stiffness-proportional
-//! damping of the strain rates (Baraff & Witkin 1998 §5) written as a potential so that line
-//! search stays consistent. Newton's method with a PSD Hessian, a block-Jacobi PCG linear solve
+//! with E the membrane, bending, sewing and contact-repulsion energies, and D the dissipation:
+//! Coulomb friction against bodies (IPC's lagged friction potential, [`FrictionPoint`]) plus a
+//! Rayleigh-style damping potential Σ_c β k_c / (2h) · (∇C_c(xₙ) · (x − xₙ))² over every
+//! elastic condition C_c (weft, warp, shear of each triangle, angle of each hinge), i.e.
+//! stiffness-proportional damping of the strain rates (Baraff & Witkin 1998 §5), written as a
+//! potential so that line search stays consistent. Newton's method with a PSD Hessian, a block-Jacobi PCG linear solve
 //! and a backtracking line search; contacts are re-detected every iteration within
-//! d̂ + margin and each iteration moves no vertex more than margin / 2, so no contact can appear
-//! unseen. A step that yields NaN or cannot decrease the energy is retried as two half steps.
+//! d̂ + margin (a margin that widens with the cloth's speed) and each iteration moves no vertex
+//! more than margin / 2, so no contact can appear unseen; vertices of pairs already found move
+//! less (see `move_limits`). A step that yields NaN or cannot decrease the energy is retried as
+//! two half steps.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
-use super::collide::distance::point_triangle;
+use super::collide::repulsion::obstacle_eval;
 use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
 use super::energy::bending::{self, BendingHessian};
 use super::energy::{sewing, Mat12, Vec12, Vec9};
@@ -56,11 +59,11 @@ pub struct SimParams {
     /// Newton iterations at most per step.
     pub newton_max_iters: usize,
     /// Most any vertex moves in one Newton iteration, m, on top of the limits that keep the
-    /// contact set valid (default: no cap). Dressing caps it at ½ d̂: seam springs pulled
-    /// tight accelerate the light cloth to metres per second, and uncapped the panels slam
-    /// together and crumple.
+    /// contact set valid (default: `f64::INFINITY`, no cap; must be positive). Dressing caps it
+    /// at ½ d̂: seam springs pulled tight accelerate the light cloth to metres per second, and
+    /// uncapped the panels slam together and crumple.
     pub move_cap_m: f64,
-    /// Iterate Newton to `newton_tol_m` (ground truth). When false (the default), a step ends
+    /// Iterate Newton to `newton_tol_m` (ground truth; the default). When false, a step ends
     /// after its first Newton iteration whose full step (α = 1) decreases the energy, as in
     /// Baraff & Witkin; further iterations run only when the line search or the per-iteration
     /// move limit had to shorten the step.
@@ -243,10 +246,15 @@ pub struct FrictionPoint {
 impl FrictionPoint {
     /// Dissipation potential μλ f₀(‖u‖), u = (I − n nᵀ)(x − anchor), with IPC's C¹ mollifier
     /// f₀(y) = y²/ε − y³/(3ε²) + ε/3 below ε and y above; its gradient μλ f₁(y)/y u (the
-    /// friction force, μλ in magnitude when sliding) and the PSD part of its Hessian,
-    /// μλ f₁(y)/y (I − n nᵀ) (the term along u, negative, is dropped as IPC does).
+    /// friction force, μλ in magnitude when sliding); and as Hessian μλ f₁(y)/y P, P = I − n nᵀ.
+    /// The exact Hessian is μλ [f₁/y (P − ûûᵀ) + f₁′ ûûᵀ] (û = u/y): along the slide it has
+    /// f₁′ ≤ f₁/y (0 when sliding), so this one is the exact one plus a PSD term, a stiffer
+    /// model along the slide. With one Newton iteration a step (fast mode) the exact one let
+    /// the step overshoot and the friction chatter: the corrector's tiny training set (a silk
+    /// sheet on a ball) became noise that 300 training steps could not lower (loss 0.41 →
+    /// 0.42, against 0.38 → 0.20 with this one). Converged Newton reaches the same minimiser.
     pub fn energy_gradient_hessian(&self, x: &Vector3<f64>) -> (f64, Vector3<f64>, Matrix3<f64>) {
-        let (e, f1_over_y, u) = self.eval(x);
+        let (e, f1_over_y, _, u) = self.eval(x);
         let p = Matrix3::identity() - self.n * self.n.transpose();
         (
             e,
@@ -260,20 +268,22 @@ impl FrictionPoint {
         self.eval(x).0
     }
 
-    fn eval(&self, x: &Vector3<f64>) -> (f64, f64, Vector3<f64>) {
+    /// (μλ f₀(y), f₁(y)/y, f₁′(y), u).
+    fn eval(&self, x: &Vector3<f64>) -> (f64, f64, f64, Vector3<f64>) {
         let r = x - self.anchor;
         let u = r - self.n * self.n.dot(&r);
         let y = u.norm();
         let eps = self.eps_m.max(f64::MIN_POSITIVE);
-        let (f0, f1_over_y) = if y >= eps {
-            (y, 1.0 / y)
+        let (f0, f1_over_y, df1) = if y >= eps {
+            (y, 1.0 / y, 0.0)
         } else {
             (
                 y * y / eps - y * y * y / (3.0 * eps * eps) + eps / 3.0,
                 2.0 / eps - y / (eps * eps),
+                2.0 / eps - 2.0 * y / (eps * eps),
             )
         };
-        (self.mu_lambda_n * f0, f1_over_y, u)
+        (self.mu_lambda_n * f0, f1_over_y, df1, u)
     }
 }
 
@@ -324,26 +334,29 @@ struct BodyMotion<'a, 'b> {
     start: &'b [ColliderFrame<'a>],
     end: &'b [ColliderFrame<'a>],
     dt_s: f64,
+    /// The (sub)step being solved runs from this fraction of the whole step …
+    from: f64,
+    /// … to this one.
+    to: f64,
 }
 
+/// A triangle's three points.
+type Tri = [Vector3<f64>; 3];
+
 impl BodyMotion<'_, '_> {
-    /// Velocity of the point with barycentric coordinates `bary` on triangle `face[1]` of
-    /// collider `face[0]`, m/s (zero for a face that is not there).
-    fn velocity(&self, face: &[u32; 2], bary: &[f64; 3]) -> Vector3<f64> {
+    /// Triangle `face[1]` of collider `face[0]` at the start and at the end of the (sub)step
+    /// being solved.
+    fn triangle(&self, face: &[u32; 2]) -> Option<(Tri, Tri)> {
         let (c, t) = (face[0] as usize, face[1] as usize);
-        let (Some(s), Some(e)) = (self.start.get(c), self.end.get(c)) else {
-            return Vector3::zeros();
-        };
-        let Some(tri) = e.triangles.get(t) else {
-            return Vector3::zeros();
-        };
-        let mut moved = Vector3::zeros();
-        for (w, &vtx) in bary.iter().zip(tri) {
-            if let (Some(a), Some(b)) = (s.points.get(vtx as usize), e.points.get(vtx as usize)) {
-                moved += (b - a) * *w;
-            }
+        let (s, e) = (self.start.get(c)?, self.end.get(c)?);
+        let tri = e.triangles.get(t)?;
+        let mut out = ([Vector3::zeros(); 3], [Vector3::zeros(); 3]);
+        for (k, &vtx) in tri.iter().enumerate() {
+            let (p0, p1) = (s.points.get(vtx as usize)?, e.points.get(vtx as usize)?);
+            out.0[k] = p0 + (p1 - p0) * self.from;
+            out.1[k] = p0 + (p1 - p0) * self.to;
         }
-        moved / self.dt_s
+        Some(out)
     }
 }
 
@@ -390,22 +403,42 @@ fn move_limits(
 }
 
 /// How deep the deepest cloth vertex is inside a body at positions `x` (the end of a step),
-/// m: per vertex, the depth under the body face of its contacts it is least deep under
-/// (nearest by |d|, as friction picks it). The detector's own figure is that of the iterate
-/// it was called on, the start of the last Newton iteration: with one iteration a step, the
-/// inertial prediction, before any contact pushed it out.
-fn penetration(x: &[Vector3<f64>], contacts: &[Contact]) -> f64 {
-    let mut nearest: std::collections::HashMap<u32, f64> = std::collections::HashMap::new();
-    for c in contacts {
-        if let Contact::VertexObstacle { v, .. } = c {
-            let d = c.distance(x);
-            let slot = nearest.entry(*v).or_insert(f64::INFINITY);
-            if d.abs() < slot.abs() {
-                *slot = d;
-            }
+/// m. A vertex with body contacts: per collider, its depth under the face of its contacts it
+/// is least deep under (nearest by |d|), the deepest over colliders. A vertex the detector
+/// found inside (`depths`, at the start of the last Newton iteration) but with no contact to
+/// push it out (in a concave region it may project onto none of the faces): that depth, as
+/// found. The detector's figure alone is that of the iterate it was called on: with one
+/// iteration a step, the inertial prediction, before any contact pushed it out.
+fn penetration(x: &[Vector3<f64>], contacts: &[Contact], depths: &[f64]) -> f64 {
+    // (vertex, collider, d) of every body contact, ordered: each vertex's contacts with one
+    // collider are adjacent.
+    let mut d: Vec<(u32, u32, f64)> = contacts
+        .iter()
+        .filter_map(|c| match c {
+            Contact::VertexObstacle { v, face, .. } => Some((*v, face[0], c.distance(x))),
+            _ => None,
+        })
+        .collect();
+    d.sort_by_key(|a| (a.0, a.1));
+    let mut touched = vec![false; depths.len()];
+    let mut deepest: f64 = 0.0;
+    for group in d.chunk_by(|a, b| (a.0, a.1) == (b.0, b.1)) {
+        let nearest =
+            group
+                .iter()
+                .map(|g| g.2)
+                .fold(f64::INFINITY, |m, d| if d.abs() < m.abs() { d } else { m });
+        deepest = deepest.max(-nearest);
+        if let Some(t) = touched.get_mut(group[0].0 as usize) {
+            *t = true;
         }
     }
-    nearest.values().map(|d| -d).fold(0.0, f64::max)
+    depths
+        .iter()
+        .zip(&touched)
+        .filter(|(_, t)| !**t)
+        .map(|(d, _)| *d)
+        .fold(deepest, f64::max)
 }
 
 /// The cap of [`Simulator::self_margin_m`]: half the 10th percentile of the rest edge lengths
@@ -695,6 +728,8 @@ impl Simulator {
             start: c0,
             end: c1,
             dt_s: h / (b - a),
+            from: a,
+            to: b,
         };
         match self.solve_step(state, &end, &motion, h, stats) {
             Ok(s) => Ok(s),
@@ -1113,7 +1148,12 @@ impl Simulator {
             let m = self.obstacle_margin_m.max(self.params.detection_margin_m);
             (m, m)
         };
-        let cap = self.params.move_cap_m.max(0.0);
+        let cap = self.params.move_cap_m;
+        if cap.is_nan() || cap <= 0.0 {
+            return Err(Error::Invalid(format!(
+                "move_cap_m must be positive (f64::INFINITY for no cap), not {cap}"
+            )));
+        }
         let (narrow_move, wide_move) = (narrow_move.min(cap), wide_move.min(cap));
         let mut max_move = vec![wide_move; n];
         let x_start = x.clone();
@@ -1129,7 +1169,7 @@ impl Simulator {
             let t_detect = std::time::Instant::now();
             contacts = self.contacts(&x, colliders);
             if it == 0 {
-                damping.friction = self.friction_points(x_n, &contacts, motion, h);
+                damping.friction = self.friction_points(x_n, &contacts, motion);
             }
             move_limits(&x, &contacts, narrow_move, wide_move, &mut max_move);
             let t_assemble = std::time::Instant::now();
@@ -1165,13 +1205,22 @@ impl Simulator {
                 break;
             }
             if longest < self.params.newton_tol_m {
-                // Converged: the last, short Newton step is still taken. Dropped, it was each
-                // step's gravity increment once air damping nearly balanced it (h²(g − αv) <
-                // tol): free-falling cloth stopped accelerating at 0.81 m/s.
-                x.par_iter_mut()
-                    .zip(dx.par_iter())
-                    .for_each(|(xi, d)| *xi += d);
-                energy = self.potential(&x, x_n, &x_tilde, h, &damping, &contacts);
+                // Converged: the last, short Newton step is still taken (within the move
+                // limits, if its energy decreases). Dropped, it was each step's gravity
+                // increment once air damping nearly balanced it (h²(g − αv) < tol):
+                // free-falling cloth stopped accelerating at 0.81 m/s.
+                let step: Vec<Vector3<f64>> = dx
+                    .iter()
+                    .zip(&max_move)
+                    .map(|(d, &m)| d * (m / d.norm().max(m)))
+                    .collect();
+                let step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
+                let trial: Vec<Vector3<f64>> = x.iter().zip(&step).map(|(a, d)| a + d).collect();
+                let e = self.potential(&trial, x_n, &x_tilde, h, &damping, &contacts);
+                if e.is_finite() && e <= energy + 1e-4 * step_slope {
+                    x = trial;
+                    energy = e;
+                }
                 dx.iter_mut().for_each(|d| *d = Vector3::zeros());
                 self.dx = dx;
                 break;
@@ -1284,7 +1333,10 @@ impl Simulator {
         stats.substeps += 1;
         self.seam_rest_m.clone_from(&self.seam_rest_step_m);
         stats.energy_j = energy;
-        stats.max_penetration_m = stats.max_penetration_m.max(penetration(&x, &contacts));
+        stats.max_penetration_m =
+            stats
+                .max_penetration_m
+                .max(penetration(&x, &contacts, self.detector.vertex_depths()));
         tracing::trace!(
             prelude_ms,
             newton_ms = (t_epilogue - t_newton).as_secs_f64() * 1e3,
@@ -1299,59 +1351,82 @@ impl Simulator {
     }
 
     /// The lagged friction of a step ([`FrictionPoint`]): one per free cloth vertex touching a
-    /// body, against the face it is least deep under (nearest by |d|), with the normal force
-    /// of all its body contacts, κ Σ (d̂ − d), at the start-of-step positions `x_n`.
+    /// body, all measured at the start of the step (cloth at `x_n`, bodies at their start
+    /// positions): the normal force is the magnitude of the summed repulsion of its body
+    /// contacts, ‖κ Σ (d̂ − d) ∇d‖; the tangent plane and the body motion under the vertex are
+    /// those of the face it is least deep under (nearest by |d|).
     fn friction_points(
         &self,
         x_n: &[Vector3<f64>],
         contacts: &[Contact],
         motion: &BodyMotion<'_, '_>,
-        h: f64,
     ) -> Vec<FrictionPoint> {
         let mu = self.params.friction;
         if mu <= 0.0 {
             return Vec::new();
         }
         let p = &self.params.collision;
-        // (nearest |d|, its contact, Σ normal force) per vertex
-        let mut per: Vec<(f64, usize, f64)> = vec![(f64::INFINITY, usize::MAX, 0.0); x_n.len()];
-        for (k, c) in contacts.iter().enumerate() {
-            if let Contact::VertexObstacle { v: i, .. } = c {
-                let d = c.distance(x_n);
-                if d >= p.dhat_m {
-                    continue;
-                }
-                let slot = &mut per[*i as usize];
-                slot.2 += p.kappa * (p.dhat_m - d);
-                if d.abs() < slot.0.abs() {
-                    (slot.0, slot.1) = (d, k);
-                }
-            }
+        struct Acc {
+            d: f64,
+            force: Vector3<f64>,
+            n: Vector3<f64>,
+            moved: Vector3<f64>,
         }
-        let mut out = Vec::new();
-        for (i, &(_, k, force)) in per.iter().enumerate() {
-            if k == usize::MAX || !self.free[i] || force <= 0.0 {
+        let mut per: Vec<Option<Acc>> = (0..x_n.len()).map(|_| None).collect();
+        for c in contacts {
+            let Contact::VertexObstacle { v: i, face, .. } = c else {
+                continue;
+            };
+            let (i, Some((t0, t1))) = (*i as usize, motion.triangle(face)) else {
+                continue;
+            };
+            if !self.free[i] {
                 continue;
             }
-            let Contact::VertexObstacle { tri, face, .. } = &contacts[k] else {
+            let e = obstacle_eval(&x_n[i], &t0[0], &t0[1], &t0[2]);
+            let (d, Some(n)) = (e.distance(), e.normal) else {
                 continue;
             };
-            let Some(n) = (tri[1] - tri[0])
-                .cross(&(tri[2] - tri[0]))
-                .try_normalize(1e-20)
-            else {
+            if d >= p.dhat_m {
                 continue;
+            }
+            let b = e.closest.bary;
+            let q = t0[0] * b[0] + t0[1] * b[1] + t0[2] * b[2];
+            // ∇d: the face normal where the vertex projects onto the face, else from the
+            // closest point.
+            let grad = if e.projects_inside {
+                n
+            } else {
+                (x_n[i] - q).try_normalize(1e-20).unwrap_or(n)
             };
-            let bary = point_triangle(&x_n[i], &tri[0], &tri[1], &tri[2]).bary;
-            out.push(FrictionPoint {
-                v: i as u32,
-                mu_lambda_n: mu * force,
+            let push = grad * (p.kappa * (p.dhat_m - d));
+            let moved = (t1[0] - t0[0]) * b[0] + (t1[1] - t0[1]) * b[1] + (t1[2] - t0[2]) * b[2];
+            let slot = per[i].get_or_insert(Acc {
+                d: f64::INFINITY,
+                force: Vector3::zeros(),
                 n,
-                anchor: x_n[i] + motion.velocity(face, &bary) * h,
-                eps_m: FRICTION_EPS_M_S * h,
+                moved,
             });
+            slot.force += push;
+            if d.abs() < slot.d.abs() {
+                (slot.d, slot.n, slot.moved) = (d, n, moved);
+            }
         }
-        out
+        let eps_m = FRICTION_EPS_M_S * motion.dt_s * (motion.to - motion.from);
+        per.iter()
+            .enumerate()
+            .filter_map(|(i, a)| {
+                let a = a.as_ref()?;
+                let force = a.force.norm();
+                (force > 0.0).then(|| FrictionPoint {
+                    v: i as u32,
+                    mu_lambda_n: mu * force,
+                    n: a.n,
+                    anchor: x_n[i] + a.moved,
+                    eps_m,
+                })
+            })
+            .collect()
     }
 }
 
@@ -1372,44 +1447,75 @@ mod tests {
     }
 
     /// The friction potential's gradient matches finite differences where it is static-like
-    /// (sliding below ε) and where it slides; its Hessian is the exact one (from differences
-    /// of the gradient) plus a positive rank-one term along the sliding direction, and PSD.
+    /// (sliding below ε) and where it slides; its Hessian is the exact one (differences of the
+    /// gradient) plus μλ (f₁/y − f₁′) ûûᵀ along the slide, and PSD; sliding, the force is μλ in
+    /// the tangent plane against the slide.
     #[test]
     fn friction_derivatives_match_finite_differences() {
         let eps = 1e-3;
         let f = point(eps);
         let t1 = f.n.cross(&Vector3::x()).normalize();
+        let t2 = f.n.cross(&t1);
         for slide in [0.3 * eps, 0.9 * eps, 4.0 * eps] {
-            let x = f.anchor + t1 * slide + f.n * 0.002;
+            let x = f.anchor + (t1 * 0.8 + t2 * 0.6) * slide + f.n * 0.002;
             let to3 = |y: &SVector<f64, 3>| Vector3::new(y[0], y[1], y[2]);
             let x3 = SVector::<f64, 3>::from_column_slice(x.as_slice());
             let (_, g, h) = f.energy_gradient_hessian(&x);
             let g3 = SVector::<f64, 3>::from_column_slice(g.as_slice());
             fd::check_gradient(|y| f.energy(&to3(y)), &g3, &x3, 1e-7 * eps, 1e-6);
             fd::check_psd(&SMatrix::<f64, 3, 3>::from_column_slice(h.as_slice()));
-            // Exact Hessian by central differences of the gradient.
-            let step = 1e-6 * eps;
-            let mut exact = Matrix3::zeros();
-            for k in 0..3 {
-                let mut d = Vector3::zeros();
-                d[k] = step;
-                let gp = f.energy_gradient_hessian(&(x + d)).1;
-                let gm = f.energy_gradient_hessian(&(x - d)).1;
-                exact.set_column(k, &((gp - gm) / (2.0 * step)));
-            }
-            // Across the sliding direction (in the tangent plane) and along the normal the
-            // two agree; along the sliding direction the PSD one is the larger.
-            let t2 = f.n.cross(&t1);
-            for w in [t2, f.n] {
-                let diff = (h * w - exact * w).norm();
-                assert!(diff <= 1e-5 * h.norm(), "slide {slide}: {diff} along {w:?}");
-            }
-            assert!(t1.dot(&(h * t1)) >= t1.dot(&(exact * t1)) - 1e-9 * h.norm());
+            let (_, f1_over_y, df1, u) = f.eval(&x);
+            let uhat = u.normalize();
+            let extra = uhat * uhat.transpose() * (f.mu_lambda_n * (f1_over_y - df1));
+            let exact = SMatrix::<f64, 3, 3>::from_column_slice((h - extra).as_slice());
+            fd::check_hessian(
+                |y| {
+                    let g = f.energy_gradient_hessian(&to3(y)).1;
+                    SVector::<f64, 3>::from_column_slice(g.as_slice())
+                },
+                &exact,
+                &x3,
+                1e-6 * eps,
+                1e-5,
+            );
+            assert!(f1_over_y - df1 >= 0.0);
         }
-        // Sliding: the force is μλ, in the tangent plane, against the sliding.
         let x = f.anchor + t1 * (10.0 * eps) + f.n * 0.004;
         let g = f.energy_gradient_hessian(&x).1;
         assert!((g.norm() - f.mu_lambda_n).abs() < 1e-12);
         assert!(g.dot(&f.n).abs() < 1e-12 && g.dot(&t1) > 0.0);
+        // At rest: 2μλ/ε across the whole tangent plane, nothing along the normal.
+        let h = f.energy_gradient_hessian(&(f.anchor + f.n * 0.001)).2;
+        assert!((t1.dot(&(h * t1)) - 2.0 * f.mu_lambda_n / eps).abs() < 1e-6 * h.norm());
+        assert!((h * f.n).norm() < 1e-9 * h.norm());
+    }
+
+    /// Vertices in no contact pair may move the wide limit; those of a found pair at distance
+    /// d move at most max(d/2, narrow); obstacle contacts count for their cloth vertex only.
+    #[test]
+    fn move_limits_hold_back_only_vertices_near_other_cloth_or_a_body() {
+        let x: Vec<Vector3<f64>> = vec![
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+            Vector3::new(0.2, 0.2, 0.004),  // 4 mm above triangle 0-1-2
+            Vector3::new(0.3, 0.3, 0.0005), // 0.5 mm above it
+            Vector3::new(5.0, 5.0, 5.0),    // far from everything
+        ];
+        let contacts = vec![
+            Contact::VertexTriangle { v: 3, t: [0, 1, 2] },
+            Contact::VertexTriangle { v: 4, t: [0, 1, 2] },
+        ];
+        let (narrow, wide) = (0.0015, 0.004);
+        let mut limit = vec![0.0; x.len()];
+        move_limits(&x, &contacts, narrow, wide, &mut limit);
+        assert_eq!(limit[5], wide);
+        assert!((limit[3] - 0.002).abs() < 1e-12, "{}", limit[3]);
+        assert_eq!(limit[4], narrow);
+        // The triangle's vertices take the tightest of their pairs.
+        assert_eq!(limit[0], narrow);
+        // Self-collision off (narrow = wide): every vertex moves the whole margin.
+        move_limits(&x, &contacts, wide, wide, &mut limit);
+        assert!(limit.iter().all(|&l| l == wide));
     }
 }

@@ -479,6 +479,7 @@ pub struct CollisionDetector {
     cloth_tris: CachedBvh,
     cloth_edges: CachedBvh,
     max_penetration: f64,
+    depth: Vec<f64>,
 }
 
 impl Default for CollisionDetector {
@@ -503,6 +504,7 @@ impl CollisionDetector {
             cloth_tris: CachedBvh::default(),
             cloth_edges: CachedBvh::default(),
             max_penetration: 0.0,
+            depth: Vec::new(),
         }
     }
 
@@ -510,6 +512,12 @@ impl CollisionDetector {
     /// (as [`max_penetration`], searched to max(d̂, [`OBSTACLE_SEARCH_M`])).
     pub fn max_penetration(&self) -> f64 {
         self.max_penetration
+    }
+
+    /// Per cloth vertex, how deep inside a collider the last
+    /// [`CollisionDetector::find_contacts`] found it, m (0 outside).
+    pub fn vertex_depths(&self) -> &[f64] {
+        &self.depth
     }
 
     /// Cloth vertices the last [`CollisionDetector::find_contacts`] skipped as certified far
@@ -633,6 +641,8 @@ impl CollisionDetector {
             })
             .collect();
         self.max_penetration = per_vertex.iter().map(|p| p.0).fold(0.0, f64::max);
+        self.depth.clear();
+        self.depth.extend(per_vertex.iter().map(|p| p.0));
         self.skipped = per_vertex.iter().filter(|p| p.2.is_none()).count();
         for (c, (_, _, new)) in self.clearance.iter_mut().zip(&per_vertex) {
             if let Some(clear_m) = *new {
