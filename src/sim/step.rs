@@ -917,6 +917,10 @@ impl Simulator {
             }
         }
         for (c, (e, g, hm)) in contacts.iter().zip(&contact_local) {
+            // Candidates beyond d̂ (found within the detection margin) add nothing.
+            if *e == 0.0 && g.iter().all(|v| *v == 0.0) {
+                continue;
+            }
             energy += e;
             let dofs = c.cloth_dofs();
             for (a, va) in dofs.iter().enumerate() {
