@@ -263,12 +263,8 @@ impl Simulation {
         })();
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
-        if let Err(e) = sewing {
-            self.sim.params.move_cap_m = move_cap;
-            return Err(e);
-        }
         let settle_steps = (settle_s / dt).ceil() as usize;
-        let settling: Result<()> = (|| {
+        let settled = sewing.and_then(|()| {
             for _ in 0..settle_steps {
                 let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
                 self.state = next;
@@ -276,9 +272,9 @@ impl Simulation {
                 out.max_penetration_m = stats.max_penetration_m;
             }
             Ok(())
-        })();
+        });
         self.sim.params.move_cap_m = move_cap;
-        settling?;
+        settled?;
         out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
         if out.seam_gap_m > gap_m {
             self.log_widest_seam();

@@ -7,8 +7,8 @@
 //! Rayleigh-style damping potential Σ_c β k_c / (2h) · (∇C_c(xₙ) · (x − xₙ))² over every
 //! elastic condition C_c (weft, warp, shear of each triangle, angle of each hinge), i.e.
 //! stiffness-proportional damping of the strain rates (Baraff & Witkin 1998 §5), written as a
-//! potential so that line search stays consistent. Newton's method with a PSD Hessian, a block-Jacobi PCG linear solve
-//! and a backtracking line search; contacts are re-detected every iteration within
+//! potential so that line search stays consistent. Newton's method with a PSD Hessian, a
+//! block-Jacobi PCG linear solve and a backtracking line search; contacts are re-detected every iteration within
 //! d̂ + margin (a margin that widens with the cloth's speed) and each iteration moves no vertex
 //! more than margin / 2, so no contact can appear unseen; vertices of pairs already found move
 //! less (see `move_limits`). A step that yields NaN or cannot decrease the energy is retried as
@@ -17,7 +17,7 @@
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
-use super::collide::repulsion::obstacle_eval;
+use super::collide::repulsion::vertex_obstacle_jet;
 use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
 use super::energy::bending::{self, BendingHessian};
 use super::energy::{sewing, Mat12, Vec12, Vec9};
@@ -326,6 +326,8 @@ pub struct Simulator {
     obstacle_margin_m: f64,
     /// Upper bound of the cloth–cloth detection margin, m (see [`Simulator::self_margin_m`]).
     self_margin_cap_m: f64,
+    /// Per-vertex move limits of the current Newton iteration (reused across steps).
+    max_move: Vec<f64>,
 }
 
 /// Where the colliders are at the start and the end of a whole time step (they move linearly
@@ -400,6 +402,24 @@ fn move_limits(
             }
         }
     }
+}
+
+/// `dx` with each vertex's move shortened to its limit; and whether any was.
+fn clip_to_limits(dx: &[Vector3<f64>], limit: &[f64]) -> (Vec<Vector3<f64>>, bool) {
+    let step: Vec<Vector3<f64>> = dx
+        .par_iter()
+        .zip(limit.par_iter())
+        .map(|(d, &m)| {
+            let l = d.norm();
+            if l > m {
+                d * (m / l)
+            } else {
+                *d
+            }
+        })
+        .collect();
+    let clipped = dx.iter().zip(limit).any(|(d, &m)| d.norm() > m);
+    (step, clipped)
 }
 
 /// How deep the deepest cloth vertex is inside a body at positions `x` (the end of a step),
@@ -536,6 +556,7 @@ impl Simulator {
                 .collect(),
             obstacle_margin_m: params.detection_margin_m,
             self_margin_cap_m: self_margin_cap(&model),
+            max_move: Vec::with_capacity(n),
             model,
             params,
             pins: Vec::new(),
@@ -1159,7 +1180,9 @@ impl Simulator {
             )));
         }
         let (narrow_move, wide_move) = (narrow_move.min(cap), wide_move.min(cap));
-        let mut max_move = vec![wide_move; n];
+        // Reused: no per-step allocation (`move_limits` fills it every iteration).
+        let mut max_move = std::mem::take(&mut self.max_move);
+        max_move.resize(n, wide_move);
         let x_start = x.clone();
         let mut contacts = Vec::new();
         let mut energy = f64::NAN;
@@ -1213,11 +1236,7 @@ impl Simulator {
                 // limits, if its energy decreases). Dropped, it was each step's gravity
                 // increment once air damping nearly balanced it (h²(g − αv) < tol):
                 // free-falling cloth stopped accelerating at 0.81 m/s.
-                let step: Vec<Vector3<f64>> = dx
-                    .iter()
-                    .zip(&max_move)
-                    .map(|(d, &m)| d * (m / d.norm().max(m)))
-                    .collect();
+                let (step, _) = clip_to_limits(&dx, &max_move);
                 let step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
                 let trial: Vec<Vector3<f64>> = x.iter().zip(&step).map(|(a, d)| a + d).collect();
                 let e = self.potential(&trial, x_n, &x_tilde, h, &damping, &contacts);
@@ -1233,19 +1252,7 @@ impl Simulator {
             // (a fold pushed out of a body) no longer shrink everybody else's step, which
             // stalled whole garments at α ≈ 0.1 for every iteration. The clipped direction is
             // still a descent direction when its slope is negative; otherwise scale uniformly.
-            let mut step: Vec<Vector3<f64>> = dx
-                .par_iter()
-                .zip(max_move.par_iter())
-                .map(|(d, &m)| {
-                    let l = d.norm();
-                    if l > m {
-                        d * (m / l)
-                    } else {
-                        *d
-                    }
-                })
-                .collect();
-            let mut clipped = dx.iter().zip(&max_move).any(|(d, &m)| d.norm() > m);
+            let (mut step, mut clipped) = clip_to_limits(&dx, &max_move);
             let mut step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
             if clipped && step_slope >= 0.0 {
                 // Uniform scaling by the tightest vertex's ratio keeps every vertex within its
@@ -1311,6 +1318,7 @@ impl Simulator {
                 break;
             }
         }
+        self.max_move = max_move;
         let t_epilogue = std::time::Instant::now();
         let travelled = x
             .iter()
@@ -1387,23 +1395,19 @@ impl Simulator {
             if !self.free[i] {
                 continue;
             }
-            let e = obstacle_eval(&x_n[i], &t0[0], &t0[1], &t0[2]);
-            let (d, Some(n)) = (e.distance(), e.normal) else {
+            // Distance and its gradient as the repulsion has them; the tangent plane is the
+            // face's.
+            let jet = vertex_obstacle_jet(&[x_n[i], t0[0], t0[1], t0[2]]);
+            let d = jet.d;
+            let Some(n) = (t0[1] - t0[0]).cross(&(t0[2] - t0[0])).try_normalize(1e-20) else {
                 continue;
             };
             if d >= p.dhat_m {
                 continue;
             }
-            let b = e.closest.bary;
-            let q = t0[0] * b[0] + t0[1] * b[1] + t0[2] * b[2];
-            // ∇d: the face normal where the vertex projects onto the face, else from the
-            // closest point.
-            let grad = if e.projects_inside {
-                n
-            } else {
-                (x_n[i] - q).try_normalize(1e-20).unwrap_or(n)
-            };
-            let push = grad * (p.kappa * (p.dhat_m - d));
+            let push = jet.n * (p.kappa * (p.dhat_m - d));
+            // p − q = Σ cᵢ xᵢ with c₀ = 1: the closest point's barycentric weights are −c₁..₃.
+            let b = [-jet.coeffs[1], -jet.coeffs[2], -jet.coeffs[3]];
             let moved = (t1[0] - t0[0]) * b[0] + (t1[1] - t0[1]) * b[1] + (t1[2] - t0[2]) * b[2];
             let slot = per[i].get_or_insert(Acc {
                 d: f64::INFINITY,

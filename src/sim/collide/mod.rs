@@ -478,7 +478,6 @@ pub struct CollisionDetector {
     skipped: usize,
     cloth_tris: CachedBvh,
     cloth_edges: CachedBvh,
-    max_penetration: f64,
     depth: Vec<f64>,
 }
 
@@ -503,7 +502,6 @@ impl CollisionDetector {
             skipped: 0,
             cloth_tris: CachedBvh::default(),
             cloth_edges: CachedBvh::default(),
-            max_penetration: 0.0,
             depth: Vec::new(),
         }
     }
@@ -511,7 +509,7 @@ impl CollisionDetector {
     /// The deepest collider penetration seen by the last [`CollisionDetector::find_contacts`]
     /// (as [`max_penetration`], searched to max(d̂, [`OBSTACLE_SEARCH_M`])).
     pub fn max_penetration(&self) -> f64 {
-        self.max_penetration
+        self.depth.iter().copied().fold(0.0, f64::max)
     }
 
     /// Per cloth vertex, how deep inside a collider the last
@@ -640,7 +638,6 @@ impl CollisionDetector {
                 (depth, out, Some(if depth > 0.0 { 0.0 } else { clear }))
             })
             .collect();
-        self.max_penetration = per_vertex.iter().map(|p| p.0).fold(0.0, f64::max);
         self.depth.clear();
         self.depth.extend(per_vertex.iter().map(|p| p.0));
         self.skipped = per_vertex.iter().filter(|p| p.2.is_none()).count();
