@@ -74,7 +74,9 @@ pub struct SimParams {
     pub cg_rel_tol: f64,
     /// Linear-solve iterations at most.
     pub cg_max_iters: usize,
-    /// How many times a failing step may be halved.
+    /// How many times a failing step may be halved: one that is not finite, finds no energy
+    /// decrease, or still has moves cut short by the move limits after `newton_max_iters`
+    /// (the last halving takes what it gets).
     pub max_halvings: u32,
     /// How bending Hessians are made PSD.
     pub bending_hessian: BendingHessian,
@@ -376,13 +378,12 @@ const SERIAL_BELOW_VERTICES: usize = 4000;
 
 /// Per-vertex move limits of one Newton iteration, m, with self-collision on. Contacts are
 /// detected within d̂ plus a margin, so pairs that were not found are at least that far apart:
-/// while every vertex moves at most half the margin (`wide`), none of them comes within d̂. A
-/// pair that was found (cloth–cloth or cloth–body), at distance d, may close by at most
-/// max(d, 2 × `narrow`): each of its cloth vertices moves at most max(d/2, `narrow`)
-/// (`narrow` = ½ d̂, the limit every vertex had when the margin was d̂). The quadratic
-/// repulsion is finite, so a pair allowed to close by more than its gap could pass through
-/// each other in one iteration to where nothing pushes them back. Only cloth near cloth or a
-/// body is slowed: a falling sheet takes its whole step.
+/// while every vertex moves at most half the margin (`wide`), none of them comes within d̂.
+/// A cloth vertex touching a body, at signed distance d, moves at most max(d/2, `narrow`)
+/// (`narrow` = ½ d̂, the limit every vertex had when the margin was d̂). Cloth–cloth pairs that
+/// were found are not limited here but pair by pair ([`ClosingPair`]), which lets a pair slide
+/// or move together as fast as the wide limit allows and still never pass through. Only cloth
+/// near a body is slowed: a falling sheet takes its whole step.
 fn move_limits(
     x: &[Vector3<f64>],
     contacts: &[Contact],
@@ -395,6 +396,12 @@ fn move_limits(
         return;
     }
     for c in contacts {
+        if !matches!(
+            c,
+            Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. }
+        ) {
+            continue;
+        }
         let l_pair = (0.5 * c.distance(x)).max(narrow);
         for v in c.cloth_dofs().into_iter().flatten() {
             if let Some(l) = limit.get_mut(v as usize) {
@@ -402,6 +409,116 @@ fn move_limits(
             }
         }
     }
+}
+
+/// Most a found cloth–cloth pair may close in one Newton iteration, as a fraction of its gap.
+const PAIR_CLOSE_FRACTION: f64 = 0.8;
+
+/// A found cloth–cloth pair (vertex–triangle or edge–edge) and how far it may close in one
+/// Newton iteration. The quadratic repulsion is finite, so a pair that closes by more than its
+/// gap d within one iteration can land on the other side, where nothing pushes it back, and
+/// the line search, which sees only the end points, accepts it. Along a linear move the gap
+/// closes by at most the largest relative move of a point of one side against a point of the
+/// other, max over i, j of ‖Δaᵢ − Δbⱼ‖ (the bound of additive CCD, Li, Kaufman & Jiang 2021):
+/// keeping that below `PAIR_CLOSE_FRACTION` × d keeps the pair apart for any step length α ≤ 1.
+/// Unlike a per-vertex limit of d/2, it leaves pairs free to slide and to move together.
+#[derive(Debug, Clone, Copy)]
+struct ClosingPair {
+    /// Vertices: side a is `v[..split]`, side b `v[split..]`.
+    v: [u32; 4],
+    /// 1 for vertex–triangle, 2 for edge–edge.
+    split: usize,
+    /// Most the gap may close, m.
+    allowed: f64,
+}
+
+impl ClosingPair {
+    /// The found cloth–cloth pairs of `contacts` at positions `x`.
+    fn all(x: &[Vector3<f64>], contacts: &[Contact]) -> Vec<ClosingPair> {
+        contacts
+            .iter()
+            .filter_map(|c| {
+                let (v, split) = match *c {
+                    Contact::VertexTriangle { v, t } => ([v, t[0], t[1], t[2]], 1),
+                    Contact::EdgeEdge { a, b } => ([a[0], a[1], b[0], b[1]], 2),
+                    _ => return None,
+                };
+                Some(ClosingPair {
+                    v,
+                    split,
+                    allowed: PAIR_CLOSE_FRACTION * c.distance(x),
+                })
+            })
+            .collect()
+    }
+
+    /// Bound on how much the gap closes along `step`: relative (max ‖Δaᵢ − Δbⱼ‖) or absolute
+    /// (max ‖Δaᵢ‖ + max ‖Δbⱼ‖, which only shrinks when any vertex's move does).
+    fn closing(&self, step: &[Vector3<f64>], relative: bool) -> f64 {
+        let d = self.v.map(|i| step[i as usize]);
+        let (a, b) = d.split_at(self.split);
+        if relative {
+            a.iter()
+                .flat_map(|p| b.iter().map(move |q| (p - q).norm()))
+                .fold(0.0, f64::max)
+        } else {
+            let m = |s: &[Vector3<f64>]| s.iter().map(|p| p.norm()).fold(0.0, f64::max);
+            m(a) + m(b)
+        }
+    }
+}
+
+/// Shortens the moves of the vertices of every pair in `pairs` that `step` would close by more
+/// than it may ([`ClosingPair`]); whether any was. Scaling one pair's vertices can undo another
+/// pair's relative bound, so a few passes use the relative bound and a last one the absolute
+/// bound, which later scalings cannot undo: every pair then holds.
+fn limit_pair_closing(step: &mut [Vector3<f64>], pairs: &[ClosingPair]) -> bool {
+    let mut any = false;
+    for pass in 0..4 {
+        let relative = pass < 3;
+        let mut changed = false;
+        for p in pairs {
+            let c = p.closing(step, relative);
+            if c > p.allowed {
+                let s = p.allowed / c;
+                for &i in &p.v {
+                    step[i as usize] *= s;
+                }
+                changed = true;
+            }
+        }
+        any |= changed;
+        if !changed {
+            break;
+        }
+    }
+    any
+}
+
+/// The largest uniform scale of `dx` within the per-vertex limits and the pairs' closing
+/// limits (at most 1).
+fn uniform_limit(dx: &[Vector3<f64>], limit: &[f64], pairs: &[ClosingPair]) -> f64 {
+    let per_vertex = dx
+        .iter()
+        .zip(limit)
+        .map(|(d, &m)| m / d.norm().max(f64::MIN_POSITIVE))
+        .fold(1.0, f64::min);
+    pairs
+        .iter()
+        .map(|p| p.allowed / p.closing(dx, true).max(f64::MIN_POSITIVE))
+        .fold(per_vertex, f64::min)
+}
+
+/// `dx` within the per-vertex limits and the pairs' closing limits; and whether it was
+/// shortened.
+fn limit_step(
+    dx: &[Vector3<f64>],
+    limit: &[f64],
+    pairs: &[ClosingPair],
+) -> (Vec<Vector3<f64>>, bool) {
+    let (mut step, clipped) = clip_to_limits(dx, limit);
+    let paired = limit_pair_closing(&mut step, pairs);
+    (step, clipped || paired)
 }
 
 /// `dx` with each vertex's move shortened to its limit; and whether any was.
@@ -606,7 +723,8 @@ impl Simulator {
     /// obstacle margin (2.5× the last step's largest move), from `detection_margin_m` up to
     /// half the mesh's short edges (see `self_margin_cap`). With the fixed
     /// `detection_margin_m` (d̂) every vertex moved at most ½ d̂ (0.075 edge lengths) per Newton
-    /// iteration; now only those near other cloth do (see `move_limits`).
+    /// iteration; now only cloth near a body is held to that (see `move_limits`), and found
+    /// cloth–cloth pairs close by at most 0.8 of their gap (see `ClosingPair`).
     pub fn self_margin_m(&self) -> f64 {
         self.obstacle_margin_m
             .min(self.self_margin_cap_m)
@@ -752,7 +870,8 @@ impl Simulator {
             from: a,
             to: b,
         };
-        match self.solve_step(state, &end, &motion, h, stats) {
+        let last_resort = depth >= self.params.max_halvings;
+        match self.solve_step(state, &end, &motion, h, last_resort, stats) {
             Ok(s) => Ok(s),
             Err(e) if depth < self.params.max_halvings => {
                 tracing::debug!(
@@ -1077,6 +1196,38 @@ impl Simulator {
         stats
     }
 
+    /// Panels sewn together must be free to meet along the seam: no repulsion between
+    /// vertices that are at most two hops apart through the seam.
+    fn drop_seam_neighbours(&self, contacts: &mut Vec<Contact>) {
+        if self.seam_ring.is_empty() {
+            return;
+        }
+        let near = |a: u32, b: u32| {
+            self.seam_ring
+                .get(&a)
+                .is_some_and(|r| r.binary_search(&b).is_ok())
+        };
+        contacts.retain(|c| match c {
+            Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. } => true,
+            Contact::VertexTriangle { v, t } => !t.iter().any(|&w| near(*v, w)),
+            Contact::EdgeEdge { a, b } => !a.iter().any(|&p| b.iter().any(|&q| near(p, q))),
+        });
+    }
+
+    /// The cloth–cloth contacts at `x`, within d̂ plus the cloth–cloth margin.
+    fn self_contacts(&mut self, x: &[Vector3<f64>]) -> Vec<Contact> {
+        let mut params = self.params.collision;
+        params.dhat_m += self.self_margin_m();
+        let mut contacts = self.detector.find_self_contacts(
+            x,
+            &self.model.mesh.triangles,
+            &self.model.edges,
+            &params,
+        );
+        self.drop_seam_neighbours(&mut contacts);
+        contacts
+    }
+
     fn contacts(&mut self, x: &[Vector3<f64>], colliders: &[ColliderFrame<'_>]) -> Vec<Contact> {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
         let mut params = self.params.collision;
@@ -1090,20 +1241,7 @@ impl Simulator {
             &bodies,
             &params,
         );
-        // Panels sewn together must be free to meet along the seam: no repulsion between
-        // vertices that are at most two hops apart through the seam.
-        if !self.seam_ring.is_empty() {
-            let near = |a: u32, b: u32| {
-                self.seam_ring
-                    .get(&a)
-                    .is_some_and(|r| r.binary_search(&b).is_ok())
-            };
-            contacts.retain(|c| match c {
-                Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. } => true,
-                Contact::VertexTriangle { v, t } => !t.iter().any(|&w| near(*v, w)),
-                Contact::EdgeEdge { a, b } => !a.iter().any(|&p| b.iter().any(|&q| near(p, q))),
-            });
-        }
+        self.drop_seam_neighbours(&mut contacts);
         if tracing::enabled!(tracing::Level::DEBUG) {
             let mut kinds = [0usize; 4];
             for c in &contacts {
@@ -1132,6 +1270,7 @@ impl Simulator {
         colliders: &[ColliderFrame<'_>],
         motion: &BodyMotion<'_, '_>,
         h: f64,
+        last_resort: bool,
         stats: &mut StepStats,
     ) -> Result<SimState> {
         let t_prelude = std::time::Instant::now();
@@ -1156,6 +1295,21 @@ impl Simulator {
             .collect();
         // Start from the inertial prediction without gravity: free flight is then one step away.
         let mut x: Vec<Vector3<f64>> = (0..n).map(|i| x_n[i] + state.v[i] * h).collect();
+        if self.params.collision.self_collision {
+            // That start is a move like any Newton step's, and must not carry cloth through
+            // cloth: layers closing faster than their gap per step crossed in the initial
+            // guess, before any contact was looked for there (the circle skirt on the walking
+            // avatar tangled so). Limited as a Newton step is, against the pairs at xₙ.
+            let pairs = ClosingPair::all(x_n, &self.self_contacts(x_n));
+            let inertial: Vec<Vector3<f64>> = state.v.iter().map(|v| v * h).collect();
+            let wide = (0.5 * self.self_margin_m()).min(self.params.move_cap_m.max(0.0));
+            let (step, clipped) = limit_step(&inertial, &vec![wide; n], &pairs);
+            if clipped {
+                x.iter_mut()
+                    .zip(x_n.iter().zip(&step))
+                    .for_each(|(x, (a, d))| *x = a + d);
+            }
+        }
         for pin in &self.pins {
             let p = self.pin_position(pin, colliders);
             x[pin.v as usize] = p;
@@ -1199,6 +1353,7 @@ impl Simulator {
                 damping.friction = self.friction_points(x_n, &contacts, motion);
             }
             move_limits(&x, &contacts, narrow_move, wide_move, &mut max_move);
+            let pairs = ClosingPair::all(&x, &contacts);
             let t_assemble = std::time::Instant::now();
             energy = self.assemble(&x, x_n, &x_tilde, h, &damping, &contacts);
             let t_solve = std::time::Instant::now();
@@ -1236,7 +1391,7 @@ impl Simulator {
                 // limits, if its energy decreases). Dropped, it was each step's gravity
                 // increment once air damping nearly balanced it (h²(g − αv) < tol):
                 // free-falling cloth stopped accelerating at 0.81 m/s.
-                let (step, _) = clip_to_limits(&dx, &max_move);
+                let (step, _) = limit_step(&dx, &max_move, &pairs);
                 let step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
                 let trial: Vec<Vector3<f64>> = x.iter().zip(&step).map(|(a, d)| a + d).collect();
                 let e = self.potential(&trial, x_n, &x_tilde, h, &damping, &contacts);
@@ -1252,16 +1407,12 @@ impl Simulator {
             // (a fold pushed out of a body) no longer shrink everybody else's step, which
             // stalled whole garments at α ≈ 0.1 for every iteration. The clipped direction is
             // still a descent direction when its slope is negative; otherwise scale uniformly.
-            let (mut step, mut clipped) = clip_to_limits(&dx, &max_move);
+            let (mut step, mut clipped) = limit_step(&dx, &max_move, &pairs);
             let mut step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
             if clipped && step_slope >= 0.0 {
-                // Uniform scaling by the tightest vertex's ratio keeps every vertex within its
+                // Uniform scaling by the tightest ratio keeps every vertex and pair within its
                 // limit.
-                let s = dx
-                    .iter()
-                    .zip(&max_move)
-                    .map(|(d, &m)| m / d.norm().max(f64::MIN_POSITIVE))
-                    .fold(1.0, f64::min);
+                let s = uniform_limit(&dx, &max_move, &pairs);
                 step.iter_mut().zip(&dx).for_each(|(o, d)| *o = d * s);
                 step_slope = slope * s;
             }
@@ -1316,6 +1467,18 @@ impl Simulator {
             self.dx = dx;
             if moved < self.params.newton_tol_m || (!self.params.newton_exact && !clipped) {
                 break;
+            }
+            // Out of iterations with moves still cut short: the cloth lags where it should be
+            // (a leg pushing a fold of skirt into the other layer). Taken as it is, the body
+            // runs into cloth that could not follow; half the step asks half the move.
+            if it + 1 == self.params.newton_max_iters && clipped && !last_resort {
+                self.dx = vec![Vector3::zeros(); n];
+                self.max_move = max_move;
+                return Err(Error::Simulation(format!(
+                    "the move limits still held vertices back after {} Newton iterations at t = {:.5} s",
+                    it + 1,
+                    state.t_s
+                )));
             }
         }
         self.max_move = max_move;
@@ -1498,20 +1661,34 @@ mod tests {
         assert!((h * f.n).norm() < 1e-9 * h.norm());
     }
 
-    /// Vertices in no contact pair may move the wide limit; those of a found pair at distance
-    /// d move at most max(d/2, narrow); obstacle contacts count for their cloth vertex only.
+    /// Vertices in no contact pair may move the wide limit; a cloth vertex touching a body at
+    /// distance d at most max(d/2, narrow); cloth–cloth pairs are left to [`ClosingPair`].
     #[test]
-    fn move_limits_hold_back_only_vertices_near_other_cloth_or_a_body() {
-        let x: Vec<Vector3<f64>> = vec![
+    fn move_limits_hold_back_only_cloth_near_a_body() {
+        let tri = [
             Vector3::new(0.0, 0.0, 0.0),
             Vector3::new(1.0, 0.0, 0.0),
             Vector3::new(0.0, 1.0, 0.0),
-            Vector3::new(0.2, 0.2, 0.004),  // 4 mm above triangle 0-1-2
+        ];
+        let x: Vec<Vector3<f64>> = vec![
+            tri[0],
+            tri[1],
+            tri[2],
+            Vector3::new(0.2, 0.2, 0.004), // 4 mm above the body triangle
             Vector3::new(0.3, 0.3, 0.0005), // 0.5 mm above it
-            Vector3::new(5.0, 5.0, 5.0),    // far from everything
+            Vector3::new(5.0, 5.0, 5.0),   // far from everything
         ];
         let contacts = vec![
-            Contact::VertexTriangle { v: 3, t: [0, 1, 2] },
+            Contact::VertexObstacle {
+                v: 3,
+                tri,
+                face: [0, 0],
+            },
+            Contact::VertexObstacle {
+                v: 4,
+                tri,
+                face: [0, 0],
+            },
             Contact::VertexTriangle { v: 4, t: [0, 1, 2] },
         ];
         let (narrow, wide) = (0.0015, 0.004);
@@ -1520,10 +1697,87 @@ mod tests {
         assert_eq!(limit[5], wide);
         assert!((limit[3] - 0.002).abs() < 1e-12, "{}", limit[3]);
         assert_eq!(limit[4], narrow);
-        // The triangle's vertices take the tightest of their pairs.
-        assert_eq!(limit[0], narrow);
+        // The cloth triangle's vertices are in a cloth–cloth pair only: not limited here.
+        assert_eq!(limit[0], wide);
         // Self-collision off (narrow = wide): every vertex moves the whole margin.
         move_limits(&x, &contacts, wide, wide, &mut limit);
         assert!(limit.iter().all(|&l| l == wide));
+    }
+
+    /// After `limit_pair_closing`, no found pair comes closer than (1 − 0.8) of its gap
+    /// anywhere along the step, sampled finely, for random close pairs and random steps many
+    /// times their gap; a pair moving together or sliding is left alone.
+    #[test]
+    fn limited_steps_never_close_a_pair_past_its_gap() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut r = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut limited = 0;
+        for case in 0..400 {
+            // A triangle, a vertex above it, an edge above it and one of its own edges; a few
+            // millimetres apart.
+            let mut x: Vec<Vector3<f64>> = vec![
+                Vector3::new(0.0, 0.0, 0.0),
+                Vector3::new(0.02, 0.0, 0.0),
+                Vector3::new(0.0, 0.02, 0.0),
+            ];
+            x.push(Vector3::new(
+                0.005 + 0.01 * r(),
+                0.005 + 0.01 * r(),
+                0.002 + 0.003 * r(),
+            ));
+            x.push(Vector3::new(0.003, 0.01 + 0.01 * r(), 0.004 + 0.003 * r()));
+            x.push(Vector3::new(0.012, -0.01 + 0.01 * r(), 0.003 + 0.003 * r()));
+            let contacts = vec![
+                Contact::VertexTriangle { v: 3, t: [0, 1, 2] },
+                Contact::VertexTriangle { v: 4, t: [0, 1, 2] },
+                Contact::EdgeEdge {
+                    a: [4, 5],
+                    b: [1, 2],
+                },
+                Contact::EdgeEdge {
+                    a: [3, 4],
+                    b: [0, 2],
+                },
+            ];
+            let pairs = ClosingPair::all(&x, &contacts);
+            let dx: Vec<Vector3<f64>> = (0..x.len())
+                .map(|_| Vector3::new(r(), r(), r()) * 0.03)
+                .collect();
+            let mut step = dx.clone();
+            if limit_pair_closing(&mut step, &pairs) {
+                limited += 1;
+            }
+            for (s, d) in step.iter().zip(&dx) {
+                assert!(s.norm() <= d.norm() * (1.0 + 1e-12), "only shortened");
+            }
+            for (c, p) in contacts.iter().zip(&pairs) {
+                let d0 = c.distance(&x);
+                for k in 0..=200 {
+                    let t = k as f64 / 200.0;
+                    let y: Vec<Vector3<f64>> =
+                        x.iter().zip(&step).map(|(a, s)| a + s * t).collect();
+                    let d = c.distance(&y);
+                    assert!(
+                        d >= d0 - p.allowed - 1e-12,
+                        "case {case}: {c:?} from {d0} to {d} at t = {t}"
+                    );
+                }
+            }
+            // The whole configuration moving rigidly (a translation) is never shortened.
+            let shift = Vector3::new(r(), r(), r()) * 0.05;
+            let mut together = vec![shift; x.len()];
+            assert!(!limit_pair_closing(&mut together, &pairs));
+            assert!(together.iter().all(|s| *s == shift));
+            x.clear();
+        }
+        assert!(
+            limited > 300,
+            "most random steps had to be limited: {limited}"
+        );
     }
 }

@@ -680,6 +680,35 @@ impl CollisionDetector {
             }
         }
 
+        self.find_self_contacts_into(cloth_x, cloth_tris, cloth_edges, params, &mut contacts);
+        contacts
+    }
+
+    /// The cloth–cloth contacts alone (vertex–triangle, then edge–edge), as
+    /// [`CollisionDetector::find_contacts`] finds them; colliders and their caches are left
+    /// untouched. Empty when `params.self_collision` is off.
+    pub fn find_self_contacts(
+        &mut self,
+        cloth_x: &[Vector3<f64>],
+        cloth_tris: &[[u32; 3]],
+        cloth_edges: &[[u32; 2]],
+        params: &CollisionParams,
+    ) -> Vec<Contact> {
+        let mut contacts = Vec::new();
+        self.find_self_contacts_into(cloth_x, cloth_tris, cloth_edges, params, &mut contacts);
+        contacts
+    }
+
+    fn find_self_contacts_into(
+        &mut self,
+        cloth_x: &[Vector3<f64>],
+        cloth_tris: &[[u32; 3]],
+        cloth_edges: &[[u32; 2]],
+        params: &CollisionParams,
+        contacts: &mut Vec<Contact>,
+    ) {
+        let dhat = params.dhat_m.max(0.0);
+        let rebuild_every = self.rebuild_every;
         if params.self_collision && dhat > 0.0 && !cloth_tris.is_empty() {
             self.cloth_tris.update(
                 cloth_tris.as_flattened(),
@@ -725,7 +754,6 @@ impl CollisionDetector {
             });
             contacts.extend(ee);
         }
-        contacts
     }
 }
 
