@@ -1214,20 +1214,6 @@ impl Simulator {
         });
     }
 
-    /// The cloth–cloth contacts at `x`, within d̂ plus the cloth–cloth margin.
-    fn self_contacts(&mut self, x: &[Vector3<f64>]) -> Vec<Contact> {
-        let mut params = self.params.collision;
-        params.dhat_m += self.self_margin_m();
-        let mut contacts = self.detector.find_self_contacts(
-            x,
-            &self.model.mesh.triangles,
-            &self.model.edges,
-            &params,
-        );
-        self.drop_seam_neighbours(&mut contacts);
-        contacts
-    }
-
     fn contacts(&mut self, x: &[Vector3<f64>], colliders: &[ColliderFrame<'_>]) -> Vec<Contact> {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
         let mut params = self.params.collision;
@@ -1299,14 +1285,22 @@ impl Simulator {
             // That start is a move like any Newton step's, and must not carry cloth through
             // cloth: layers closing faster than their gap per step crossed in the initial
             // guess, before any contact was looked for there (the circle skirt on the walking
-            // avatar tangled so). Limited as a Newton step is, against the pairs at xₙ.
-            let pairs = ClosingPair::all(x_n, &self.self_contacts(x_n));
-            let inertial: Vec<Vector3<f64>> = state.v.iter().map(|v| v * h).collect();
-            let wide = (0.5 * self.self_margin_m()).min(self.params.move_cap_m.max(0.0));
-            let (step, clipped) = limit_step(&inertial, &vec![wide; n], &pairs);
-            if clipped {
+            // avatar tangled so). The pairs that may meet on the way (swept boxes) close by
+            // at most 0.8 of their gap at xₙ ([`ClosingPair`]); cloth moving together, as a
+            // falling sheet, keeps its whole inertial move.
+            let mut pairs = self.detector.find_swept_self_pairs(
+                x_n,
+                &x,
+                &self.model.mesh.triangles,
+                &self.model.edges,
+                self.params.collision.dhat_m,
+            );
+            self.drop_seam_neighbours(&mut pairs);
+            let pairs = ClosingPair::all(x_n, &pairs);
+            let mut inertial: Vec<Vector3<f64>> = state.v.iter().map(|v| v * h).collect();
+            if limit_pair_closing(&mut inertial, &pairs) {
                 x.iter_mut()
-                    .zip(x_n.iter().zip(&step))
+                    .zip(x_n.iter().zip(&inertial))
                     .for_each(|(x, (a, d))| *x = a + d);
             }
         }

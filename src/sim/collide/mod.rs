@@ -684,19 +684,79 @@ impl CollisionDetector {
         contacts
     }
 
-    /// The cloth–cloth contacts alone (vertex–triangle, then edge–edge), as
-    /// [`CollisionDetector::find_contacts`] finds them; colliders and their caches are left
-    /// untouched. Empty when `params.self_collision` is off.
-    pub fn find_self_contacts(
+    /// Cloth–cloth pairs (vertex–triangle, then edge–edge) that may come within `r` of each
+    /// other while every vertex moves on a straight line from `x0` to `x1`: those whose swept
+    /// boxes (inflated by `r`) overlap and whose gap at `x0` less the most it can close
+    /// (the largest relative move of a point of one side against one of the other) is under
+    /// `r`. Cloth moving together makes few: its neighbours' relative moves are small.
+    pub fn find_swept_self_pairs(
         &mut self,
-        cloth_x: &[Vector3<f64>],
+        x0: &[Vector3<f64>],
+        x1: &[Vector3<f64>],
         cloth_tris: &[[u32; 3]],
         cloth_edges: &[[u32; 2]],
-        params: &CollisionParams,
+        r: f64,
     ) -> Vec<Contact> {
-        let mut contacts = Vec::new();
-        self.find_self_contacts_into(cloth_x, cloth_tris, cloth_edges, params, &mut contacts);
-        contacts
+        let mut out = Vec::new();
+        if x0.len() != x1.len() || r.is_nan() || r <= 0.0 {
+            return out;
+        }
+        let rebuild_every = self.rebuild_every;
+        let swept = |ids: &[u32], pad: f64| {
+            Aabb::from_points(ids.iter().flat_map(|&i| [&x0[i as usize], &x1[i as usize]]))
+                .inflate(pad)
+        };
+        let closing = |a: &[u32], b: &[u32]| {
+            a.iter()
+                .flat_map(|&i| {
+                    b.iter().map(move |&j| {
+                        ((x1[i as usize] - x0[i as usize]) - (x1[j as usize] - x0[j as usize]))
+                            .norm()
+                    })
+                })
+                .fold(0.0, f64::max)
+        };
+        if !cloth_tris.is_empty() {
+            let boxes: Vec<Aabb> = cloth_tris.par_iter().map(|t| swept(t, r)).collect();
+            self.cloth_tris
+                .update(cloth_tris.as_flattened(), &boxes, rebuild_every);
+            let tri_bvh = &self.cloth_tris.bvh;
+            let vt: Vec<Vec<Contact>> = (0..x0.len() as u32)
+                .into_par_iter()
+                .map(|v| {
+                    let mut found = Vec::new();
+                    tri_bvh.query(&swept(&[v], 0.0), |t| {
+                        let t = cloth_tris[t as usize];
+                        if t.contains(&v) {
+                            return;
+                        }
+                        let [a, b, c] = tri_points(x0, &t);
+                        let d = point_triangle(&x0[v as usize], &a, &b, &c).dist;
+                        if d - closing(&[v], &t) < r {
+                            found.push(Contact::VertexTriangle { v, t });
+                        }
+                    });
+                    found
+                })
+                .collect();
+            out.extend(vt.into_iter().flatten());
+        }
+        if !cloth_edges.is_empty() {
+            let boxes: Vec<Aabb> = cloth_edges.par_iter().map(|e| swept(e, 0.5 * r)).collect();
+            self.cloth_edges
+                .update(cloth_edges.as_flattened(), &boxes, rebuild_every);
+            let ee = self.cloth_edges.bvh.self_pairs_filter_map(|i, j| {
+                let (a, b) = (cloth_edges[i as usize], cloth_edges[j as usize]);
+                if a.contains(&b[0]) || a.contains(&b[1]) {
+                    return None;
+                }
+                let x = |k: u32| &x0[k as usize];
+                let d = segment_segment(x(a[0]), x(a[1]), x(b[0]), x(b[1])).dist;
+                (d - closing(&a, &b) < r).then_some(Contact::EdgeEdge { a, b })
+            });
+            out.extend(ee);
+        }
+        out
     }
 
     fn find_self_contacts_into(
@@ -1329,5 +1389,58 @@ mod tests {
         );
         assert_eq!(c1, c2);
         assert!(c2.len() > 1000);
+    }
+}
+
+#[cfg(test)]
+mod swept_tests {
+    use super::*;
+
+    /// A vertex that flies through a triangle from 5 cm away is found; one that moves as fast
+    /// alongside it, and one that flies past outside it, are not; nor is a vertex that moves
+    /// with the triangle, however far.
+    #[test]
+    fn swept_pairs_are_those_that_may_meet_on_the_way() {
+        let tri = [[0u32, 1, 2]];
+        let base = [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(0.1, 0.0, 0.0),
+            Vector3::new(0.0, 0.1, 0.0),
+        ];
+        let r = 0.003;
+        let pairs = |p0: Vector3<f64>, p1: Vector3<f64>, tri_move: Vector3<f64>| {
+            let mut x0 = base.to_vec();
+            x0.push(p0);
+            let mut x1: Vec<Vector3<f64>> = base.iter().map(|p| p + tri_move).collect();
+            x1.push(p1);
+            let mut det = CollisionDetector::new();
+            det.find_swept_self_pairs(&x0, &x1, &tri, &[], r)
+        };
+        let still = Vector3::zeros();
+        let through = pairs(
+            Vector3::new(0.02, 0.02, 0.05),
+            Vector3::new(0.02, 0.02, -0.05),
+            still,
+        );
+        assert_eq!(through.len(), 1, "{through:?}");
+        assert!(matches!(through[0], Contact::VertexTriangle { v: 3, .. }));
+        let alongside = pairs(
+            Vector3::new(0.02, 0.02, 0.05),
+            Vector3::new(0.07, 0.02, 0.05),
+            still,
+        );
+        assert!(alongside.is_empty(), "{alongside:?}");
+        let past = pairs(
+            Vector3::new(0.2, 0.2, 0.05),
+            Vector3::new(0.2, 0.2, -0.05),
+            still,
+        );
+        assert!(past.is_empty(), "{past:?}");
+        let together = pairs(
+            Vector3::new(0.02, 0.02, 0.05),
+            Vector3::new(0.02, 0.02, -0.05),
+            Vector3::new(0.0, 0.0, -0.1),
+        );
+        assert!(together.is_empty(), "{together:?}");
     }
 }
