@@ -18,7 +18,9 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::collide::repulsion::vertex_obstacle_jet;
-use super::collide::{Collider, CollisionDetector, CollisionParams, Contact};
+use super::collide::{
+    edge_triangle_crossings, Collider, CollisionDetector, CollisionParams, Contact,
+};
 use super::energy::bending::{self, BendingHessian};
 use super::energy::{sewing, Mat12, Vec12, Vec9};
 use super::model::ClothModel;
@@ -738,6 +740,21 @@ impl Simulator {
                 .min(MAX_OBSTACLE_MARGIN_M)
                 .max(self.params.detection_margin_m);
         }
+    }
+
+    /// The cloth's edge–triangle crossings at `x` ([`edge_triangle_crossings`]), leaving out
+    /// pairs next to each other through a seam (sewn panels meet there within the seam gap):
+    /// 0 for cloth that never passed through itself.
+    pub fn self_intersections(&self, x: &[Vector3<f64>]) -> usize {
+        let near = |a: u32, b: u32| {
+            self.seam_ring
+                .get(&a)
+                .is_some_and(|r| r.binary_search(&b).is_ok())
+        };
+        edge_triangle_crossings(x, &self.model.mesh.triangles, &self.model.edges, |e, t| {
+            !e.iter().any(|&p| t.iter().any(|&q| near(p, q)))
+        })
+        .len()
     }
 
     /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
