@@ -426,10 +426,11 @@ const PAIR_CLOSE_FRACTION: f64 = 0.8;
 /// - isotropic: the largest relative move of a vertex of one side against one of the other,
 ///   max ‖Δaᵢ − Δbⱼ‖ (the bound of additive CCD, Li, Kaufman & Jiang 2021);
 /// - normal: with c_a, c_b the moves of the closest points (their barycentric blends) and n
-///   the unit vector from b's closest point to a's, max(0, −n·(c_a − c_b)) + max ‖Δaᵢ − c_a‖
-///   + max ‖Δbⱼ − c_b‖. Each side is within its vertices' deviation of its closest point's
-///   translate, and the distance between two convex sets is convex in their relative
-///   translation, so it stays above its tangent. Layers sliding over each other close by ~0.
+///   the unit vector from b's closest point to a's,
+///   max(0, −n·(c_a − c_b)) + max ‖Δaᵢ − c_a‖ + max ‖Δbⱼ − c_b‖. Each side is within its
+///   vertices' deviation of its closest point's translate, and the distance between two
+///   convex sets is convex in their relative translation, so it stays above its tangent.
+///   Layers sliding over each other close by ~0.
 ///
 /// The smaller is kept below `PAIR_CLOSE_FRACTION` × d.
 #[derive(Debug, Clone, Copy)]
