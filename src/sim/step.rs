@@ -316,8 +316,7 @@ pub struct Simulator {
     mem_set: MembraneSet,
     hinge_set: HingeSet,
     detector: CollisionDetector,
-    /// For vertices within one hop of a seam: every vertex at most two hops away through mesh
-    /// edges and seam pairs (sorted).
+    /// For sewn vertices: the vertices sewn to them (sorted; see [`seam_rings`]).
     seam_ring: std::collections::HashMap<u32, Vec<u32>>,
     cholesky: Option<CholeskyPreconditioner>,
     two_level: Option<TwoLevel>,
@@ -657,35 +656,50 @@ fn stack<const N: usize, const M: usize>(p: &[Vector3<f64>; N]) -> nalgebra::SVe
     out
 }
 
-/// Two-hop neighbourhoods (mesh edges + seam pairs) of the vertices within one hop of a seam.
+/// For each sewn vertex, the other vertices sewn to it (directly or through others: the
+/// classes of the seam pairs), sorted. Contacts between them are dropped, as a mesh with its
+/// seams welded would have no contact between a vertex and a triangle or edge it belongs to.
+/// The two-hop neighbourhoods used before left cloth within two edges of a seam with no
+/// repulsion: the circle skirt's panels crossed each other there for a few frames.
 fn seam_rings(model: &ClothModel) -> std::collections::HashMap<u32, Vec<u32>> {
     use std::collections::HashMap;
     let seams = &model.mesh.seam_pairs;
-    if seams.is_empty() {
-        return HashMap::new();
-    }
-    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); model.num_vertices()];
-    for e in model.edges.iter().chain(seams.iter()) {
-        adj[e[0] as usize].push(e[1]);
-        adj[e[1] as usize].push(e[0]);
-    }
-    let mut band: Vec<u32> = seams.iter().flatten().copied().collect();
-    for p in seams.iter().flatten() {
-        band.extend_from_slice(&adj[*p as usize]);
-    }
-    band.sort_unstable();
-    band.dedup();
-    band.into_iter()
-        .map(|v| {
-            let mut ring: Vec<u32> = adj[v as usize].clone();
-            for w in &adj[v as usize] {
-                ring.extend_from_slice(&adj[*w as usize]);
+    let mut parent: HashMap<u32, u32> = HashMap::new();
+    fn root(parent: &mut HashMap<u32, u32>, v: u32) -> u32 {
+        let mut r = v;
+        while let Some(&p) = parent.get(&r) {
+            if p == r {
+                break;
             }
-            ring.sort_unstable();
-            ring.dedup();
-            (v, ring)
-        })
-        .collect()
+            r = p;
+        }
+        parent.insert(v, r);
+        r
+    }
+    for p in seams {
+        for &v in p {
+            parent.entry(v).or_insert(v);
+        }
+        let (a, b) = (root(&mut parent, p[0]), root(&mut parent, p[1]));
+        if a != b {
+            parent.insert(a.max(b), a.min(b));
+        }
+    }
+    let vertices: Vec<u32> = parent.keys().copied().collect();
+    let mut classes: HashMap<u32, Vec<u32>> = HashMap::new();
+    for v in vertices {
+        let r = root(&mut parent, v);
+        classes.entry(r).or_default().push(v);
+    }
+    let mut rings = HashMap::new();
+    for members in classes.values() {
+        let mut sorted = members.clone();
+        sorted.sort_unstable();
+        for &v in members {
+            rings.insert(v, sorted.iter().copied().filter(|&w| w != v).collect());
+        }
+    }
+    rings
 }
 
 impl Simulator {
@@ -1254,8 +1268,8 @@ impl Simulator {
         stats
     }
 
-    /// Panels sewn together must be free to meet along the seam: no repulsion between
-    /// vertices that are at most two hops apart through the seam.
+    /// Panels sewn together must be free to meet along the seam: no repulsion between a
+    /// vertex and a triangle or edge holding a vertex sewn to it ([`seam_rings`]).
     fn drop_seam_neighbours(&self, contacts: &mut Vec<Contact>) {
         if self.seam_ring.is_empty() {
             return;
