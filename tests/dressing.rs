@@ -13,6 +13,24 @@ fn shared(path: &str) -> PathBuf {
         .join(path)
 }
 
+/// A cotton GarmentCode pattern (`pattern`, under the shared data) at 20 mm with the walking
+/// avatar as collider, fast solver.
+fn on_the_walking_avatar(pattern: &str) -> Simulation {
+    let fabric = Fabric::preset("cotton").expect("preset");
+    let mut scene = Scene::load(&shared(pattern), &fabric).expect("pattern");
+    scene
+        .add_collider_file(&shared("avatars/mh_walk_train_baked.usdc"))
+        .expect("avatar");
+    Simulation::new(&scene, 0.02, |p| p.newton_exact = false).expect("set-up")
+}
+
+/// The avatar's points at the simulation's time.
+fn body_now(sim: &Simulation) -> Vec<nalgebra::Vector3<f64>> {
+    let mut pts = Vec::new();
+    sim.colliders[0].positions_at(sim.state.t_s, &mut pts);
+    pts
+}
+
 /// Issue 3: the pencil skirt (zero ease at the hips) used to stall with its side seams 36 mm
 /// open: GarmentCode's flat front and back panels pulled their seams through the hips, and
 /// friction held the hem on the legs. Dressed, it then crumpled as soon as the avatar walked
@@ -20,16 +38,8 @@ fn shared(path: &str) -> PathBuf {
 /// velocity against legs striding under it and moved vertices along faces into the body.
 #[test]
 fn issue_3_pencil_skirt_closes_around_the_walking_avatar_and_walks_with_it() {
-    let fabric = Fabric::preset("cotton").expect("preset");
-    let mut scene = Scene::load(
-        &shared("patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json"),
-        &fabric,
-    )
-    .expect("pattern");
-    scene
-        .add_collider_file(&shared("avatars/mh_walk_train_baked.usdc"))
-        .expect("avatar");
-    let mut sim = Simulation::new(&scene, 0.02, |p| p.newton_exact = false).expect("set-up");
+    let mut sim =
+        on_the_walking_avatar("patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json");
     let dhat_m = sim.sim.params.collision.dhat_m;
     let d = sim.dress(0.8, 0.1, 1e-3).expect("dressing");
     // Front and back of the skirt and of its waistband face the body: all four are rolled.
@@ -55,11 +65,6 @@ fn issue_3_pencil_skirt_closes_around_the_walking_avatar_and_walks_with_it() {
 
     // Half a second of walking: the skirt stays outside the body and goes along with it (no
     // vertex far from the body, which walks 0.3 m meanwhile).
-    let body_now = |sim: &Simulation| {
-        let mut pts = Vec::new();
-        sim.colliders[0].positions_at(sim.state.t_s, &mut pts);
-        pts
-    };
     let start = body_now(&sim);
     for frame in 1..=15 {
         let f = sim.advance_frame(|_| {}).expect("walking");
@@ -95,28 +100,15 @@ fn issue_3_pencil_skirt_closes_around_the_walking_avatar_and_walks_with_it() {
 /// its triangles, and no vertex goes into the body, through the stride that tangled it.
 #[test]
 fn issue_3_circle_skirt_walks_without_passing_through_itself() {
-    let fabric = Fabric::preset("cotton").expect("preset");
-    let mut scene = Scene::load(
-        &shared("patterns/mh_skirt_circle/mh_skirt_circle_specification.json"),
-        &fabric,
-    )
-    .expect("pattern");
-    scene
-        .add_collider_file(&shared("avatars/mh_walk_train_baked.usdc"))
-        .expect("avatar");
-    let mut sim = Simulation::new(&scene, 0.02, |p| p.newton_exact = false).expect("set-up");
+    let mut sim =
+        on_the_walking_avatar("patterns/mh_skirt_circle/mh_skirt_circle_specification.json");
     let dhat_m = sim.sim.params.collision.dhat_m;
     let d = sim.dress(2.0, 0.3, 1e-3).expect("dressing");
     assert!(d.seam_gap_m < 2e-3, "{d:?}");
     assert_eq!(sim.sim.self_intersections(&sim.state.x), 0, "dressed");
     let centroid =
         |p: &[nalgebra::Vector3<f64>]| p.iter().sum::<nalgebra::Vector3<f64>>() / p.len() as f64;
-    let body_now = |sim: &Simulation| {
-        let mut pts = Vec::new();
-        sim.colliders[0].positions_at(sim.state.t_s, &mut pts);
-        centroid(&pts)
-    };
-    let (body0, skirt0) = (body_now(&sim), centroid(&sim.state.x));
+    let (body0, skirt0) = (centroid(&body_now(&sim)), centroid(&sim.state.x));
     for frame in 1..=20 {
         let f = sim.advance_frame(|_| {}).expect("walking");
         assert!(
@@ -131,7 +123,7 @@ fn issue_3_circle_skirt_walks_without_passing_through_itself() {
         );
     }
     // It goes along with the body (which walks about 0.4 m meanwhile).
-    let walked = body_now(&sim) - body0;
+    let walked = centroid(&body_now(&sim)) - body0;
     let carried = centroid(&sim.state.x) - skirt0;
     assert!(walked.norm() > 0.25, "the avatar walks: {walked}");
     assert!(

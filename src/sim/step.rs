@@ -801,15 +801,19 @@ impl Simulator {
     /// pairs next to each other through a seam (sewn panels meet there within the seam gap):
     /// 0 for cloth that never passed through itself.
     pub fn self_intersections(&self, x: &[Vector3<f64>]) -> usize {
-        let near = |a: u32, b: u32| {
-            self.seam_ring
-                .get(&a)
-                .is_some_and(|r| r.binary_search(&b).is_ok())
-        };
         edge_triangle_crossings(x, &self.model.mesh.triangles, &self.model.edges, |e, t| {
-            !e.iter().any(|&p| t.iter().any(|&q| near(p, q)))
+            !self.sewn_together(&e, &t)
         })
         .len()
+    }
+
+    /// Whether a vertex of `a` is sewn to a vertex of `b` ([`seam_rings`]).
+    fn sewn_together(&self, a: &[u32], b: &[u32]) -> bool {
+        a.iter().any(|p| {
+            self.seam_ring
+                .get(p)
+                .is_some_and(|r| b.iter().any(|q| r.binary_search(q).is_ok()))
+        })
     }
 
     /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
@@ -1274,15 +1278,10 @@ impl Simulator {
         if self.seam_ring.is_empty() {
             return;
         }
-        let near = |a: u32, b: u32| {
-            self.seam_ring
-                .get(&a)
-                .is_some_and(|r| r.binary_search(&b).is_ok())
-        };
         contacts.retain(|c| match c {
             Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. } => true,
-            Contact::VertexTriangle { v, t } => !t.iter().any(|&w| near(*v, w)),
-            Contact::EdgeEdge { a, b } => !a.iter().any(|&p| b.iter().any(|&q| near(p, q))),
+            Contact::VertexTriangle { v, t } => !self.sewn_together(&[*v], t),
+            Contact::EdgeEdge { a, b } => !self.sewn_together(a, b),
         });
     }
 

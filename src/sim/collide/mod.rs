@@ -1443,9 +1443,6 @@ mod tests {
 mod swept_tests {
     use super::*;
 
-    /// A vertex that flies through a triangle from 5 cm away is found; one that moves as fast
-    /// alongside it, and one that flies past outside it, are not; nor is a vertex that moves
-    /// with the triangle, however far.
     /// An edge through the middle of a triangle crosses it; one beside it, one above it and
     /// one sharing a vertex with it do not.
     #[test]
@@ -1467,6 +1464,9 @@ mod swept_tests {
         assert!(edge_triangle_crossings(&x, &tris, &edges, |e, _| e != [3, 4]).is_empty());
     }
 
+    /// A vertex that flies through a triangle from 5 cm away is found; one that moves as fast
+    /// alongside it, and one that flies past outside it, are not; nor is a vertex that moves
+    /// with the triangle, however far.
     #[test]
     fn swept_pairs_are_those_that_may_meet_on_the_way() {
         let tri = [[0u32, 1, 2]];
