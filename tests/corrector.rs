@@ -121,6 +121,10 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
     );
 }
 
+fn g_inv_mass(g: &MeshGraph) -> Vec<f32> {
+    clothsr::corrector::model::inverse_masses(&g.mass)
+}
+
 fn dist(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum()
 }
@@ -133,12 +137,13 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         sim: None,
     }];
     let norm = fit_normalisation(&sets);
-    for attention in [false, true] {
+    for (attention, momentum) in [(false, false), (true, false), (false, true), (true, true)] {
         let cfg = TrainingConfig::new(
             CorrectorConfig::new()
                 .with_latent(16)
                 .with_steps(3)
-                .with_attention(attention),
+                .with_attention(attention)
+                .with_momentum_decoder(Some(momentum)),
         );
         let device = default_device().expect("device");
         let net = cfg.model.init(&device);
@@ -160,7 +165,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         norm.targets.invert(&mut expect);
         let p = loaded.predict(&x, &v, &st.body).expect("predict");
         for (a, b) in p.iter().flat_map(|p| p.iter().copied()).zip(&expect) {
-            assert_eq!(a as f32, *b, "attention {attention}");
+            assert_eq!(a as f32, *b, "attention {attention}, momentum {momentum}");
         }
         // Two graphs in one batch give each graph's own output.
         let n = seq.graph.num_nodes as u32;
@@ -183,6 +188,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             [edges.clone(), edges].concat(),
             &senders,
             &receivers,
+            [g_inv_mass(&seq.graph), g_inv_mass(&seq.graph)].concat(),
             &device,
         );
         let batched: Vec<f32> = net
@@ -206,6 +212,28 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             .expect_err("too fast");
         assert!(e.to_string().contains("diverged"), "{e}");
         assert_eq!(fast, before);
+        // Away from colliders, the momentum-conserving decoder's corrections add no linear
+        // momentum (Σ mᵢ pᵢ = 0 to rounding); near them they may. The paper's decoder gives
+        // any correction.
+        let momentum_of = |body: &[f32]| {
+            let p = loaded.predict(&x, &v, body).expect("predict");
+            let (mut sum, mut scale) = (Vector3::zeros(), 0.0);
+            for (p, m) in p.iter().zip(&seq.graph.mass) {
+                sum += p * f64::from(*m);
+                scale += p.norm() * f64::from(*m);
+            }
+            sum.norm() / scale
+        };
+        let (free, near) = (
+            momentum_of(&vec![0.0; x.len()]),
+            momentum_of(&vec![1.0; x.len()]),
+        );
+        if momentum {
+            assert!(free < 1e-5, "relative momentum {free} away from colliders");
+        } else {
+            assert!(free > 1e-3, "the node decoder's momentum {free}");
+        }
+        assert!(near > 1e-3, "relative momentum {near} near colliders");
         // A mesh collapsed to a point at rest still gets a finite correction.
         let zeros = vec![Vector3::zeros(); x.len()];
         let p = loaded
@@ -213,6 +241,35 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             .expect("predict zeros");
         assert!(p.iter().all(|p| p.iter().all(|c| c.is_finite())));
     }
+}
+
+#[test]
+fn recomputed_coarse_steps_are_the_stored_ones_unless_the_simulator_changes() {
+    let stored = load(None);
+    let mean_gap = |seq: &Sequence| {
+        let (mut sum, mut n) = (0.0, 0);
+        for (a, b) in seq.steps.iter().zip(&stored.steps).skip(1) {
+            sum += dist(&vectors(&a.coarse_x), &vectors(&b.coarse_x));
+            n += a.coarse_x.len() / 3;
+        }
+        sum / n as f64
+    };
+    let mut same = stored.clone();
+    let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
+    let t0 = sim.state.t_s;
+    same.recompute_coarse(&mut sim, t0).expect("recompute");
+    let mut soft = stored.clone();
+    let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
+    sim.sim
+        .model
+        .set_membrane_compression(0.05)
+        .expect("factor");
+    soft.recompute_coarse(&mut sim, t0).expect("recompute");
+    let (g_same, g_soft) = (mean_gap(&same), mean_gap(&soft));
+    eprintln!("recomputed M_c vs stored: same simulator {g_same:e} m, soft membrane {g_soft:e} m");
+    assert!(g_same < 1e-6, "{g_same}");
+    assert!(g_soft > 1e-5 && g_soft > 100.0 * g_same, "{g_soft}");
+    assert!(sim.sim.model.set_membrane_compression(0.0).is_err());
 }
 
 #[test]
@@ -251,9 +308,10 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
     let corrector = Corrector::load(out.path(), &seq.mesh).expect("load");
     let mut sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
     let mut alone = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let mut check = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
     let e = evaluate(
         &seq,
-        [&mut alone, &mut sim],
+        [&mut alone, &mut sim, &mut check],
         t0,
         &corrector,
         3,

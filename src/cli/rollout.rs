@@ -60,9 +60,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let corrector = Corrector::load(&args.model, &seq.mesh)?;
     let mut alone = coarse_simulation(&scene, &args.data, args.start_frame)?;
+    let mut check = coarse_simulation(&scene, &args.data, args.start_frame)?;
+    for s in [&mut sim, &mut alone, &mut check] {
+        corrector.training.prepare_coarse(s)?;
+    }
     let e = evaluate(
         &seq,
-        [&mut alone, &mut sim],
+        [&mut alone, &mut sim, &mut check],
         t0,
         &corrector,
         frames,
@@ -105,6 +109,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         e.sim_step_ms,
         e.corrector_ms,
         e.corrector_ms / e.sim_step_ms
+    );
+    let (prox, feat, net) = corrector.times.mean_ms();
+    println!(
+        "corrector per call: body proximity {prox:.2} ms, features {feat:.2} ms, network {net:.2} ms"
     );
     Ok(())
 }

@@ -142,9 +142,19 @@ pub struct CorrectorArgs {
     /// GATv2-style attention on the edge aggregation.
     #[arg(long)]
     attention: bool,
+    /// The paper's node decoder (a free correction per vertex) instead of the
+    /// momentum-conserving one (antisymmetric edge impulses; per-vertex terms only near
+    /// colliders).
+    #[arg(long)]
+    node_decoder: bool,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
+    /// The coarse simulator's membrane stiffness under compression, as a factor (0, 1] of its
+    /// stretch stiffness: below 1 the coarse mesh gives way to the shortening that the fine
+    /// cloth takes up in wrinkles; saved with the model, which then runs with it.
+    #[arg(long, default_value_t = 1.0)]
+    coarse_compression: f64,
 }
 
 /// Runs `train`.
@@ -168,7 +178,8 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         CorrectorConfig::new()
             .with_latent(a.latent)
             .with_steps(a.mp_steps)
-            .with_attention(a.attention),
+            .with_attention(a.attention)
+            .with_momentum_decoder(Some(!a.node_decoder)),
     )
     .with_steps(a.steps)
     .with_batch(a.batch)
@@ -180,7 +191,8 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     .with_window(a.window)
     .with_rollout_lr(a.rollout_lr)
     .with_rollout_stop_loss(a.rollout_stop_loss)
-    .with_seed(a.seed);
+    .with_seed(a.seed)
+    .with_coarse_compression((a.coarse_compression != 1.0).then_some(a.coarse_compression));
     let mut sets = Vec::new();
     for dir in &a.data {
         let m = clothsr::data::read_manifest(dir)?;
@@ -195,9 +207,14 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         let scene = source
             .load()
             .with_context(|| format!("loading the scene of {}", dir.display()))?;
-        let sim = coarse_simulation(&scene, dir, 1)?;
+        let mut sim = coarse_simulation(&scene, dir, 1)?;
+        cfg.prepare_coarse(&mut sim)?;
         let t0 = sim.state.t_s;
-        let seq = Sequence::load(dir, frames, &sim.colliders, t0)?;
+        let mut seq = Sequence::load(dir, frames, &sim.colliders, t0)?;
+        // M_c from this simulator, in a fresh instance (a simulator carries warm starts).
+        let mut fresh = coarse_simulation(&scene, dir, 1)?;
+        cfg.prepare_coarse(&mut fresh)?;
+        seq.recompute_coarse(&mut fresh, t0)?;
         let sim = (a.rollout_iters > 0).then_some((sim, t0));
         tracing::info!(
             "{}: {} steps, {} coarse vertices, {} edges",

@@ -14,6 +14,8 @@ use crate::data::{read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
 use crate::scene::Collider;
+use crate::sim::driver::Simulation;
+use crate::sim::SimState;
 
 /// One simulator step of a sequence: flattened (N·3) f32 arrays.
 #[derive(Debug, Clone)]
@@ -104,6 +106,34 @@ impl Sequence {
             first_frame: *frames.start(),
             steps,
         })
+    }
+
+    /// Replaces M_c of every step after the first with a step of `sim` (the data set's coarse
+    /// simulation, [`crate::data::coarse_simulation`], whose time at the data set's frame 0 is
+    /// `t0_s`, possibly set up otherwise) from the previous step's M_int, so that the
+    /// corrector learns to correct the simulator it will run with rather than the one that
+    /// made the data set. The first step's M_c (from the state before the sequence, which is
+    /// not stored) stays as stored.
+    pub fn recompute_coarse(&mut self, sim: &mut Simulation, t0_s: f64) -> Result<()> {
+        for i in 1..self.steps.len() {
+            let prev = &self.steps[i - 1];
+            let state = SimState {
+                x: vectors(&prev.int_x),
+                v: vectors(&prev.int_v),
+                t_s: t0_s + self.step_time_s(i - 1),
+            };
+            let c = sim.step_from(&state)?.0;
+            let flat = |v: &[Vector3<f64>]| -> Vec<f32> {
+                v.iter()
+                    .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                    .collect()
+            };
+            let st = &mut self.steps[i];
+            st.body = body_proximity(&c.x, &sim.colliders, c.t_s);
+            st.coarse_x = flat(&c.x);
+            st.coarse_v = flat(&c.v);
+        }
+        Ok(())
     }
 
     /// Simulated time at the end of `steps[i]`, s, relative to the data set's first frame.

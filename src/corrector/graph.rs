@@ -21,6 +21,7 @@
 use std::collections::{HashMap, VecDeque};
 
 use nalgebra::{Vector2, Vector3};
+use rayon::prelude::*;
 
 use crate::mesh::ClothMesh;
 use crate::scene::Collider;
@@ -43,15 +44,18 @@ pub fn body_proximity(x: &[Vector3<f64>], colliders: &[Collider], t_s: f64) -> V
             continue;
         }
         let bvh = Bvh::build(&boxes);
-        for (p, best) in x.iter().zip(nearest.iter_mut()) {
-            let hit = bvh.nearest(p, *best, |i| {
-                let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
-                point_triangle(p, &a, &b, &c).dist
+        x.par_iter()
+            .zip(nearest.par_iter_mut())
+            .with_min_len(64)
+            .for_each(|(p, best)| {
+                let hit = bvh.nearest(p, *best, |i| {
+                    let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
+                    point_triangle(p, &a, &b, &c).dist
+                });
+                if let Some((_, d)) = hit {
+                    *best = best.min(d);
+                }
             });
-            if let Some((_, d)) = hit {
-                *best = best.min(d);
-            }
-        }
     }
     nearest
         .iter()
@@ -66,6 +70,8 @@ pub const NODE_FEATURES: usize = 6;
 pub const EDGE_FEATURES: usize = 11;
 /// Node features that are 0/1 flags (not normalised): their column indices.
 pub const NODE_FLAGS: [usize; 3] = [3, 4, 5];
+/// The node-feature column of the body proximity (in [0, 1], not normalised).
+pub const BODY_COLUMN: usize = 5;
 /// Distance from a collider at which the body-proximity feature reaches 0, m.
 pub const BODY_RADIUS_M: f64 = 0.05;
 /// Edge features that are 0/1 flags (not normalised).
@@ -84,6 +90,10 @@ pub struct MeshGraph {
     boundary: Vec<bool>,
     seam_vertex: Vec<bool>,
     material: Vec<Vector2<f64>>,
+    /// Lumped mass of each vertex relative to the mean (a third of the material-space area
+    /// of its triangles, over the mean of that): the simulator's lumped masses up to the
+    /// fabric's density, for momentum-conserving corrections.
+    pub mass: Vec<f32>,
 }
 
 impl MeshGraph {
@@ -104,6 +114,25 @@ impl MeshGraph {
                 boundary[e[1] as usize] = true;
             }
         }
+        let mut area = vec![0.0f64; n];
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|v| mesh.material[v as usize]);
+            let e = (b - a).perp(&(c - a)).abs() / 6.0;
+            for v in t {
+                area[*v as usize] += e;
+            }
+        }
+        let mean_area = area.iter().sum::<f64>() / n.max(1) as f64;
+        let mass = area
+            .iter()
+            .map(|a| {
+                if mean_area > 0.0 {
+                    (a / mean_area) as f32
+                } else {
+                    1.0
+                }
+            })
+            .collect();
         let mut seam_vertex = vec![false; n];
         let (mut senders, mut receivers, mut seam_edge) = (Vec::new(), Vec::new(), Vec::new());
         let mut push = |a: u32, b: u32, seam: bool| {
@@ -129,6 +158,7 @@ impl MeshGraph {
             boundary,
             seam_vertex,
             material: mesh.material.clone(),
+            mass,
         }
     }
 
@@ -243,6 +273,7 @@ impl MeshGraph {
             boundary: pick(&self.boundary),
             seam_vertex: pick(&self.seam_vertex),
             material: nodes.iter().map(|&v| self.material[v as usize]).collect(),
+            mass: nodes.iter().map(|&v| self.mass[v as usize]).collect(),
         }
     }
 }
@@ -279,6 +310,32 @@ mod tests {
                 .any(|d| d.abs() < 1e-9);
             assert_eq!(g.boundary[i], on_rim, "vertex {i} at {p:?}");
         }
+    }
+
+    #[test]
+    fn masses_are_lumped_areas_relative_to_their_mean() {
+        let m = sheet();
+        let g = MeshGraph::new(&m);
+        let n = g.num_nodes as f32;
+        assert!((g.mass.iter().sum::<f32>() / n - 1.0).abs() < 1e-5);
+        // Their sum is the sheet's area over the mean vertex area.
+        let mean_area = 0.2 * 0.1 / f64::from(n);
+        let area: f64 = g.mass.iter().map(|&w| f64::from(w) * mean_area).sum();
+        assert!((area - 0.02).abs() < 1e-9, "{area}");
+        // Rim vertices carry less than inner ones.
+        let mean = |rim: bool| {
+            let w: Vec<f32> = (0..g.num_nodes)
+                .filter(|&i| g.boundary[i] == rim)
+                .map(|i| g.mass[i])
+                .collect();
+            w.iter().sum::<f32>() / w.len() as f32
+        };
+        assert!(
+            mean(true) < 0.8 * mean(false),
+            "{} {}",
+            mean(true),
+            mean(false)
+        );
     }
 
     #[test]

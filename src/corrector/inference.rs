@@ -5,6 +5,8 @@
 //! the network's [`CorrectorConfig`]), `normalisation.json` and `model.bpk` (burnpack weights).
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
 use burn::config::Config;
 use burn::module::Module;
@@ -12,7 +14,7 @@ use burn::tensor::{Device, Int, Tensor};
 use nalgebra::Vector3;
 
 use super::graph::{body_proximity, MeshGraph};
-use super::model::{index_tensor, CorrectorConfig, CorrectorNet, GraphTensors};
+use super::model::{index_tensor, inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
 use crate::error::{Error, Result};
@@ -73,17 +75,51 @@ pub const MAX_CORRECTION_STD: f32 = 25.0;
 /// garments on people and cloth falling a few metres stay well below this.
 pub const MAX_CORRECTED_SPEED_M_S: f64 = 20.0;
 
+/// Time spent in each part of [`Corrector::correct`] since the corrector was loaded.
+#[derive(Debug, Default)]
+pub struct CorrectorTimes {
+    calls: AtomicU64,
+    proximity_ns: AtomicU64,
+    features_ns: AtomicU64,
+    network_ns: AtomicU64,
+}
+
+impl CorrectorTimes {
+    fn add(counter: &AtomicU64, since: Instant) {
+        counter.fetch_add(since.elapsed().as_nanos() as u64, Ordering::Relaxed);
+    }
+
+    /// Mean ms per call: (body proximity, features and normalisation, network forward and
+    /// read-back).
+    pub fn mean_ms(&self) -> (f64, f64, f64) {
+        let n = self.calls.load(Ordering::Relaxed).max(1) as f64 * 1e6;
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed) as f64 / n;
+        (
+            get(&self.proximity_ns),
+            get(&self.features_ns),
+            get(&self.network_ns),
+        )
+    }
+}
+
 /// A loaded corrector for one coarse mesh.
 #[derive(Debug)]
 pub struct Corrector {
+    /// Where its time goes.
+    pub times: CorrectorTimes,
     net: CorrectorNet,
     norm: Normalisation,
     graph: MeshGraph,
     /// The graph's edge lists on the device, uploaded once.
     senders: Tensor<1, Int>,
     receivers: Tensor<1, Int>,
+    /// `[n]` inverse relative masses of the graph's nodes.
+    inv_mass: Vec<f32>,
     /// The network's sizes.
     pub config: CorrectorConfig,
+    /// How it was trained (including the coarse simulator's set-up it needs,
+    /// [`TrainingConfig::prepare_coarse`]).
+    pub training: TrainingConfig,
     /// Where it was loaded from.
     pub dir: PathBuf,
 }
@@ -126,12 +162,15 @@ impl Corrector {
         let (net, norm, config) = load_net(dir, &device)?;
         let graph = MeshGraph::new(mesh);
         Ok(Corrector {
+            times: CorrectorTimes::default(),
             net,
             norm,
             senders: index_tensor(&graph.senders, &device),
             receivers: index_tensor(&graph.receivers, &device),
+            inv_mass: inverse_masses(&graph.mass),
             graph,
-            config: config.model,
+            config: config.model.clone(),
+            training: config,
             dir: dir.to_path_buf(),
         })
     }
@@ -151,13 +190,22 @@ impl Corrector {
                 x.len()
             )));
         }
+        let t = Instant::now();
         let (nodes, edges) = features(&self.graph, x, v, body, &self.norm);
-        let g =
-            GraphTensors::with_indices(nodes, edges, self.senders.clone(), self.receivers.clone());
+        CorrectorTimes::add(&self.times.features_ns, t);
+        let t = Instant::now();
+        let g = GraphTensors::with_indices(
+            nodes,
+            edges,
+            self.senders.clone(),
+            self.receivers.clone(),
+            self.inv_mass.clone(),
+        );
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
             .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
+        CorrectorTimes::add(&self.times.network_ns, t);
         if let Some(k) = p
             .iter()
             .position(|c| c.abs() > MAX_CORRECTION_STD || !c.is_finite())
@@ -186,7 +234,10 @@ impl Corrector {
     /// simulation's, taken at `state.t_s`. A diverged correction (too large, or too fast a
     /// result) is an error and leaves `state` as it was.
     pub fn correct(&self, state: &mut SimState, dt_s: f64, colliders: &[Collider]) -> Result<()> {
+        let t = Instant::now();
+        self.times.calls.fetch_add(1, Ordering::Relaxed);
         let body = body_proximity(&state.x, colliders, state.t_s);
+        CorrectorTimes::add(&self.times.proximity_ns, t);
         let p = self.predict(&state.x, &state.v, &body)?;
         if let Some((i, q)) = state
             .v

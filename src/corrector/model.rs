@@ -7,7 +7,15 @@
 //!   receiver). With `attention`, the sum is replaced by a GATv2-style weighted sum
 //!   (Brody et al. 2022): a score a·LeakyReLU(e′_ij) per edge, softmax over each receiver's
 //!   incoming edges.
-//! * Decoder: MLP `L → 3`, the velocity correction p_i (normalised units).
+//! * Decoder: MLP `L → 3`, the velocity correction p_i (normalised units); or, with
+//!   `momentum_decoder`, a momentum-conserving one (beyond the paper): an edge MLP `L → 3`
+//!   gives g_ij on each directed edge, the pair's impulse is f_ij = g_ij − g_ji = −f_ji, and
+//!   p_i = (Σ_j f_ji)/m_i + b_i·h(v_i), m_i the relative lumped mass, b_i the body proximity
+//!   and h the node MLP. Away from colliders (b = 0) the corrections then add no linear
+//!   momentum, Σ m_i p_i = 0 exactly, as differences of internal forces between resolutions
+//!   cannot: a learned bias can deform the cloth, which its elasticity undoes, but cannot
+//!   accelerate it as a whole, which nothing would undo (interleaved with the simulator, a
+//!   bias of 0.1 σ a step is a third of gravity).
 //!
 //! Every MLP is ReLU with `hidden_layers` hidden layers of `latent` units; all but the decoder
 //! end in a LayerNorm. Inputs and outputs are normalised outside the network
@@ -19,7 +27,7 @@ use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::tensor::activation::{leaky_relu, relu};
 use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
 
-use super::graph::{MeshGraph, EDGE_FEATURES, NODE_FEATURES};
+use super::graph::{MeshGraph, BODY_COLUMN, EDGE_FEATURES, NODE_FEATURES};
 
 /// Sizes of the corrector network (saved as `config.json` beside the weights).
 #[derive(Config, Debug, PartialEq)]
@@ -36,6 +44,17 @@ pub struct CorrectorConfig {
     /// GATv2-style attention weights on the edge aggregation instead of a plain sum.
     #[config(default = false)]
     pub attention: bool,
+    /// The momentum-conserving decoder (antisymmetric edge impulses, node terms only near
+    /// colliders) when `Some(true)`. Optional so that models saved before it (without the
+    /// field) load as they were trained; `clothsr train corrector` turns it on.
+    pub momentum_decoder: Option<bool>,
+}
+
+impl CorrectorConfig {
+    /// Whether the decoder is the momentum-conserving one.
+    pub fn conserves_momentum(&self) -> bool {
+        self.momentum_decoder == Some(true)
+    }
 }
 
 /// An MLP: `hidden_layers` ReLU layers of `latent` units, a linear output, an optional
@@ -117,16 +136,28 @@ pub struct GraphTensors {
     pub senders: Tensor<1, Int>,
     /// `[E]` receiver node of each edge.
     pub receivers: Tensor<1, Int>,
+    /// `[N, 1]` inverse relative lumped mass of each node ([`MeshGraph::mass`]).
+    pub inv_mass: Tensor<2>,
+}
+
+/// Smallest relative mass used (a vertex of no triangle would otherwise divide by zero).
+const MIN_MASS: f32 = 0.05;
+
+/// `[n]` relative masses → `[n]` inverse masses.
+pub fn inverse_masses(mass: &[f32]) -> Vec<f32> {
+    mass.iter().map(|m| 1.0 / m.max(MIN_MASS)).collect()
 }
 
 impl GraphTensors {
-    /// Uploads row-major features (`nodes`: `[n, NODE_FEATURES]`, `edges`: `[e, EDGE_FEATURES]`)
-    /// and edge lists.
+    /// Uploads row-major features (`nodes`: `[n, NODE_FEATURES]`, `edges`: `[e, EDGE_FEATURES]`),
+    /// edge lists and inverse masses (`[n]`, [`inverse_masses`]). Edges come in pairs: edge
+    /// 2k + 1 is edge 2k reversed ([`MeshGraph::new`]).
     pub fn new(
         nodes: Vec<f32>,
         edges: Vec<f32>,
         senders: &[u32],
         receivers: &[u32],
+        inv_mass: Vec<f32>,
         device: &Device,
     ) -> GraphTensors {
         GraphTensors::with_indices(
@@ -134,6 +165,7 @@ impl GraphTensors {
             edges,
             index_tensor(senders, device),
             index_tensor(receivers, device),
+            inv_mass,
         )
     }
 
@@ -144,22 +176,32 @@ impl GraphTensors {
         edges: Vec<f32>,
         senders: Tensor<1, Int>,
         receivers: Tensor<1, Int>,
+        inv_mass: Vec<f32>,
     ) -> GraphTensors {
         let device = senders.device();
         let [e] = senders.dims();
         let n = nodes.len() / NODE_FEATURES;
         debug_assert_eq!(edges.len(), e * EDGE_FEATURES);
+        debug_assert_eq!(inv_mass.len(), n);
         GraphTensors {
             nodes: Tensor::from_data(TensorData::new(nodes, [n, NODE_FEATURES]), &device),
             edges: Tensor::from_data(TensorData::new(edges, [e, EDGE_FEATURES]), &device),
             senders,
             receivers,
+            inv_mass: Tensor::from_data(TensorData::new(inv_mass, [n, 1]), &device),
         }
     }
 
     /// The graph of `graph` with the given (normalised) features.
     pub fn of(graph: &MeshGraph, nodes: Vec<f32>, edges: Vec<f32>, device: &Device) -> Self {
-        GraphTensors::new(nodes, edges, &graph.senders, &graph.receivers, device)
+        GraphTensors::new(
+            nodes,
+            edges,
+            &graph.senders,
+            &graph.receivers,
+            inverse_masses(&graph.mass),
+            device,
+        )
     }
 }
 
@@ -221,6 +263,7 @@ pub struct CorrectorNet {
     encode_edges: Mlp,
     blocks: Vec<Block>,
     decode: Mlp,
+    decode_edges: Option<Mlp>,
 }
 
 impl CorrectorConfig {
@@ -240,6 +283,9 @@ impl CorrectorConfig {
                 })
                 .collect(),
             decode: Mlp::new(l, l, h, 3, false, device),
+            decode_edges: self
+                .conserves_momentum()
+                .then(|| Mlp::new(l, l, h, 3, false, device)),
         }
     }
 }
@@ -252,6 +298,23 @@ impl CorrectorNet {
         for block in &self.blocks {
             (nodes, edges) = block.forward(nodes, edges, &g.senders, &g.receivers);
         }
-        self.decode.forward(nodes) // [N, 3]
+        let Some(decode_edges) = &self.decode_edges else {
+            return self.decode.forward(nodes); // [N, 3]
+        };
+        let [n, _] = nodes.dims();
+        let g_e = decode_edges.forward(edges); // [E, 3]
+        let [e, _] = g_e.dims();
+        let pairs = g_e.reshape([e / 2, 6]); // [E/2, 6]: g of edge 2k, then of 2k + 1
+        let f = pairs.clone().slice([0..e / 2, 0..3]) - pairs.slice([0..e / 2, 3..6]); // [E/2, 3]
+        let f = Tensor::cat(vec![f.clone(), f.neg()], 1).reshape([e, 3]); // [E, 3], f_ji = −f_ij
+        let device = nodes.device();
+        let impulse = Tensor::<2>::zeros([n, 3], &device).select_assign(
+            0,
+            g.receivers.clone(),
+            f,
+            IndexingUpdateOp::Add,
+        ); // [N, 3], sums to zero
+        let body = g.nodes.clone().slice([0..n, BODY_COLUMN..BODY_COLUMN + 1]); // [N, 1]
+        impulse * g.inv_mass.clone() + self.decode.forward(nodes) * body // [N, 3]
     }
 }

@@ -30,8 +30,8 @@ pub struct RolloutErrors {
     pub interleaved_mm: Vec<f64>,
     /// Corrector applied to the free-running simulation.
     pub not_interleaved_mm: Vec<f64>,
-    /// One-step check at every frame end: mean distance of the data set's own M_c to M_int,
-    /// mm (what the corrector has to remove) …
+    /// One-step check at every frame end: mean distance to M_int of M_c, one coarse step
+    /// from the previous step's M_int, mm (what the corrector has to remove) …
     pub one_step_uncorrected_mm: Vec<f64>,
     /// … and of the corrected M_c, mm.
     pub one_step_corrected_mm: Vec<f64>,
@@ -114,14 +114,17 @@ impl RolloutErrors {
 }
 
 /// Runs the three variants over `frames` frames of `seq` (from its first stored step) with
-/// `sims`, two instances of the data set's coarse simulation
+/// `sims`, three instances of the data set's coarse simulation
 /// ([`crate::data::coarse_simulation`], whose time at the data set's frame 0 is `t0_s`): one
-/// for the simulation alone, one for the interleaved run. They must be separate: a simulator
-/// carries state from step to step (its warm start, its adaptive contact margin) and the
-/// one-Newton-step solver's result depends on it. `on_frame` sees each frame's errors.
+/// for the simulation alone, one for the interleaved run, one for the one-step check (at each
+/// frame end, a coarse step from the ground truth's previous step, so that the check is of
+/// this simulator, which may differ from the one that made the data set). They must be
+/// separate: a simulator carries state from step to step (its warm start, its adaptive
+/// contact margin) and the one-Newton-step solver's result depends on it. `on_frame` sees
+/// each frame's errors.
 pub fn evaluate(
     seq: &Sequence,
-    sims: [&mut Simulation; 2],
+    sims: [&mut Simulation; 3],
     t0_s: f64,
     corrector: &Corrector,
     frames: usize,
@@ -173,12 +176,14 @@ pub fn evaluate(
                 mean_distance_mm(&inter.x, &gt),
                 mean_distance_mm(&fixed.x, &gt),
             );
-            let st = &seq.steps[i];
-            let mut data_c = SimState {
-                x: vectors(&st.coarse_x),
-                v: vectors(&st.coarse_v),
-                t_s: inter.t_s,
-            };
+            let before = &seq.steps[i - 1];
+            let mut data_c = sims[2]
+                .step_from(&SimState {
+                    x: vectors(&before.int_x),
+                    v: vectors(&before.int_v),
+                    t_s: inter.t_s - h,
+                })?
+                .0;
             out.one_step_uncorrected_mm
                 .push(mean_distance_mm(&data_c.x, &gt));
             corrector.correct(&mut data_c, h, &sims[1].colliders)?;

@@ -37,7 +37,7 @@ use super::graph::{body_proximity, MeshGraph};
 use super::inference::{
     default_device, features, read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE,
 };
-use super::model::{CorrectorConfig, CorrectorNet, GraphTensors};
+use super::model::{inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
 use crate::error::{Error, Result};
 use crate::io::write_atomic;
@@ -87,6 +87,20 @@ pub struct TrainingConfig {
     /// Random seed.
     #[config(default = 7)]
     pub seed: u64,
+    /// The coarse simulator's membrane compression factor
+    /// ([`crate::sim::ClothModel::set_membrane_compression`]) the corrector is trained with,
+    /// and so must run with (`None`: 1, the full Baraff-Witkin membrane). Optional so that
+    /// models saved before it load.
+    pub coarse_compression: Option<f64>,
+}
+
+impl TrainingConfig {
+    /// Sets up `sim` (a coarse simulation) as the corrector was trained with.
+    pub fn prepare_coarse(&self, sim: &mut Simulation) -> Result<()> {
+        sim.sim
+            .model
+            .set_membrane_compression(self.coarse_compression.unwrap_or(1.0))
+    }
 }
 
 /// A training sequence and, for phase 2, the coarse simulation it was made with
@@ -158,9 +172,10 @@ fn batch_tensors(
     device: &Device,
 ) -> (GraphTensors, Tensor<2>, Tensor<2>, f32) {
     let (mut nodes, mut edges, mut targets, mut mask) = (vec![], vec![], vec![], vec![]);
-    let (mut senders, mut receivers) = (vec![], vec![]);
+    let (mut senders, mut receivers, mut inv_mass) = (vec![], vec![], vec![]);
     let mut offset = 0u32;
     for s in samples {
+        inv_mass.extend(inverse_masses(&s.graph.mass));
         nodes.extend_from_slice(&s.nodes);
         edges.extend_from_slice(&s.edges);
         targets.extend_from_slice(&s.targets);
@@ -175,7 +190,7 @@ fn batch_tensors(
     let n = offset as usize;
     let weight: f32 = mask.iter().sum::<f32>().max(1.0) * 3.0;
     (
-        GraphTensors::new(nodes, edges, &senders, &receivers, device),
+        GraphTensors::new(nodes, edges, &senders, &receivers, inv_mass, device),
         Tensor::from_data(TensorData::new(targets, [n, 3]), device),
         Tensor::from_data(TensorData::new(mask, [n, 1]), device),
         weight,

@@ -151,6 +151,10 @@ impl<'a> Pipeline<'a> {
         let corrector = corrector_dir
             .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
             .transpose()?;
+        if let Some(c) = &corrector {
+            // After dressing: sewing is done with the full membrane.
+            c.training.prepare_coarse(&mut coarse)?;
+        }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {
             coarse,

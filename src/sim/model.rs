@@ -48,6 +48,20 @@ pub struct ClothModel {
 }
 
 impl ClothModel {
+    /// Makes every membrane compression-soft: weft and warp stiffness times `factor` (in
+    /// (0, 1]) where shortened ([`MembraneStiffness::compression`]).
+    pub fn set_membrane_compression(&mut self, factor: f64) -> Result<()> {
+        if !(factor > 0.0 && factor <= 1.0) {
+            return Err(Error::Invalid(format!(
+                "membrane compression factor must be in (0, 1], got {factor}"
+            )));
+        }
+        for k in &mut self.membrane_k {
+            k.compression = factor;
+        }
+        Ok(())
+    }
+
     /// Builds the model from garments given as (name, mesh, fabric).
     pub fn new(pieces: &[(&str, &ClothMesh, &Fabric)]) -> Result<ClothModel> {
         if pieces.is_empty() {
@@ -80,6 +94,7 @@ impl ClothModel {
                 weft_n_m: fabric.stretch_weft_n_m,
                 warp_n_m: fabric.stretch_warp_n_m,
                 shear_n_m: fabric.shear_n_m,
+                compression: 1.0,
             };
             for (t, tri) in m.triangles.iter().enumerate() {
                 let el = Membrane::new(*tri, &m.material).ok_or_else(|| {

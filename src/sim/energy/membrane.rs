@@ -7,7 +7,12 @@
 //!
 //! E = A · [½ k_weft (|w_u| − 1)² + ½ k_warp (|w_v| − 1)² + ½ k_shear (w_u·w_v)²]  (joules)
 //!
-//! with stiffnesses in N/m. Gradients and Hessians are taken in the 6D space (w_u, w_v), then
+//! with stiffnesses in N/m. A `compression` factor c ≤ 1 scales the weft and warp terms
+//! where |w| < 1 (a compression-soft, tension-field-like membrane, ½ c k (|w| − 1)²): a coarse
+//! mesh cannot buckle within its triangles as the cloth it stands for does, so at full
+//! stiffness it resists, as membrane, shortening that the real cloth takes up in wrinkles
+//! (the energy and its gradient stay continuous at |w| = 1; c = 1 is Baraff-Witkin's).
+//! Gradients and Hessians are taken in the 6D space (w_u, w_v), then
 //! mapped to the 9 vertex coordinates by the constant linear map w = B·x. The Hessian is made PSD
 //! in that 6D space: the stretch terms analytically (the eigenvalue k(1 − 1/|w|) across the
 //! stretch direction is clamped at zero under compression) and, when the shear coupling still
@@ -39,6 +44,19 @@ pub struct MembraneStiffness {
     pub warp_n_m: f64,
     /// Shear.
     pub shear_n_m: f64,
+    /// Factor on the weft and warp stiffnesses under compression (|w| < 1), in (0, 1].
+    pub compression: f64,
+}
+
+impl MembraneStiffness {
+    /// The stretch stiffness `k` at stretch ratio `l`: `k·compression` below 1.
+    fn at(&self, k: f64, l: f64) -> f64 {
+        if l < 1.0 {
+            k * self.compression
+        } else {
+            k
+        }
+    }
 }
 
 impl Membrane {
@@ -66,8 +84,11 @@ impl Membrane {
     /// Energy, joules.
     pub fn energy(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> f64 {
         let (wu, wv) = self.stretch_vectors(x);
-        let (su, sv, s) = (wu.norm() - 1.0, wv.norm() - 1.0, wu.dot(&wv));
-        self.area_m2 * 0.5 * (k.weft_n_m * su * su + k.warp_n_m * sv * sv + k.shear_n_m * s * s)
+        let (lu, lv, s) = (wu.norm(), wv.norm(), wu.dot(&wv));
+        let (ku, kv) = (k.at(k.weft_n_m, lu), k.at(k.warp_n_m, lv));
+        self.area_m2
+            * 0.5
+            * (ku * (lu - 1.0).powi(2) + kv * (lv - 1.0).powi(2) + k.shear_n_m * s * s)
     }
 
     /// Energy, gradient in (w_u, w_v) and the 6×6 Hessian there; `psd` clamps the stretch
@@ -84,21 +105,18 @@ impl Membrane {
         let (lu, lv) = (wu.norm().max(1e-12), wv.norm().max(1e-12));
         let (nu, nv) = (wu / lu, wv / lv);
         let s = wu.dot(&wv);
-        let e = a
-            * 0.5
-            * (k.weft_n_m * (lu - 1.0).powi(2)
-                + k.warp_n_m * (lv - 1.0).powi(2)
-                + k.shear_n_m * s * s);
-        let gu = (nu * (k.weft_n_m * (lu - 1.0)) + wv * (k.shear_n_m * s)) * a;
-        let gv = (nv * (k.warp_n_m * (lv - 1.0)) + wu * (k.shear_n_m * s)) * a;
+        let (ku, kv) = (k.at(k.weft_n_m, lu), k.at(k.warp_n_m, lv));
+        let e = a * 0.5 * (ku * (lu - 1.0).powi(2) + kv * (lv - 1.0).powi(2) + k.shear_n_m * s * s);
+        let gu = (nu * (ku * (lu - 1.0)) + wv * (k.shear_n_m * s)) * a;
+        let gv = (nv * (kv * (lv - 1.0)) + wu * (k.shear_n_m * s)) * a;
         let stretch = |kk: f64, n: &Vector3<f64>, l: f64| {
             let nn = n * n.transpose();
             let perp = 1.0 - 1.0 / l;
             let perp = if psd { perp.max(0.0) } else { perp };
             (nn + (Matrix3::identity() - nn) * perp) * kk
         };
-        let huu = (stretch(k.weft_n_m, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
-        let hvv = (stretch(k.warp_n_m, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
+        let huu = (stretch(ku, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
+        let hvv = (stretch(kv, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
         let coupling = if shear_coupling { s } else { 0.0 };
         let huv = (wv * wu.transpose() + Matrix3::identity() * coupling) * (k.shear_n_m * a);
         let mut h = SMatrix::<f64, 6, 6>::zeros();
@@ -183,10 +201,12 @@ mod tests {
             Vector2::new(0.005 * r.next(), 0.02 + 0.01 * r.next()),
         ];
         let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        // Every other triangle compression-soft.
         let k = MembraneStiffness {
             weft_n_m: 1800.0,
             warp_n_m: 2500.0,
             shear_n_m: 100.0,
+            compression: if r.next() < 0.5 { 1.0 } else { 0.1 },
         };
         // World: rotated, stretched or compressed, and sheared copy of the material triangle.
         let mut x = Vec9::zeros();
@@ -240,6 +260,7 @@ mod tests {
             weft_n_m: 1000.0,
             warp_n_m: 1500.0,
             shear_n_m: 50.0,
+            compression: 1.0,
         };
         let x = [
             Vector3::zeros(),
@@ -248,6 +269,39 @@ mod tests {
         ];
         let (_, _, h) = m.energy_gradient_hessian(&k, &x);
         assert!((h - m.hessian_exact(&k, &x)).norm() < 1e-9 * h.norm());
+    }
+
+    #[test]
+    fn compression_softness_scales_only_shortened_directions() {
+        let material = [
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.02, 0.0),
+            Vector2::new(0.0, 0.02),
+        ];
+        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        let stiff = MembraneStiffness {
+            weft_n_m: 1000.0,
+            warp_n_m: 1500.0,
+            shear_n_m: 50.0,
+            compression: 1.0,
+        };
+        let soft = MembraneStiffness {
+            compression: 0.1,
+            ..stiff
+        };
+        let scaled = |su: f64, sv: f64| material.map(|u| Vector3::new(su * u.x, sv * u.y, 0.0));
+        // Weft shortened by 2 %, warp stretched by 1 %: only the weft term is scaled.
+        let x = scaled(0.98, 1.01);
+        let weft = 0.5 * 1000.0 * 0.02f64.powi(2) * m.area_m2;
+        let warp = 0.5 * 1500.0 * 0.01f64.powi(2) * m.area_m2;
+        assert!((m.energy(&stiff, &x) - (weft + warp)).abs() < 1e-12);
+        assert!((m.energy(&soft, &x) - (0.1 * weft + warp)).abs() < 1e-12);
+        // The gradient stays continuous through the rest length.
+        for s in [1.0 - 1e-9, 1.0 + 1e-9] {
+            assert!(m.gradient(&soft, &scaled(s, 1.0)).norm() < 1e-6);
+        }
+        let (_, _, h) = m.energy_gradient_hessian(&soft, &scaled(0.97, 0.99));
+        fd::check_psd(&h);
     }
 
     #[test]
@@ -262,6 +316,7 @@ mod tests {
             weft_n_m: 1000.0,
             warp_n_m: 1500.0,
             shear_n_m: 50.0,
+            compression: 1.0,
         };
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -1.1, 0.7);
         let x = material.map(|u| rot * Vector3::new(u.x, u.y, 0.0) + Vector3::new(1.0, 2.0, 3.0));
