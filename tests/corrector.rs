@@ -8,7 +8,7 @@ mod common;
 use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector};
-use clothsr::corrector::model::GraphTensors;
+use clothsr::corrector::model::{Decoder, GraphTensors};
 use clothsr::corrector::rollout::evaluate;
 use clothsr::corrector::training::{fit_normalisation, save_model, train, TrainSet};
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
@@ -47,7 +47,7 @@ fn dataset() -> std::path::PathBuf {
 
 fn load(frames: Option<std::ops::RangeInclusive<usize>>) -> Sequence {
     let sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
-    Sequence::load(&dataset(), frames, &sim.colliders, sim.state.t_s).expect("load")
+    Sequence::load(&dataset(), frames, &sim).expect("load")
 }
 
 fn tiny_config() -> TrainingConfig {
@@ -99,11 +99,9 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
 
     // The loaded corrector moves M_c towards M_int on average over the training steps.
     let c = Corrector::load(&model, &seq.mesh).expect("load");
-    let colliders = coarse_simulation(&scene(), &dataset(), 1)
-        .expect("coarse simulation")
-        .colliders;
+    let sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
     let (mut before, mut after) = (0.0, 0.0);
-    for (k, st) in seq.steps.iter().enumerate() {
+    for (k, st) in seq.steps.iter().enumerate().skip(1) {
         let mut state = clothsr::sim::SimState {
             x: vectors(&st.coarse_x),
             v: vectors(&st.coarse_v),
@@ -111,7 +109,7 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
         };
         let gt = vectors(&st.int_x);
         before += dist(&state.x, &gt);
-        c.correct(&mut state, seq.manifest.dt_s, &colliders)
+        c.correct(&vectors(&seq.steps[k - 1].int_v), &mut state, &sim)
             .expect("correct");
         after += dist(&state.x, &gt);
     }
@@ -137,13 +135,17 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         sim: None,
     }];
     let norm = fit_normalisation(&sets);
-    for (attention, momentum) in [(false, false), (true, false), (false, true), (true, true)] {
+    let kinds = [Decoder::Node, Decoder::Momentum, Decoder::Gated];
+    for (attention, decoder) in [false, true]
+        .into_iter()
+        .flat_map(|a| kinds.map(|d| (a, d)))
+    {
         let cfg = TrainingConfig::new(
             CorrectorConfig::new()
                 .with_latent(16)
                 .with_steps(3)
                 .with_attention(attention)
-                .with_momentum_decoder(Some(momentum)),
+                .with_decoder(Some(decoder)),
         );
         let device = default_device().expect("device");
         let net = cfg.model.init(&device);
@@ -152,9 +154,18 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         let loaded = Corrector::load(dir.path(), &seq.mesh).expect("load");
         let st = &seq.steps[3];
         let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
+        let dv = vectors(st.dv.as_deref().expect("Δq after the first step"));
         // Direct forward pass of the in-memory network.
-        let (nodes, edges) = features(&seq.graph, &x, &v, &st.body, &norm);
-        let g = GraphTensors::of(&seq.graph, nodes.clone(), edges.clone(), &device);
+        let (nodes, edges) = features(&seq.graph, &x, &v, &dv, &st.body, &norm);
+        let mut step_change: Vec<f32> = st.dv.clone().expect("Δq");
+        norm.targets.apply(&mut step_change);
+        let g = GraphTensors::of(
+            &seq.graph,
+            nodes.clone(),
+            edges.clone(),
+            step_change.clone(),
+            &device,
+        );
         let direct: Vec<f32> = net
             .forward(&g)
             .into_data()
@@ -163,9 +174,9 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         assert_eq!(direct.len(), 3 * seq.graph.num_nodes);
         let mut expect = direct.clone();
         norm.targets.invert(&mut expect);
-        let p = loaded.predict(&x, &v, &st.body).expect("predict");
+        let p = loaded.predict(&x, &v, &dv, &st.body).expect("predict");
         for (a, b) in p.iter().flat_map(|p| p.iter().copied()).zip(&expect) {
-            assert_eq!(a as f32, *b, "attention {attention}, momentum {momentum}");
+            assert_eq!(a as f32, *b, "attention {attention}, {decoder:?}");
         }
         // Two graphs in one batch give each graph's own output.
         let n = seq.graph.num_nodes as u32;
@@ -189,6 +200,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             &senders,
             &receivers,
             [g_inv_mass(&seq.graph), g_inv_mass(&seq.graph)].concat(),
+            [step_change.clone(), step_change].concat(),
             &device,
         );
         let batched: Vec<f32> = net
@@ -207,8 +219,9 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             t_s: 0.0,
         };
         let before = fast.clone();
+        let sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
         let e = loaded
-            .correct(&mut fast, 1.0 / 300.0, &[])
+            .correct(&before.v, &mut fast, &sim)
             .expect_err("too fast");
         assert!(e.to_string().contains("diverged"), "{e}");
         assert_eq!(fast, before);
@@ -216,7 +229,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         // momentum (Σ mᵢ pᵢ = 0 to rounding); near them they may. The paper's decoder gives
         // any correction.
         let momentum_of = |body: &[f32]| {
-            let p = loaded.predict(&x, &v, body).expect("predict");
+            let p = loaded.predict(&x, &v, &dv, body).expect("predict");
             let (mut sum, mut scale) = (Vector3::zeros(), 0.0);
             for (p, m) in p.iter().zip(&seq.graph.mass) {
                 sum += p * f64::from(*m);
@@ -228,16 +241,32 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             momentum_of(&vec![0.0; x.len()]),
             momentum_of(&vec![1.0; x.len()]),
         );
-        if momentum {
-            assert!(free < 1e-5, "relative momentum {free} away from colliders");
-        } else {
-            assert!(free > 1e-3, "the node decoder's momentum {free}");
+        match decoder {
+            Decoder::Momentum => {
+                assert!(free < 1e-5, "relative momentum {free} away from colliders")
+            }
+            _ => assert!(free > 1e-3, "{decoder:?}: momentum {free}"),
         }
         assert!(near > 1e-3, "relative momentum {near} near colliders");
+        // Away from colliders, the gated decoder takes back a share in (0, 1) of each
+        // component of the step's velocity change beyond gravity, and nothing in free fall.
+        if decoder == Decoder::Gated {
+            let far = vec![0.0; x.len()];
+            let p = loaded.predict(&x, &v, &dv, &far).expect("predict");
+            for (p, d) in p.iter().zip(&dv) {
+                for k in 0..3 {
+                    let share = -p[k] / d[k];
+                    assert!(d[k] == 0.0 || (share > 0.0 && share < 1.0), "share {share}");
+                }
+            }
+            let zero = vec![Vector3::zeros(); x.len()];
+            let p = loaded.predict(&x, &v, &zero, &far).expect("predict");
+            assert!(p.iter().all(|p| *p == Vector3::zeros()), "free fall");
+        }
         // A mesh collapsed to a point at rest still gets a finite correction.
         let zeros = vec![Vector3::zeros(); x.len()];
         let p = loaded
-            .predict(&zeros, &zeros, &vec![1.0; x.len()])
+            .predict(&zeros, &zeros, &zeros, &vec![1.0; x.len()])
             .expect("predict zeros");
         assert!(p.iter().all(|p| p.iter().all(|c| c.is_finite())));
     }
@@ -285,7 +314,7 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
     let dir = dataset();
     let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
     let t0 = sim.state.t_s;
-    let seq = Sequence::load(&dir, None, &sim.colliders, t0).expect("load");
+    let seq = Sequence::load(&dir, None, &sim).expect("load");
     // The coarse simulator has the fine one's contact thickness, below its own default.
     let dhat = seq.manifest.coarse_dhat_m.expect("matched thickness");
     assert_eq!(sim.sim.params.collision.dhat_m, dhat);

@@ -55,8 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let seq = Sequence::load(
         &args.data,
         Some(args.start_frame..=args.start_frame + frames),
-        &sim.colliders,
-        t0,
+        &sim,
     )?;
     let corrector = Corrector::load(&args.model, &seq.mesh)?;
     let mut alone = coarse_simulation(&scene, &args.data, args.start_frame)?;

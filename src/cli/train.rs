@@ -142,11 +142,12 @@ pub struct CorrectorArgs {
     /// GATv2-style attention on the edge aggregation.
     #[arg(long)]
     attention: bool,
-    /// The paper's node decoder (a free correction per vertex) instead of the
-    /// momentum-conserving one (antisymmetric edge impulses; per-vertex terms only near
-    /// colliders).
-    #[arg(long)]
-    node_decoder: bool,
+    /// The decoder: `node` (the paper's: a free correction per vertex), `momentum`
+    /// (antisymmetric edge impulses, per-vertex terms only near colliders) or `gated` (a
+    /// learned share of the simulator step's velocity change taken back, per-vertex terms
+    /// only near colliders).
+    #[arg(long, value_enum, default_value = "gated")]
+    decoder: clothsr::corrector::model::Decoder,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -179,7 +180,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             .with_latent(a.latent)
             .with_steps(a.mp_steps)
             .with_attention(a.attention)
-            .with_momentum_decoder(Some(!a.node_decoder)),
+            .with_decoder(Some(a.decoder)),
     )
     .with_steps(a.steps)
     .with_batch(a.batch)
@@ -210,7 +211,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         let mut sim = coarse_simulation(&scene, dir, 1)?;
         cfg.prepare_coarse(&mut sim)?;
         let t0 = sim.state.t_s;
-        let mut seq = Sequence::load(dir, frames, &sim.colliders, t0)?;
+        let mut seq = Sequence::load(dir, frames, &sim)?;
         // M_c from this simulator, in a fresh instance (a simulator carries warm starts).
         let mut fresh = coarse_simulation(&scene, dir, 1)?;
         cfg.prepare_coarse(&mut fresh)?;

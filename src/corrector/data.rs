@@ -9,11 +9,10 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
 
-use super::graph::{body_proximity, MeshGraph};
+use super::graph::{body_proximity, step_change, MeshGraph};
 use crate::data::{read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
-use crate::scene::Collider;
 use crate::sim::driver::Simulation;
 use crate::sim::SimState;
 
@@ -30,6 +29,25 @@ pub struct Step {
     pub int_v: Vec<f32>,
     /// Body proximity of M_c's vertices ([`super::graph::body_proximity`]).
     pub body: Vec<f32>,
+    /// The coarse step's velocity change beyond gravity ([`super::graph::step_change`]) from
+    /// the previous step's M_int, m/s; `None` for a data set's very first step, whose start
+    /// state is not stored.
+    pub dv: Option<Vec<f32>>,
+}
+
+fn flat(v: &[Vector3<f64>]) -> Vec<f32> {
+    v.iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
+}
+
+/// Δq = v_c − v_start − g·h of flattened arrays.
+fn change(coarse_v: &[f32], start_v: &[f32], gravity_dt: Vector3<f64>) -> Vec<f32> {
+    flat(&step_change(
+        &vectors(coarse_v),
+        &vectors(start_v),
+        gravity_dt,
+    ))
 }
 
 /// A data set's coarse sequence in memory.
@@ -58,14 +76,16 @@ pub fn vectors(v: &[f32]) -> Vec<Vector3<f64>> {
 
 impl Sequence {
     /// Loads frames `frames` (1-based, inclusive; `None`: all complete frames) of the data set
-    /// in `dir`, with the data set's colliders (those of
-    /// [`crate::data::coarse_simulation`]) and the simulation's time at its frame 0, s.
+    /// in `dir`, with `sim`, the data set's coarse simulation
+    /// ([`crate::data::coarse_simulation`], not yet stepped: its time is the data set's frame
+    /// 0), for its colliders, time and gravity.
     pub fn load(
         dir: &Path,
         frames: Option<RangeInclusive<usize>>,
-        colliders: &[Collider],
-        t0_s: f64,
+        sim: &Simulation,
     ) -> Result<Sequence> {
+        let (colliders, t0_s) = (&sim.colliders, sim.state.t_s);
+        let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
         let manifest = read_manifest(dir)?;
         let frames = frames.unwrap_or(1..=manifest.frames_done);
         if frames.is_empty() || *frames.start() == 0 || *frames.end() > manifest.frames_done {
@@ -83,19 +103,40 @@ impl Sequence {
         let graph = MeshGraph::new(&mesh);
         let (n3, s) = (3 * manifest.coarse_vertices, manifest.steps_per_frame);
         let mut steps = Vec::with_capacity(frames.clone().count() * s);
+        if sim.sim.model.num_vertices() != manifest.coarse_vertices {
+            return Err(Error::bad_input(
+                dir.join("manifest.json"),
+                format!(
+                    "the data set's coarse mesh has {} vertices, the simulation's {}",
+                    manifest.coarse_vertices,
+                    sim.sim.model.num_vertices()
+                ),
+            ));
+        }
+        // M_int's velocity before the first step loaded: the previous frame's last step.
+        let mut start_v = if *frames.start() > 1 {
+            let f = read_coarse_steps(dir, &manifest, frames.start() - 1)?;
+            Some(f.int_v[(s - 1) * n3..s * n3].to_vec())
+        } else {
+            None
+        };
         for k in frames.clone() {
             let f = read_coarse_steps(dir, &manifest, k)?;
             for i in 0..s {
                 let r = i * n3..(i + 1) * n3;
                 let coarse_x = f.coarse_x[r.clone()].to_vec();
+                let coarse_v = f.coarse_v[r.clone()].to_vec();
                 let t_s = t0_s + ((k - 1) * s + i + 1) as f64 * manifest.dt_s;
+                let int_v = f.int_v[r.clone()].to_vec();
                 steps.push(Step {
                     body: body_proximity(&vectors(&coarse_x), colliders, t_s),
+                    dv: start_v.map(|v0| change(&coarse_v, &v0, gravity_dt)),
                     coarse_x,
-                    coarse_v: f.coarse_v[r.clone()].to_vec(),
-                    int_x: f.int_x[r.clone()].to_vec(),
-                    int_v: f.int_v[r].to_vec(),
+                    coarse_v,
+                    int_x: f.int_x[r].to_vec(),
+                    int_v: int_v.clone(),
                 });
+                start_v = Some(int_v);
             }
         }
         Ok(Sequence {
@@ -123,15 +164,13 @@ impl Sequence {
                 t_s: t0_s + self.step_time_s(i - 1),
             };
             let c = sim.step_from(&state)?.0;
-            let flat = |v: &[Vector3<f64>]| -> Vec<f32> {
-                v.iter()
-                    .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-                    .collect()
-            };
+            let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
+            let dv = flat(&step_change(&c.v, &state.v, gravity_dt));
             let st = &mut self.steps[i];
             st.body = body_proximity(&c.x, &sim.colliders, c.t_s);
             st.coarse_x = flat(&c.x);
             st.coarse_v = flat(&c.v);
+            st.dv = Some(dv);
         }
         Ok(())
     }

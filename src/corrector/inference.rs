@@ -13,13 +13,13 @@ use burn::module::Module;
 use burn::tensor::{Device, Int, Tensor};
 use nalgebra::Vector3;
 
-use super::graph::{body_proximity, MeshGraph};
+use super::graph::{body_proximity, step_change, MeshGraph, EDGE_FEATURES, NODE_FEATURES};
 use super::model::{index_tensor, inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
-use crate::scene::Collider;
+use crate::sim::driver::Simulation;
 use crate::sim::SimState;
 
 /// The weights file in a model directory.
@@ -29,17 +29,19 @@ pub const CONFIG_FILE: &str = "config.json";
 /// The normalisation statistics file in a model directory.
 pub const NORMALISATION_FILE: &str = "normalisation.json";
 
-/// Normalised network inputs for positions `x`, velocities `v` and body proximities `body`
-/// on `graph`: node rows `[n, NODE_FEATURES]`, edge rows `[e, EDGE_FEATURES]`.
+/// Normalised network inputs for positions `x`, velocities `v`, the step's velocity changes
+/// `dv` ([`super::graph::step_change`]) and body proximities `body` on `graph`: node rows
+/// `[n, NODE_FEATURES]`, edge rows `[e, EDGE_FEATURES]`.
 pub fn features(
     graph: &MeshGraph,
     x: &[Vector3<f64>],
     v: &[Vector3<f64>],
+    dv: &[Vector3<f64>],
     body: &[f32],
     norm: &Normalisation,
 ) -> (Vec<f32>, Vec<f32>) {
     let (mut nodes, mut edges) = (Vec::new(), Vec::new());
-    graph.node_features(v, body, &mut nodes);
+    graph.node_features(v, dv, body, &mut nodes);
     graph.edge_features(x, v, &mut edges);
     norm.nodes.apply(&mut nodes);
     norm.edges.apply(&mut edges);
@@ -65,9 +67,10 @@ pub fn default_device() -> Result<Device> {
     }
 }
 
-/// Largest correction accepted, in standard deviations of the training targets (per
-/// component): the network extrapolating far outside its data is a failure to report, not a
-/// correction to apply. The data sets here have |p̄| below ~8 σ.
+/// Largest correction accepted beyond the step's velocity change (which the gated decoder
+/// may take back), in standard deviations of the training targets (per component):
+/// the network extrapolating far outside its data is a failure to report, not a correction
+/// to apply. The data sets here have |p̄| below ~8 σ.
 pub const MAX_CORRECTION_STD: f32 = 25.0;
 
 /// Fastest vertex accepted after a correction, m/s. Interleaving can run away without any
@@ -145,7 +148,21 @@ pub fn load_net(
     }
     let config = TrainingConfig::load(&config_path)
         .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
-    let norm: Normalisation = read_json(&dir.join(NORMALISATION_FILE))?;
+    let norm_path = dir.join(NORMALISATION_FILE);
+    let norm: Normalisation = read_json(&norm_path)?;
+    if norm.nodes.mean.len() != NODE_FEATURES || norm.edges.mean.len() != EDGE_FEATURES {
+        return Err(Error::bad_input(
+            &norm_path,
+            format!(
+                "the model has {} node and {} edge features, this clothsr's corrector {} and {}: \
+                 it was made by an older clothsr; train it again with 'clothsr train corrector'",
+                norm.nodes.mean.len(),
+                norm.edges.mean.len(),
+                NODE_FEATURES,
+                EDGE_FEATURES
+            ),
+        ));
+    }
     let weights = dir.join(WEIGHTS_FILE);
     let net = config
         .model
@@ -175,15 +192,18 @@ impl Corrector {
         })
     }
 
-    /// The predicted velocity correction p for M_c = (x, v) with body proximities `body`
+    /// The predicted velocity correction p for M_c = (x, v), reached by a step that changed
+    /// the velocities by `dv` beyond gravity ([`step_change`]), with body proximities `body`
     /// ([`body_proximity`]), m/s per vertex.
     pub fn predict(
         &self,
         x: &[Vector3<f64>],
         v: &[Vector3<f64>],
+        dv: &[Vector3<f64>],
         body: &[f32],
     ) -> Result<Vec<Vector3<f64>>> {
-        if x.len() != self.graph.num_nodes || v.len() != x.len() || body.len() != x.len() {
+        let n = x.len();
+        if n != self.graph.num_nodes || v.len() != n || dv.len() != n || body.len() != n {
             return Err(Error::Invalid(format!(
                 "the corrector was set up for {} vertices, the state has {}",
                 self.graph.num_nodes,
@@ -191,30 +211,37 @@ impl Corrector {
             )));
         }
         let t = Instant::now();
-        let (nodes, edges) = features(&self.graph, x, v, body, &self.norm);
+        let (nodes, edges) = features(&self.graph, x, v, dv, body, &self.norm);
         CorrectorTimes::add(&self.times.features_ns, t);
         let t = Instant::now();
+        let mut impulse: Vec<f32> = dv
+            .iter()
+            .flat_map(|d| [d.x as f32, d.y as f32, d.z as f32])
+            .collect();
+        self.norm.targets.apply(&mut impulse);
         let g = GraphTensors::with_indices(
             nodes,
             edges,
             self.senders.clone(),
             self.receivers.clone(),
             self.inv_mass.clone(),
+            impulse.clone(),
         );
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
             .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
         CorrectorTimes::add(&self.times.network_ns, t);
-        if let Some(k) = p
-            .iter()
-            .position(|c| c.abs() > MAX_CORRECTION_STD || !c.is_finite())
+        if let Some(k) = (0..p.len())
+            .find(|&k| (p[k].abs() > MAX_CORRECTION_STD + impulse[k].abs()) || !p[k].is_finite())
         {
             return Err(Error::Simulation(format!(
                 "the corrector diverged: its correction at vertex {} is {:.1} standard deviations \
-                 of its training data (limit {MAX_CORRECTION_STD})",
+                 of its training data (limit {MAX_CORRECTION_STD} beyond the step's velocity \
+                 change, {:.1})",
                 k / 3,
-                p[k]
+                p[k],
+                impulse[k]
             )));
         }
         self.norm.targets.invert(&mut p);
@@ -230,15 +257,23 @@ impl Corrector {
         Ok(p)
     }
 
-    /// Corrects M_c in place into M_int: q′ = q + p, x′ = x + h·p; `colliders` are the
-    /// simulation's, taken at `state.t_s`. A diverged correction (too large, or too fast a
-    /// result) is an error and leaves `state` as it was.
-    pub fn correct(&self, state: &mut SimState, dt_s: f64, colliders: &[Collider]) -> Result<()> {
+    /// Corrects M_c = `state`, the result of a step of `sim` from velocities `start_v`, in
+    /// place into M_int: q′ = q + p, x′ = x + h·p (the time step, gravity and colliders are
+    /// `sim`'s, the colliders taken at `state.t_s`). A diverged correction (too large, or too
+    /// fast a result) is an error and leaves `state` as it was.
+    pub fn correct(
+        &self,
+        start_v: &[Vector3<f64>],
+        state: &mut SimState,
+        sim: &Simulation,
+    ) -> Result<()> {
         let t = Instant::now();
         self.times.calls.fetch_add(1, Ordering::Relaxed);
-        let body = body_proximity(&state.x, colliders, state.t_s);
+        let body = body_proximity(&state.x, &sim.colliders, state.t_s);
+        let dt_s = sim.sim.params.dt_s;
+        let dv = step_change(&state.v, start_v, sim.sim.params.gravity_m_s2 * dt_s);
         CorrectorTimes::add(&self.times.proximity_ns, t);
-        let p = self.predict(&state.x, &state.v, &body)?;
+        let p = self.predict(&state.x, &state.v, &dv, &body)?;
         if let Some((i, q)) = state
             .v
             .iter()

@@ -16,6 +16,16 @@
 //!   cannot: a learned bias can deform the cloth, which its elasticity undoes, but cannot
 //!   accelerate it as a whole, which nothing would undo (interleaved with the simulator, a
 //!   bias of 0.1 σ a step is a third of gravity).
+//! * Or, with the `Gated` decoder (beyond the paper), p_i = −(1 − c_i)·γ_i ⊙ Δq_i +
+//!   c_i·h(v_i): γ_i ∈ (0, 1)³ a sigmoid of a node MLP, Δq_i the simulator step's velocity
+//!   change beyond gravity ([`super::graph::step_change`]), c_i = max(0, 1 − d_i/`CONTACT_RADIUS_M`)
+//!   the contact weight (d_i the distance to the nearest collider). Away from colliders the
+//!   corrector can then only scale down, per vertex and axis, what the simulator's forces did
+//!   in the step: it is exactly zero in free fall, and interleaved with the simulator it makes
+//!   a cloth that responds less (a fine cloth wrinkles where the coarse mesh must stretch),
+//!   never one that gains energy from the corrector. In contact, where Δq holds the
+//!   collider's push (which taking back would drive the cloth in), the correction is free
+//!   instead: the resolutions' contacts differ.
 //!
 //! Every MLP is ReLU with `hidden_layers` hidden layers of `latent` units; all but the decoder
 //! end in a LayerNorm. Inputs and outputs are normalised outside the network
@@ -24,10 +34,11 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
-use burn::tensor::activation::{leaky_relu, relu};
+use burn::tensor::activation::{leaky_relu, relu, sigmoid};
 use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
 
-use super::graph::{MeshGraph, BODY_COLUMN, EDGE_FEATURES, NODE_FEATURES};
+use super::graph::{MeshGraph, BODY_COLUMN, BODY_RADIUS_M, EDGE_FEATURES, NODE_FEATURES};
 
 /// Sizes of the corrector network (saved as `config.json` beside the weights).
 #[derive(Config, Debug, PartialEq)]
@@ -44,16 +55,29 @@ pub struct CorrectorConfig {
     /// GATv2-style attention weights on the edge aggregation instead of a plain sum.
     #[config(default = false)]
     pub attention: bool,
-    /// The momentum-conserving decoder (antisymmetric edge impulses, node terms only near
-    /// colliders) when `Some(true)`. Optional so that models saved before it (without the
-    /// field) load as they were trained; `clothsr train corrector` turns it on.
-    pub momentum_decoder: Option<bool>,
+    /// The decoder (`None`: [`Decoder::Node`], the paper's; optional so that models saved
+    /// before the choice existed load as they were trained).
+    pub decoder: Option<Decoder>,
+}
+
+/// How the network's node latents become velocity corrections.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Decoder {
+    /// The paper's: a node MLP, any correction anywhere.
+    Node,
+    /// Antisymmetric edge impulses over lumped masses, node terms only near colliders: no
+    /// linear momentum added away from them.
+    Momentum,
+    /// A per-vertex, per-axis share γ ∈ (0, 1)³ of the step's velocity change beyond gravity
+    /// taken back, node terms only near colliders.
+    Gated,
 }
 
 impl CorrectorConfig {
-    /// Whether the decoder is the momentum-conserving one.
-    pub fn conserves_momentum(&self) -> bool {
-        self.momentum_decoder == Some(true)
+    /// The decoder.
+    pub fn decoder_kind(&self) -> Decoder {
+        self.decoder.unwrap_or(Decoder::Node)
     }
 }
 
@@ -138,7 +162,14 @@ pub struct GraphTensors {
     pub receivers: Tensor<1, Int>,
     /// `[N, 1]` inverse relative lumped mass of each node ([`MeshGraph::mass`]).
     pub inv_mass: Tensor<2>,
+    /// `[N, 3]` the step's velocity change beyond gravity in the targets' normalised units
+    /// (for the gated decoder).
+    pub step_change: Tensor<2>,
 }
+
+/// Distance from a collider within which the gated decoder's correction turns from a share
+/// of the step's velocity change to a free one, m (a few contact thicknesses).
+pub const CONTACT_RADIUS_M: f64 = 0.005;
 
 /// Smallest relative mass used (a vertex of no triangle would otherwise divide by zero).
 const MIN_MASS: f32 = 0.05;
@@ -150,14 +181,16 @@ pub fn inverse_masses(mass: &[f32]) -> Vec<f32> {
 
 impl GraphTensors {
     /// Uploads row-major features (`nodes`: `[n, NODE_FEATURES]`, `edges`: `[e, EDGE_FEATURES]`),
-    /// edge lists and inverse masses (`[n]`, [`inverse_masses`]). Edges come in pairs: edge
-    /// 2k + 1 is edge 2k reversed ([`MeshGraph::new`]).
+    /// edge lists, inverse masses (`[n]`, [`inverse_masses`]) and step changes (`[n, 3]`,
+    /// normalised as the targets). Edges come in pairs: edge 2k + 1 is edge 2k reversed
+    /// ([`MeshGraph::new`]).
     pub fn new(
         nodes: Vec<f32>,
         edges: Vec<f32>,
         senders: &[u32],
         receivers: &[u32],
         inv_mass: Vec<f32>,
+        step_change: Vec<f32>,
         device: &Device,
     ) -> GraphTensors {
         GraphTensors::with_indices(
@@ -166,6 +199,7 @@ impl GraphTensors {
             index_tensor(senders, device),
             index_tensor(receivers, device),
             inv_mass,
+            step_change,
         )
     }
 
@@ -177,29 +211,39 @@ impl GraphTensors {
         senders: Tensor<1, Int>,
         receivers: Tensor<1, Int>,
         inv_mass: Vec<f32>,
+        step_change: Vec<f32>,
     ) -> GraphTensors {
         let device = senders.device();
         let [e] = senders.dims();
         let n = nodes.len() / NODE_FEATURES;
         debug_assert_eq!(edges.len(), e * EDGE_FEATURES);
         debug_assert_eq!(inv_mass.len(), n);
+        debug_assert_eq!(step_change.len(), 3 * n);
         GraphTensors {
             nodes: Tensor::from_data(TensorData::new(nodes, [n, NODE_FEATURES]), &device),
             edges: Tensor::from_data(TensorData::new(edges, [e, EDGE_FEATURES]), &device),
             senders,
             receivers,
             inv_mass: Tensor::from_data(TensorData::new(inv_mass, [n, 1]), &device),
+            step_change: Tensor::from_data(TensorData::new(step_change, [n, 3]), &device),
         }
     }
 
-    /// The graph of `graph` with the given (normalised) features.
-    pub fn of(graph: &MeshGraph, nodes: Vec<f32>, edges: Vec<f32>, device: &Device) -> Self {
+    /// The graph of `graph` with the given (normalised) features and step changes.
+    pub fn of(
+        graph: &MeshGraph,
+        nodes: Vec<f32>,
+        edges: Vec<f32>,
+        step_change: Vec<f32>,
+        device: &Device,
+    ) -> Self {
         GraphTensors::new(
             nodes,
             edges,
             &graph.senders,
             &graph.receivers,
             inverse_masses(&graph.mass),
+            step_change,
             device,
         )
     }
@@ -264,6 +308,7 @@ pub struct CorrectorNet {
     blocks: Vec<Block>,
     decode: Mlp,
     decode_edges: Option<Mlp>,
+    gate: Option<Mlp>,
 }
 
 impl CorrectorConfig {
@@ -283,8 +328,9 @@ impl CorrectorConfig {
                 })
                 .collect(),
             decode: Mlp::new(l, l, h, 3, false, device),
-            decode_edges: self
-                .conserves_momentum()
+            decode_edges: (self.decoder_kind() == Decoder::Momentum)
+                .then(|| Mlp::new(l, l, h, 3, false, device)),
+            gate: (self.decoder_kind() == Decoder::Gated)
                 .then(|| Mlp::new(l, l, h, 3, false, device)),
         }
     }
@@ -298,10 +344,19 @@ impl CorrectorNet {
         for block in &self.blocks {
             (nodes, edges) = block.forward(nodes, edges, &g.senders, &g.receivers);
         }
+        let [n, _] = nodes.dims();
+        let body = g.nodes.clone().slice([0..n, BODY_COLUMN..BODY_COLUMN + 1]); // [N, 1]
+        if let Some(gate) = &self.gate {
+            // d = (1 − b)·BODY_RADIUS_M, c = max(0, 1 − d/CONTACT_RADIUS_M).
+            let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
+            let contact = ((body - 1.0) * ratio + 1.0).clamp(0.0, 1.0); // [N, 1]
+            let share = sigmoid(gate.forward(nodes.clone())); // [N, 3]
+            let taken = share * g.step_change.clone() * (contact.clone().neg() + 1.0); // [N, 3]
+            return self.decode.forward(nodes) * contact - taken; // [N, 3]
+        }
         let Some(decode_edges) = &self.decode_edges else {
             return self.decode.forward(nodes); // [N, 3]
         };
-        let [n, _] = nodes.dims();
         let g_e = decode_edges.forward(edges); // [E, 3]
         let [e, _] = g_e.dims();
         let pairs = g_e.reshape([e / 2, 6]); // [E/2, 6]: g of edge 2k, then of 2k + 1
@@ -314,7 +369,6 @@ impl CorrectorNet {
             f,
             IndexingUpdateOp::Add,
         ); // [N, 3], sums to zero
-        let body = g.nodes.clone().slice([0..n, BODY_COLUMN..BODY_COLUMN + 1]); // [N, 1]
         impulse * g.inv_mass.clone() + self.decode.forward(nodes) * body // [N, 3]
     }
 }

@@ -152,12 +152,13 @@ pub fn evaluate(
     let mut out = RolloutErrors::default();
     let (mut sim_s, mut corr_s) = (0.0, 0.0);
     for i in 1..=steps {
+        let alone_start_v = alone.v.clone();
         alone = sims[0].step_from(&alone)?.0;
         let t = Instant::now();
         let mut c = sims[1].step_from(&inter)?.0;
         sim_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let corrected = corrector.correct(&mut c, h, &sims[1].colliders);
+        let corrected = corrector.correct(&inter.v, &mut c, sims[1]);
         corr_s += t.elapsed().as_secs_f64();
         if let Err(e) = corrected {
             let frame = seq.first_frame + (i + 1).div_ceil(s) - 1;
@@ -170,7 +171,7 @@ pub fn evaluate(
         if (i + 1) % s == 0 {
             let gt = vectors(&seq.steps[i].int_x);
             let mut fixed = alone.clone();
-            corrector.correct(&mut fixed, h, &sims[1].colliders)?;
+            corrector.correct(&alone_start_v, &mut fixed, sims[0])?;
             let e = (
                 mean_distance_mm(&alone.x, &gt),
                 mean_distance_mm(&inter.x, &gt),
@@ -186,7 +187,7 @@ pub fn evaluate(
                 .0;
             out.one_step_uncorrected_mm
                 .push(mean_distance_mm(&data_c.x, &gt));
-            corrector.correct(&mut data_c, h, &sims[1].colliders)?;
+            corrector.correct(&vectors(&before.int_v), &mut data_c, sims[2])?;
             out.one_step_corrected_mm
                 .push(mean_distance_mm(&data_c.x, &gt));
             let frame = seq.first_frame + i / s;

@@ -33,7 +33,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use super::data::{vectors, Sequence};
-use super::graph::{body_proximity, MeshGraph};
+use super::graph::{body_proximity, step_change, MeshGraph};
 use super::inference::{
     default_device, features, read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE,
 };
@@ -155,6 +155,8 @@ struct Sample {
     graph: MeshGraph,
     nodes: Vec<f32>,
     edges: Vec<f32>,
+    /// The step's velocity change beyond gravity, m/s, `[n, 3]`.
+    step_change: Vec<f32>,
     targets: Vec<f32>,
     mask: Vec<f32>,
 }
@@ -173,9 +175,11 @@ fn batch_tensors(
 ) -> (GraphTensors, Tensor<2>, Tensor<2>, f32) {
     let (mut nodes, mut edges, mut targets, mut mask) = (vec![], vec![], vec![], vec![]);
     let (mut senders, mut receivers, mut inv_mass) = (vec![], vec![], vec![]);
+    let mut step_change = vec![];
     let mut offset = 0u32;
     for s in samples {
         inv_mass.extend(inverse_masses(&s.graph.mass));
+        step_change.extend_from_slice(&s.step_change);
         nodes.extend_from_slice(&s.nodes);
         edges.extend_from_slice(&s.edges);
         targets.extend_from_slice(&s.targets);
@@ -187,10 +191,19 @@ fn batch_tensors(
     norm.nodes.apply(&mut nodes);
     norm.edges.apply(&mut edges);
     norm.targets.apply(&mut targets);
+    norm.targets.apply(&mut step_change);
     let n = offset as usize;
     let weight: f32 = mask.iter().sum::<f32>().max(1.0) * 3.0;
     (
-        GraphTensors::new(nodes, edges, &senders, &receivers, inv_mass, device),
+        GraphTensors::new(
+            nodes,
+            edges,
+            &senders,
+            &receivers,
+            inv_mass,
+            step_change,
+            device,
+        ),
         Tensor::from_data(TensorData::new(targets, [n, 3]), device),
         Tensor::from_data(TensorData::new(mask, [n, 1]), device),
         weight,
@@ -380,9 +393,12 @@ pub fn fit_normalisation(sets: &[TrainSet]) -> Normalisation {
     let mut b = NormalisationBuilder::default();
     for s in sets {
         for st in &s.seq.steps {
+            let Some(dv) = &st.dv else { continue };
             let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
             let (mut nodes, mut edges) = (Vec::new(), Vec::new());
-            s.seq.graph.node_features(&v, &st.body, &mut nodes);
+            s.seq
+                .graph
+                .node_features(&v, &vectors(dv), &st.body, &mut nodes);
             s.seq.graph.edge_features(&x, &v, &mut edges);
             let targets: Vec<f32> = st
                 .int_v
@@ -422,17 +438,28 @@ impl Trainer<'_> {
                 }
             })
             .unwrap_or(&sets[0]);
-        let (seq, st) = (&set.seq, &set.seq.steps[pick.min(set.seq.steps.len() - 1)]);
+        let seq = &set.seq;
+        let mut k = pick.min(seq.steps.len() - 1);
+        // Only a data set's very first step has no Δq (its start is not stored): take the next.
+        if seq.steps[k].dv.is_none() && k + 1 < seq.steps.len() {
+            k += 1;
+        }
+        let st = &seq.steps[k];
         let h = seq.manifest.dt_s;
         let mut x = vectors(&st.coarse_x);
         let mut v = vectors(&st.coarse_v);
+        let mut dv = st
+            .dv
+            .as_deref()
+            .map_or_else(|| vec![Vector3::zeros(); x.len()], vectors);
         let x_int = vectors(&st.int_x);
         if self.noise_std_m > 0.0 {
             if let Ok(normal) = Normal::new(0.0, self.noise_std_m) {
-                for (x, v) in x.iter_mut().zip(v.iter_mut()) {
+                for ((x, v), dv) in x.iter_mut().zip(v.iter_mut()).zip(dv.iter_mut()) {
                     let d = Vector3::from_fn(|_, _| normal.sample(&mut self.rng));
                     *x += d;
                     *v += d / h;
+                    *dv += d / h;
                 }
             }
         }
@@ -455,15 +482,16 @@ impl Trainer<'_> {
         let take = |a: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
             nodes_idx.iter().map(|&i| a[i as usize]).collect()
         };
-        let (xs, vs, ts) = (take(&x), take(&v), take(&targets));
+        let (xs, vs, dvs, ts) = (take(&x), take(&v), take(&dv), take(&targets));
         let body: Vec<f32> = nodes_idx.iter().map(|&i| st.body[i as usize]).collect();
         let (mut nodes, mut edges) = (Vec::new(), Vec::new());
-        graph.node_features(&vs, &body, &mut nodes);
+        graph.node_features(&vs, &dvs, &body, &mut nodes);
         graph.edge_features(&xs, &vs, &mut edges);
         Sample {
             graph,
             nodes,
             edges,
+            step_change: flat(&dvs),
             targets: flat(&ts),
             mask,
         }
@@ -644,8 +672,11 @@ fn rollout_window(
                 .collect::<Vec<_>>(),
         );
         let body = body_proximity(&c.x, &sim.colliders, c.t_s);
-        let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &body, norm);
-        let g = GraphTensors::of(&seq.graph, nodes, edges, device);
+        let dv = step_change(&c.v, &state.v, sim.sim.params.gravity_m_s2 * h);
+        let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &dv, &body, norm);
+        let mut step_change = flat(&dv);
+        norm.targets.apply(&mut step_change);
+        let g = GraphTensors::of(&seq.graph, nodes, edges, step_change, device);
         let pred = net.forward(&g); // [n, 3], normalised
         let mut p: Vec<f32> = pred
             .clone()

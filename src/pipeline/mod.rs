@@ -193,15 +193,20 @@ impl<'a> Pipeline<'a> {
     /// module. Returns the fine positions.
     pub fn advance_frame(&mut self) -> Result<&[Vector3<f64>]> {
         let (mut sim_s, mut cor_s) = (0.0, 0.0);
-        let dt = self.coarse.sim.params.dt_s;
+        let mut start_v = Vec::new();
         for _ in 0..self.coarse.steps_per_frame {
+            if self.corrector.is_some() {
+                start_v.clone_from(&self.coarse.state.v);
+            }
             let t = Instant::now();
             self.coarse.step()?;
             sim_s += t.elapsed().as_secs_f64();
             if let Some(c) = &self.corrector {
                 self.simulated.clone_from(&self.coarse.state.x);
                 let t = Instant::now();
-                c.correct(&mut self.coarse.state, dt, &self.coarse.colliders)?;
+                let mut state = self.coarse.state.clone();
+                c.correct(&start_v, &mut state, &self.coarse)?;
+                self.coarse.state = state;
                 cor_s += t.elapsed().as_secs_f64();
             }
         }
