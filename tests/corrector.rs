@@ -324,6 +324,7 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         sim: Some((sim, t0)),
     }];
     let cfg = tiny_config()
+        .with_noise_ratio(0.3)
         .with_steps(20)
         .with_rollout_iters(4)
         .with_window(3)

@@ -62,8 +62,9 @@ pub struct TrainingConfig {
     #[config(default = 1e-6)]
     pub lr_end: f64,
     /// Training-noise standard deviation as a multiple of the data's RMS per-step position
-    /// correction h·|p̄| (0: no noise).
-    #[config(default = 0.3)]
+    /// correction h·|p̄| (0: no noise, the default: noise teaches the corrector to take back
+    /// deviations in one step, which interleaved with the simulator feeds back).
+    #[config(default = 0.0)]
     pub noise_ratio: f64,
     /// Vertices per random sub-mesh patch (0: whole meshes).
     #[config(default = 0)]
