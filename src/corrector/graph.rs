@@ -8,11 +8,8 @@
 //! distance to the nearest collider surface.
 //! Per directed edge i → j (`EDGE_FEATURES`): the material-space offset u_ij = u_i − u_j (2, m)
 //! and its norm, the world-space offset x_ij = x_i − x_j (3, m) and its norm, the relative
-//! velocity q_i − q_j (3, m/s), the strain |x_ij|/|u_ij| − 1 (beyond the paper: strains of
-//! a per cent are 0.03 σ of the normalised lengths, too little for the network to read off
-//! them, yet they decide whether the membrane snaps back or holds the cloth up), and a flag
-//! for seam edges (whose two ends lie on different panels, so u_ij and the strain are set to
-//! zero: sewn vertices should coincide).
+//! velocity q_i − q_j (3, m/s), and a flag for seam edges (whose two ends lie on different
+//! panels, so u_ij is set to zero: sewn vertices should coincide).
 //!
 //! Beyond the paper, whose node feature is the bare velocity q_i and whose corrector sees no
 //! colliders: away from bodies the features are invariant to a uniform motion of the cloth.
@@ -80,9 +77,8 @@ pub fn body_proximity(x: &[Vector3<f64>], colliders: &[Collider], t_s: f64) -> V
 /// Features per node: proximity-weighted velocity (3), the step's velocity change beyond
 /// gravity (3), boundary flag, seam flag, body proximity.
 pub const NODE_FEATURES: usize = 9;
-/// Features per directed edge: u_ij (2), |u_ij|, x_ij (3), |x_ij|, q_i − q_j (3), strain,
-/// seam flag.
-pub const EDGE_FEATURES: usize = 12;
+/// Features per directed edge: u_ij (2), |u_ij|, x_ij (3), |x_ij|, q_i − q_j (3), seam flag.
+pub const EDGE_FEATURES: usize = 11;
 /// Node features that are 0/1 flags (not normalised): their column indices.
 pub const NODE_FLAGS: [usize; 3] = [6, 7, 8];
 /// The node-feature column of the body proximity (in [0, 1], not normalised).
@@ -104,7 +100,7 @@ pub fn step_change(
 /// Distance from a collider at which the body-proximity feature reaches 0, m.
 pub const BODY_RADIUS_M: f64 = 0.05;
 /// Edge features that are 0/1 flags (not normalised).
-pub const EDGE_FLAGS: [usize; 1] = [11];
+pub const EDGE_FLAGS: [usize; 1] = [10];
 
 /// The static graph of a coarse mesh: directed edges and per-vertex flags.
 #[derive(Debug, Clone, PartialEq)]
@@ -239,11 +235,6 @@ impl MeshGraph {
             };
             let d = x[i] - x[j];
             let w = v[i] - v[j];
-            let strain = if self.seam_edge[k] || u.norm() <= 0.0 {
-                0.0
-            } else {
-                d.norm() / u.norm() - 1.0
-            };
             out.extend([
                 u.x as f32,
                 u.y as f32,
@@ -255,7 +246,6 @@ impl MeshGraph {
                 w.x as f32,
                 w.y as f32,
                 w.z as f32,
-                strain as f32,
                 f32::from(u8::from(self.seam_edge[k])),
             ]);
         }
@@ -401,14 +391,6 @@ mod tests {
         assert!((row[3] as f64 - d.x).abs() < 1e-6 && (row[6] as f64 - d.norm()).abs() < 1e-6);
         // Flat sheet: world length equals material length.
         assert!((row[2] - row[6]).abs() < 1e-6);
-        assert!(row[10].abs() < 1e-6, "strain {}", row[10]);
-        // Stretched by 2 %: strain 0.02 on every edge.
-        let mut s = Vec::new();
-        let stretched: Vec<Vector3<f64>> = m.positions.iter().map(|p| p * 1.02).collect();
-        g.edge_features(&stretched, &v, &mut s);
-        assert!(s
-            .chunks_exact(EDGE_FEATURES)
-            .all(|r| (r[10] - 0.02).abs() < 1e-5));
         assert_eq!(row[8], (j as f32) - (i as f32));
         // A uniform velocity leaves every edge feature unchanged.
         let mut g2 = Vec::new();
