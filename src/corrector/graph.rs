@@ -26,8 +26,9 @@
 //! step moves almost as if only gravity and contact acted: on the three-balls drops,
 //! p̄ ≈ −0.9·Δq explains 94 % of the target's variance during the impact and 72–88 % later.
 //! Δq is zero in free fall, where no correction is needed. (The elastic impulse at M_c,
-//! −h·∇E/m, is no substitute: the one-Newton-step solver's velocity change is not the force
-//! at its end state, and with it the phase-1 loss stayed 3× higher.)
+//! −h·∇E(x_c)/m, is no substitute: the one-Newton-step solver's velocity change is not the
+//! force at its end state; in its place the phase-1 loss stayed 3× higher and the interleaved
+//! rollout diverged in frame 2.)
 
 use std::collections::{HashMap, VecDeque};
 

@@ -217,28 +217,6 @@ impl ClothModel {
         self.parts.iter().map(|p| p.vertices.clone()).collect()
     }
 
-    /// The velocity change the elastic forces (membrane + bending) at positions `x` give in a
-    /// time step `dt_s`: −dt·∇E(x)/m per vertex, m/s.
-    pub fn elastic_impulse(&self, x: &[Vector3<f64>], dt_s: f64) -> Vec<Vector3<f64>> {
-        let mut grad = vec![Vector3::zeros(); x.len()];
-        for (m, k) in self.membranes.iter().zip(&self.membrane_k) {
-            let g = m.gradient(k, &m.v.map(|v| x[v as usize]));
-            for (i, v) in m.v.iter().enumerate() {
-                grad[*v as usize] += g.fixed_rows::<3>(3 * i);
-            }
-        }
-        for h in &self.hinges {
-            let g = bending::gradient(h, &h.v.map(|v| x[v as usize]));
-            for (i, v) in h.v.iter().enumerate() {
-                grad[*v as usize] += g.fixed_rows::<3>(3 * i);
-            }
-        }
-        grad.iter()
-            .zip(&self.mass_kg)
-            .map(|(g, m)| -g * (dt_s / m))
-            .collect()
-    }
-
     /// Elastic energy (membrane + bending) at positions `x`, joules.
     pub fn elastic_energy(&self, x: &[Vector3<f64>]) -> f64 {
         let mem = super::reduce::sum(self.membranes.len(), |k| {
@@ -250,59 +228,5 @@ impl ClothModel {
             bending::energy(h, &h.v.map(|v| x[v as usize]))
         });
         mem + bend
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::garment::Fabric;
-    use crate::mesh::{mesh_garment, MeshOptions};
-    use crate::scene::samples::flat_sheet;
-
-    #[test]
-    fn elastic_impulse_is_minus_dt_times_the_energy_gradient_over_mass() {
-        let g = flat_sheet("s", 0.1, 0.08, Vector3::zeros(), Fabric::default());
-        let mesh = mesh_garment(&g, &MeshOptions::with_edge(0.02)).expect("mesh");
-        let mut model = ClothModel::new(&[("s", &mesh, &Fabric::default())]).expect("model");
-        // A crumpled, partly compressed state.
-        let x: Vec<Vector3<f64>> = mesh
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let s = i as f64;
-                Vector3::new(
-                    0.93 * p.x + 1e-3 * (s * 1.7).sin(),
-                    p.y + 2e-3 * (s * 0.9).cos(),
-                    1.05 * p.z + 1.5e-3 * (s * 2.3).sin(),
-                )
-            })
-            .collect();
-        for c in [1.0, 0.1] {
-            model.set_membrane_compression(c).expect("factor");
-            let dt = 1.0 / 300.0;
-            let imp = model.elastic_impulse(&x, dt);
-            let eps = 1e-7;
-            for i in (0..x.len()).step_by(5) {
-                for k in 0..3 {
-                    let mut y = x.clone();
-                    y[i][k] += eps;
-                    let up = model.elastic_energy(&y);
-                    y[i][k] -= 2.0 * eps;
-                    let down = model.elastic_energy(&y);
-                    let grad = (up - down) / (2.0 * eps);
-                    let expect = -dt * grad / model.mass_kg[i];
-                    let got = imp[i][k];
-                    assert!(
-                        (got - expect).abs() <= 1e-5 * expect.abs().max(1e-3),
-                        "vertex {i} axis {k}, compression {c}: {got} vs {expect}"
-                    );
-                }
-            }
-        }
-        // At rest (as meshed) nothing acts.
-        let rest = model.elastic_impulse(&mesh.positions, 1.0 / 300.0);
-        assert!(rest.iter().all(|q| q.norm() < 1e-9));
     }
 }
