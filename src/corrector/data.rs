@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 
 use super::graph::{body_proximity, step_change, MeshGraph};
-use crate::data::{read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
+use crate::data::{flat32, read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
 use crate::sim::driver::Simulation;
@@ -35,15 +35,9 @@ pub struct Step {
     pub dv: Option<Vec<f32>>,
 }
 
-fn flat(v: &[Vector3<f64>]) -> Vec<f32> {
-    v.iter()
-        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-        .collect()
-}
-
 /// Δq = v_c − v_start − g·h of flattened arrays.
 fn change(coarse_v: &[f32], start_v: &[f32], gravity_dt: Vector3<f64>) -> Vec<f32> {
-    flat(&step_change(
+    flat32(&step_change(
         &vectors(coarse_v),
         &vectors(start_v),
         gravity_dt,
@@ -103,16 +97,6 @@ impl Sequence {
         let graph = MeshGraph::new(&mesh);
         let (n3, s) = (3 * manifest.coarse_vertices, manifest.steps_per_frame);
         let mut steps = Vec::with_capacity(frames.clone().count() * s);
-        if sim.sim.model.num_vertices() != manifest.coarse_vertices {
-            return Err(Error::bad_input(
-                dir.join("manifest.json"),
-                format!(
-                    "the data set's coarse mesh has {} vertices, the simulation's {}",
-                    manifest.coarse_vertices,
-                    sim.sim.model.num_vertices()
-                ),
-            ));
-        }
         // M_int's velocity before the first step loaded: the previous frame's last step.
         let mut start_v = if *frames.start() > 1 {
             let f = read_coarse_steps(dir, &manifest, frames.start() - 1)?;
@@ -165,11 +149,11 @@ impl Sequence {
             };
             let c = sim.step_from(&state)?.0;
             let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
-            let dv = flat(&step_change(&c.v, &state.v, gravity_dt));
+            let dv = flat32(&step_change(&c.v, &state.v, gravity_dt));
             let st = &mut self.steps[i];
             st.body = body_proximity(&c.x, &sim.colliders, c.t_s);
-            st.coarse_x = flat(&c.x);
-            st.coarse_v = flat(&c.v);
+            st.coarse_x = flat32(&c.x);
+            st.coarse_v = flat32(&c.v);
             st.dv = Some(dv);
         }
         Ok(())

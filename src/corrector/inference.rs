@@ -17,6 +17,7 @@ use super::graph::{body_proximity, step_change, MeshGraph, EDGE_FEATURES, NODE_F
 use super::model::{index_tensor, inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
+use crate::data::flat32;
 use crate::error::{Error, Result};
 use crate::mesh::ClothMesh;
 use crate::sim::driver::Simulation;
@@ -214,34 +215,31 @@ impl Corrector {
         let (nodes, edges) = features(&self.graph, x, v, dv, body, &self.norm);
         CorrectorTimes::add(&self.times.features_ns, t);
         let t = Instant::now();
-        let mut impulse: Vec<f32> = dv
-            .iter()
-            .flat_map(|d| [d.x as f32, d.y as f32, d.z as f32])
-            .collect();
-        self.norm.targets.apply(&mut impulse);
+        let mut step_change = flat32(dv);
+        self.norm.targets.apply(&mut step_change);
         let g = GraphTensors::with_indices(
             nodes,
             edges,
             self.senders.clone(),
             self.receivers.clone(),
             self.inv_mass.clone(),
-            impulse.clone(),
+            step_change.clone(),
         );
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
             .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
         CorrectorTimes::add(&self.times.network_ns, t);
-        if let Some(k) = (0..p.len())
-            .find(|&k| (p[k].abs() > MAX_CORRECTION_STD + impulse[k].abs()) || !p[k].is_finite())
-        {
+        if let Some(k) = (0..p.len()).find(|&k| {
+            (p[k].abs() > MAX_CORRECTION_STD + step_change[k].abs()) || !p[k].is_finite()
+        }) {
             return Err(Error::Simulation(format!(
                 "the corrector diverged: its correction at vertex {} is {:.1} standard deviations \
                  of its training data (limit {MAX_CORRECTION_STD} beyond the step's velocity \
                  change, {:.1})",
                 k / 3,
                 p[k],
-                impulse[k]
+                step_change[k]
             )));
         }
         self.norm.targets.invert(&mut p);

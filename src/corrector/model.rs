@@ -8,7 +8,7 @@
 //!   (Brody et al. 2022): a score a·LeakyReLU(e′_ij) per edge, softmax over each receiver's
 //!   incoming edges.
 //! * Decoder: MLP `L → 3`, the velocity correction p_i (normalised units); or, with
-//!   `momentum_decoder`, a momentum-conserving one (beyond the paper): an edge MLP `L → 3`
+//!   the `Momentum` decoder, a momentum-conserving one (beyond the paper): an edge MLP `L → 3`
 //!   gives g_ij on each directed edge, the pair's impulse is f_ij = g_ij − g_ji = −f_ji, and
 //!   p_i = (Σ_j f_ji)/m_i + b_i·h(v_i), m_i the relative lumped mass, b_i the body proximity
 //!   and h the node MLP. Away from colliders (b = 0) the corrections then add no linear

@@ -152,7 +152,13 @@ pub fn evaluate(
     let mut out = RolloutErrors::default();
     let (mut sim_s, mut corr_s) = (0.0, 0.0);
     for i in 1..=steps {
-        let alone_start_v = alone.v.clone();
+        // The not-interleaved variant corrects the free run at frame ends only.
+        let frame_end = (i + 1) % s == 0;
+        let alone_start_v = if frame_end {
+            alone.v.clone()
+        } else {
+            Vec::new()
+        };
         alone = sims[0].step_from(&alone)?.0;
         let t = Instant::now();
         let mut c = sims[1].step_from(&inter)?.0;
@@ -168,7 +174,7 @@ pub fn evaluate(
         }
         inter = c;
         // The data set's frame ends are its steps s, 2s, …; step 0 here is its step 1.
-        if (i + 1) % s == 0 {
+        if frame_end {
             let gt = vectors(&seq.steps[i].int_x);
             let mut fixed = alone.clone();
             corrector.correct(&alone_start_v, &mut fixed, sims[0])?;

@@ -39,6 +39,7 @@ use super::inference::{
 };
 use super::model::{inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
+use crate::data::flat32;
 use crate::error::{Error, Result};
 use crate::io::write_atomic;
 use crate::sim::driver::Simulation;
@@ -160,12 +161,6 @@ struct Sample {
     step_change: Vec<f32>,
     targets: Vec<f32>,
     mask: Vec<f32>,
-}
-
-fn flat(v: &[Vector3<f64>]) -> Vec<f32> {
-    v.iter()
-        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-        .collect()
 }
 
 /// A batch of samples concatenated into one graph, normalised, on `device`.
@@ -492,8 +487,8 @@ impl Trainer<'_> {
             graph,
             nodes,
             edges,
-            step_change: flat(&dvs),
-            targets: flat(&ts),
+            step_change: flat32(&dvs),
+            targets: flat32(&ts),
             mask,
         }
     }
@@ -665,7 +660,7 @@ fn rollout_window(
     for w in 1..=window {
         let (mut c, _) = sim.step_from(&state)?;
         let x_gt = vectors(&seq.steps[start + w].int_x);
-        let target: Vec<f32> = flat(
+        let target: Vec<f32> = flat32(
             &x_gt
                 .iter()
                 .zip(&c.x)
@@ -675,7 +670,7 @@ fn rollout_window(
         let body = body_proximity(&c.x, &sim.colliders, c.t_s);
         let dv = step_change(&c.v, &state.v, sim.sim.params.gravity_m_s2 * h);
         let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &dv, &body, norm);
-        let mut step_change = flat(&dv);
+        let mut step_change = flat32(&dv);
         norm.targets.apply(&mut step_change);
         let g = GraphTensors::of(&seq.graph, nodes, edges, step_change, device);
         let pred = net.forward(&g); // [n, 3], normalised

@@ -225,7 +225,8 @@ fn frame_path(dir: &Path, k: usize) -> PathBuf {
     dir.join("frames").join(format!("frame_{k:05}.safetensors"))
 }
 
-fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
+/// Vectors as a flat (N·3) f32 array, for tensor files and networks.
+pub(crate) fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
     x.iter()
         .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
         .collect()

@@ -204,9 +204,12 @@ impl<'a> Pipeline<'a> {
             if let Some(c) = &self.corrector {
                 self.simulated.clone_from(&self.coarse.state.x);
                 let t = Instant::now();
-                let mut state = self.coarse.state.clone();
-                c.correct(&start_v, &mut state, &self.coarse)?;
+                // Out of the simulation while `correct` reads its settings; put back either way
+                // (a failed correction leaves it as it was).
+                let mut state = std::mem::take(&mut self.coarse.state);
+                let corrected = c.correct(&start_v, &mut state, &self.coarse);
                 self.coarse.state = state;
+                corrected?;
                 cor_s += t.elapsed().as_secs_f64();
             }
         }

@@ -159,7 +159,7 @@ impl SimParams {
 
 /// Positions and velocities of the cloth: plain data that the corrector may overwrite between
 /// steps (the paper's interleaving).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct SimState {
     /// Positions, m.
     pub x: Vec<Vector3<f64>>,
