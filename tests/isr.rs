@@ -13,6 +13,7 @@ use clothsr::data::{generate, Options, Variation};
 use clothsr::msr::data::IsrSequence;
 use clothsr::msr::eval::evaluate;
 use clothsr::msr::gradients::gradient_l1;
+use clothsr::msr::inference::{patch_input, strain_channels, STRAIN_UNIT};
 use clothsr::msr::model::{
     relative_position_index, shift_mask, window_partition, window_reverse, IsrConfig,
 };
@@ -133,10 +134,102 @@ fn windows_partition_and_reverse_exactly_and_shift_masks_separate_wrapped_tokens
 }
 
 #[test]
+fn strain_channels_measure_the_stretch_of_the_coarse_map_exactly() {
+    // x(u, v) = (1.02 u, 0.97 v + 0.05 u, 0): |∂x/∂u| = √(1.02² + 0.05²), |∂x/∂v| = 0.97,
+    // cos ∠ = 0.05 · 0.97 / (|∂x/∂u| · 0.97). Linear, so one-sided and central differences agree.
+    let (p, h) = (10usize, 0.0025f32);
+    let coarse = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+        let (u, v) = (i as f32 * h, j as f32 * h);
+        [1.02 * u, 0.97 * v + 0.05 * u, 0.0][c] + 0.3
+    });
+    let mut mask = Array2::from_elem((p, p), true);
+    mask[(5, 5)] = false; // a hole: its neighbours fall back to one-sided differences
+                          // (0, 8) loses both neighbours along v: no derivative there, zeros.
+    mask[(0, 7)] = false;
+    mask[(0, 9)] = false;
+    let s = strain_channels(coarse.view(), mask.view(), h);
+    let lu = (1.02f32 * 1.02 + 0.05 * 0.05).sqrt();
+    let expect = [
+        (lu - 1.0) / STRAIN_UNIT,
+        (0.97 - 1.0) / STRAIN_UNIT,
+        0.05 / lu / STRAIN_UNIT,
+    ];
+    for i in 0..p {
+        for j in 0..p {
+            let got = [s[(0, i, j)], s[(1, i, j)], s[(2, i, j)]];
+            if !mask[(i, j)] || (i, j) == (0, 8) {
+                assert_eq!(got, [0.0; 3], "({i}, {j})");
+            } else {
+                for c in 0..3 {
+                    assert!(
+                        (got[c] - expect[c]).abs() < 2e-3,
+                        "({i}, {j}) {c}: {got:?} {expect:?}"
+                    );
+                }
+            }
+        }
+    }
+    // Shortening is negative and clamped at ±10 units.
+    let squashed = coarse.mapv(|x| x * 0.5);
+    let s = strain_channels(squashed.view(), mask.view(), h);
+    assert_eq!(s[(0, 3, 3)], -10.0);
+    // In the network's input they come after the initialisation, before the mask.
+    let init = coarse.clone();
+    let input = patch_input(
+        coarse.view(),
+        Some(init.view()),
+        mask.view(),
+        0.01,
+        0.001,
+        Some(h),
+    )
+    .expect("masked pixels");
+    assert_eq!(input.len(), 10 * p * p);
+    let strain = strain_channels(coarse.view(), mask.view(), h);
+    assert_eq!(
+        &input[6 * p * p..9 * p * p],
+        strain.as_slice().expect("standard layout")
+    );
+    assert_eq!(input[9 * p * p + 5 * p + 5], 0.0);
+    assert_eq!(input[9 * p * p], 1.0);
+    let without = patch_input(coarse.view(), None, mask.view(), 0.01, 0.001, None).expect("masked");
+    assert_eq!(without.len(), 4 * p * p);
+}
+
+#[test]
+fn a_model_saved_before_the_strain_input_loads_without_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let device = default_device().expect("device");
+    let cfg = tiny_config();
+    save_model(dir.path(), &cfg, &cfg.model.init(&device)).expect("save");
+    // Drop the field, as in config.json files written before it existed.
+    let path = dir.path().join("config.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+    json["model"]
+        .as_object_mut()
+        .expect("model object")
+        .remove("strain_input");
+    std::fs::write(&path, json.to_string()).expect("write");
+    let isr = Isr::load(dir.path()).expect("load");
+    assert!(!isr.cfg.model.strain());
+    assert_eq!(isr.cfg.model.in_channels(), 7);
+}
+
+#[test]
 fn forward_shapes_and_the_loss_matches_the_reference_differences() {
     let device = default_device().expect("device");
-    for init in [true, false] {
-        let cfg = tiny_model().with_init_input(init);
+    for (init, strain) in [
+        (true, None),
+        (false, None),
+        (true, Some(true)),
+        (false, Some(true)),
+    ] {
+        let cfg = tiny_model().with_init_input(init).with_strain_input(strain);
+        assert_eq!(
+            cfg.in_channels(),
+            4 + 3 * usize::from(init) + 3 * usize::from(strain.is_some())
+        );
         let net = cfg.init(&device);
         let x = Tensor::<4>::ones([3, cfg.in_channels(), 16, 16], &device);
         let y = net.forward(x);

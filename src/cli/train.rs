@@ -58,6 +58,9 @@ pub struct IsrArgs {
     /// Leave out the previous frame's output as an input (the ablation of §4.2).
     #[arg(long)]
     no_init: bool,
+    /// Give the network the coarse map's stretch (three more input channels).
+    #[arg(long)]
+    strain_input: bool,
     /// Feature channels.
     #[arg(long, default_value_t = 32)]
     embed_dim: usize,
@@ -86,6 +89,10 @@ pub struct IsrArgs {
     /// initialisation is then the network's own output; 0: always the data's).
     #[arg(long, default_value_t = 3)]
     unroll_max: usize,
+    /// Probability that a training sample's initialisation is the coarse map itself (as on a
+    /// shot's first frame) instead of the previous frame's ground truth.
+    #[arg(long, default_value_t = 0.1)]
+    coarse_init_prob: f64,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -286,7 +293,8 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_depths(a.depths.clone())
         .with_heads(a.heads)
         .with_window(a.window)
-        .with_init_input(!a.no_init);
+        .with_init_input(!a.no_init)
+        .with_strain_input(Some(a.strain_input));
     model
         .check()
         .map_err(|e| anyhow::anyhow!("ISR network: {e}"))?;
@@ -301,6 +309,7 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_init_noise_m(a.init_noise_mm * 1e-3)
         .with_init_motion(!a.no_init_motion)
         .with_unroll_max(a.unroll_max)
+        .with_coarse_init_prob(a.coarse_init_prob)
         .with_phong_alpha(a.phong_alpha)
         .with_seed(a.seed);
     let mut seqs = Vec::new();

@@ -24,8 +24,61 @@ pub const CONFIG_FILE: &str = "config.json";
 /// The weights in a model directory (burnpack).
 pub const WEIGHTS_FILE: &str = "model.bpk";
 
+/// Length change that one unit of the stretch channels stands for (1 %).
+pub const STRAIN_UNIT: f32 = 0.01;
+
+/// The stretch of a coarse patch `(3, P, Q)` (metres, on a material grid of `pixel_m` pixels)
+/// as three channels `(3, P, Q)`: (|∂x/∂u| − 1, |∂x/∂v| − 1, cos ∠(∂x/∂u, ∂x/∂v)) in units of
+/// [`STRAIN_UNIT`], clamped to ±10. Derivatives are central differences where both neighbours
+/// are on the mask, one-sided where one is; a pixel with neither along an axis, and every pixel
+/// off the mask, gets zeros. A cloth shortened by its wrinkles shows here as negative stretch.
+pub fn strain_channels(
+    coarse: ArrayView3<f32>,
+    mask: ArrayView2<bool>,
+    pixel_m: f32,
+) -> Array3<f32> {
+    let (_, p, q) = coarse.dim();
+    let mut out = Array3::zeros((3, p, q));
+    let at =
+        |i: usize, j: usize| Vector3::new(coarse[(0, i, j)], coarse[(1, i, j)], coarse[(2, i, j)]);
+    let on = |i: isize, j: isize| {
+        i >= 0 && j >= 0 && (i as usize) < p && (j as usize) < q && mask[(i as usize, j as usize)]
+    };
+    // The derivative along (di, dj) at (i, j), metres per metre of material.
+    let derivative = |i: usize, j: usize, di: isize, dj: isize| -> Option<Vector3<f32>> {
+        let (ii, jj) = (i as isize, j as isize);
+        let (fwd, back) = (on(ii + di, jj + dj), on(ii - di, jj - dj));
+        let idx = |k: isize| ((ii + k * di) as usize, (jj + k * dj) as usize);
+        let (f, b) = (idx(1), idx(-1));
+        match (fwd, back) {
+            (true, true) => Some((at(f.0, f.1) - at(b.0, b.1)) / (2.0 * pixel_m)),
+            (true, false) => Some((at(f.0, f.1) - at(i, j)) / pixel_m),
+            (false, true) => Some((at(i, j) - at(b.0, b.1)) / pixel_m),
+            (false, false) => None,
+        }
+    };
+    for ((i, j), &m) in mask.indexed_iter() {
+        if !m {
+            continue;
+        }
+        let (Some(a), Some(b)) = (derivative(i, j, 1, 0), derivative(i, j, 0, 1)) else {
+            continue;
+        };
+        let (la, lb) = (a.norm(), b.norm());
+        if !(la > 0.0 && lb > 0.0) {
+            continue;
+        }
+        let values = [la - 1.0, lb - 1.0, a.dot(&b) / (la * lb)];
+        for (c, v) in values.iter().enumerate() {
+            out[(c, i, j)] = (v / STRAIN_UNIT).clamp(-10.0, 10.0);
+        }
+    }
+    out
+}
+
 /// The network's input for one patch, normalised: channels coarse shape (3), initialisation
-/// detail (3, when `init` is given) and mask (1), each `P × P`, zero off the mask. The coarse
+/// detail (3, when `init` is given), coarse stretch (3, when `strain_pixel_m` gives the pixel
+/// size: [`strain_channels`]) and mask (1), each `P × P`, zero off the mask. The coarse
 /// positions are centred on the mean of the patch's masked pixels and divided by `scale_m`;
 /// the initialisation enters as its difference to the coarse patch divided by `detail_m`.
 /// `None` when no pixel is masked.
@@ -35,6 +88,7 @@ pub fn patch_input(
     mask: ArrayView2<bool>,
     scale_m: f32,
     detail_m: f32,
+    strain_pixel_m: Option<f32>,
 ) -> Option<Vec<f32>> {
     let count = mask.iter().filter(|&&m| m).count();
     if count == 0 {
@@ -52,7 +106,7 @@ pub fn patch_input(
         *centre = (sum / count as f64) as f32;
     }
     let (_, p, q) = coarse.dim();
-    let channels = if init.is_some() { 7 } else { 4 };
+    let channels = 4 + 3 * usize::from(init.is_some()) + 3 * usize::from(strain_pixel_m.is_some());
     let mut out = Vec::with_capacity(channels * p * q);
     for (c, centre) in centre.iter().enumerate() {
         for ((i, j), &m) in mask.indexed_iter() {
@@ -73,6 +127,9 @@ pub fn patch_input(
                 });
             }
         }
+    }
+    if let Some(pixel_m) = strain_pixel_m {
+        out.extend(strain_channels(coarse, mask, pixel_m).iter());
     }
     out.extend(mask.iter().map(|&m| if m { 1.0 } else { 0.0 }));
     Some(out)
@@ -267,6 +324,7 @@ impl<'a> SuperResolver<'a> {
         let cfg = &self.isr.cfg;
         let (p, scale, detail) = (cfg.patch, cfg.scale_m as f32, cfg.detail_m as f32);
         let use_init = cfg.model.init_input;
+        let strain = cfg.model.strain().then_some(cfg.pixel_m as f32);
         let maps = self.rasteriser.rasterise(x);
         // Every patch of every panel: (grid, patch index) and its input.
         let mut index: Vec<(usize, usize)> = Vec::new();
@@ -288,6 +346,7 @@ impl<'a> SuperResolver<'a> {
                     mp.slice(s![k, .., ..]),
                     scale,
                     detail,
+                    strain,
                 ) {
                     inputs.extend(input);
                     index.push((g, k));

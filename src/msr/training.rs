@@ -654,7 +654,8 @@ fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) ->
     let (mut mask_values, mut grad_values) = (0.0f32, 0.0f32);
     for r in raws {
         let init = cfg.model.init_input.then(|| r.init.view());
-        match patch_input(r.coarse.view(), init, r.mask.view(), scale, detail) {
+        let strain = cfg.model.strain().then_some(cfg.pixel_m as f32);
+        match patch_input(r.coarse.view(), init, r.mask.view(), scale, detail, strain) {
             Some(input) => {
                 inputs.extend(input);
                 for c in 0..3 {
