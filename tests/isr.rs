@@ -13,7 +13,9 @@ use clothsr::data::{generate, Options, Variation};
 use clothsr::msr::data::IsrSequence;
 use clothsr::msr::eval::evaluate;
 use clothsr::msr::gradients::gradient_l1;
-use clothsr::msr::inference::{patch_input, strain_channels, STRAIN_UNIT};
+use clothsr::msr::inference::{
+    geometry_channels, patch_input, CURVATURE_UNIT, GEOMETRY_CHANNELS, STRAIN_UNIT,
+};
 use clothsr::msr::model::{
     relative_position_index, shift_mask, window_partition, window_reverse, IsrConfig,
 };
@@ -134,70 +136,107 @@ fn windows_partition_and_reverse_exactly_and_shift_masks_separate_wrapped_tokens
 }
 
 #[test]
-fn strain_channels_measure_the_stretch_of_the_coarse_map_exactly() {
-    // x(u, v) = (1.02 u, 0.97 v + 0.05 u, 0): |∂x/∂u| = √(1.02² + 0.05²), |∂x/∂v| = 0.97,
-    // cos ∠ = 0.05 · 0.97 / (|∂x/∂u| · 0.97). Linear, so one-sided and central differences agree.
-    let (p, h) = (10usize, 0.0025f32);
-    let coarse = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+fn geometry_channels_measure_stretch_normal_and_curvature_of_the_coarse_map() {
+    // A sheared plane x(u, v) = (1.02 u, 0.97 v + 0.05 u, 0): |∂x/∂u| = √(1.02² + 0.05²),
+    // |∂x/∂v| = 0.97, cos ∠ = 0.05 / |∂x/∂u|, normal +z, no curvature. Linear, so one-sided
+    // and central differences agree.
+    let (p, h) = (12usize, 0.0025f32);
+    let plane = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
         let (u, v) = (i as f32 * h, j as f32 * h);
         [1.02 * u, 0.97 * v + 0.05 * u, 0.0][c] + 0.3
     });
     let mut mask = Array2::from_elem((p, p), true);
     mask[(5, 5)] = false; // a hole: its neighbours fall back to one-sided differences
-                          // (0, 8) loses both neighbours along v: no derivative there, zeros.
+                          // (0, 8) loses both neighbours along v: no stretch or normal there.
     mask[(0, 7)] = false;
     mask[(0, 9)] = false;
-    let s = strain_channels(coarse.view(), mask.view(), h);
+    let g = geometry_channels(plane.view(), mask.view(), h);
+    assert_eq!(g.dim(), (GEOMETRY_CHANNELS, p, p));
     let lu = (1.02f32 * 1.02 + 0.05 * 0.05).sqrt();
     let expect = [
         (lu - 1.0) / STRAIN_UNIT,
         (0.97 - 1.0) / STRAIN_UNIT,
         0.05 / lu / STRAIN_UNIT,
+        0.0,
+        0.0,
+        1.0,
     ];
     for i in 0..p {
         for j in 0..p {
-            let got = [s[(0, i, j)], s[(1, i, j)], s[(2, i, j)]];
-            if !mask[(i, j)] || (i, j) == (0, 8) {
-                assert_eq!(got, [0.0; 3], "({i}, {j})");
+            let got: Vec<f32> = (0..GEOMETRY_CHANNELS).map(|c| g[(c, i, j)]).collect();
+            if !mask[(i, j)] {
+                assert!(got.iter().all(|&v| v == 0.0), "({i}, {j})");
+            } else if (i, j) == (0, 8) {
+                assert!(got[..6].iter().all(|&v| v == 0.0), "({i}, {j}) {got:?}");
             } else {
-                for c in 0..3 {
-                    assert!(
-                        (got[c] - expect[c]).abs() < 2e-3,
-                        "({i}, {j}) {c}: {got:?} {expect:?}"
-                    );
+                for c in 0..6 {
+                    assert!((got[c] - expect[c]).abs() < 2e-3, "({i}, {j}) {c}: {got:?}");
                 }
+            }
+            for c in 6..9 {
+                assert!(got[c].abs() < 2e-3, "({i}, {j}) curvature {c}: {got:?}");
             }
         }
     }
-    // Shortening is negative and clamped at ±10 units.
-    let squashed = coarse.mapv(|x| x * 0.5);
-    let s = strain_channels(squashed.view(), mask.view(), h);
+    // Shortening is negative and clamped at -10 units.
+    let squashed = plane.mapv(|x| x * 0.5);
+    let s = geometry_channels(squashed.view(), mask.view(), h);
     assert_eq!(s[(0, 3, 3)], -10.0);
-    // In the network's input they come after the initialisation, before the mask.
-    let init = coarse.clone();
+
+    // A cylinder of radius R = 20 mm rolled along u (an isometry): normal (sin, 0, cos) of
+    // u/R, curvature vector −normal/R (1 unit), stretch along u the chord's shortening.
+    let r = 0.02f32;
+    let p = 16usize;
+    let cyl = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+        let (u, v) = (i as f32 * h, j as f32 * h);
+        [r * (u / r).sin(), v, r * (u / r).cos()][c]
+    });
+    let full = Array2::from_elem((p, p), true);
+    let g = geometry_channels(cyl.view(), full.view(), h);
+    let chord = ((h / r).sin() / (h / r) - 1.0) / STRAIN_UNIT;
+    for i in 4..p - 4 {
+        for j in 4..p - 4 {
+            let t = i as f32 * h / r;
+            let n = [t.sin(), 0.0, t.cos()];
+            assert!((g[(0, i, j)] - chord).abs() < 2e-3, "{}", g[(0, i, j)]);
+            assert!(g[(1, i, j)].abs() < 1e-3 && g[(2, i, j)].abs() < 1e-3);
+            for c in 0..3 {
+                assert!((g[(3 + c, i, j)] - n[c]).abs() < 1e-4, "normal {c}");
+                let k = -n[c] / r / CURVATURE_UNIT;
+                assert!(
+                    (g[(6 + c, i, j)] - k).abs() < 0.03,
+                    "curvature {c}: {}",
+                    g[(6 + c, i, j)]
+                );
+            }
+        }
+    }
+
+    // In the network's input they come after the initialisation, before the mask, zero off it.
+    let g = geometry_channels(plane.view(), mask.view(), h);
+    let p = 12usize;
     let input = patch_input(
-        coarse.view(),
-        Some(init.view()),
+        plane.view(),
+        Some(plane.view()),
         mask.view(),
         0.01,
         0.001,
-        Some(h),
+        Some(g.view()),
     )
     .expect("masked pixels");
-    assert_eq!(input.len(), 10 * p * p);
-    let strain = strain_channels(coarse.view(), mask.view(), h);
+    assert_eq!(input.len(), (7 + GEOMETRY_CHANNELS) * p * p);
     assert_eq!(
-        &input[6 * p * p..9 * p * p],
-        strain.as_slice().expect("standard layout")
+        &input[6 * p * p..15 * p * p],
+        g.as_slice().expect("standard layout")
     );
-    assert_eq!(input[9 * p * p + 5 * p + 5], 0.0);
-    assert_eq!(input[9 * p * p], 1.0);
-    let without = patch_input(coarse.view(), None, mask.view(), 0.01, 0.001, None).expect("masked");
+    assert_eq!(input[15 * p * p + 5 * p + 5], 0.0);
+    assert_eq!(input[15 * p * p], 1.0);
+    let without = patch_input(plane.view(), None, mask.view(), 0.01, 0.001, None).expect("masked");
     assert_eq!(without.len(), 4 * p * p);
 }
 
 #[test]
-fn a_model_saved_before_the_strain_input_loads_without_it() {
+fn a_model_saved_before_the_geometry_input_loads_without_it() {
     let dir = tempfile::tempdir().expect("tempdir");
     let device = default_device().expect("device");
     let cfg = tiny_config();
@@ -209,26 +248,28 @@ fn a_model_saved_before_the_strain_input_loads_without_it() {
     json["model"]
         .as_object_mut()
         .expect("model object")
-        .remove("strain_input");
+        .remove("geometry_input");
     std::fs::write(&path, json.to_string()).expect("write");
     let isr = Isr::load(dir.path()).expect("load");
-    assert!(!isr.cfg.model.strain());
+    assert!(!isr.cfg.model.geometry());
     assert_eq!(isr.cfg.model.in_channels(), 7);
 }
 
 #[test]
 fn forward_shapes_and_the_loss_matches_the_reference_differences() {
     let device = default_device().expect("device");
-    for (init, strain) in [
+    for (init, geometry) in [
         (true, None),
         (false, None),
         (true, Some(true)),
         (false, Some(true)),
     ] {
-        let cfg = tiny_model().with_init_input(init).with_strain_input(strain);
+        let cfg = tiny_model()
+            .with_init_input(init)
+            .with_geometry_input(geometry);
         assert_eq!(
             cfg.in_channels(),
-            4 + 3 * usize::from(init) + 3 * usize::from(strain.is_some())
+            4 + 3 * usize::from(init) + GEOMETRY_CHANNELS * usize::from(geometry.is_some())
         );
         let net = cfg.init(&device);
         let x = Tensor::<4>::ones([3, cfg.in_channels(), 16, 16], &device);

@@ -58,9 +58,10 @@ pub struct IsrArgs {
     /// Leave out the previous frame's output as an input (the ablation of §4.2).
     #[arg(long)]
     no_init: bool,
-    /// Give the network the coarse map's stretch (three more input channels).
+    /// Give the network the coarse map's local geometry: stretch, normal and curvature (nine
+    /// more input channels).
     #[arg(long)]
-    strain_input: bool,
+    geometry_input: bool,
     /// Feature channels.
     #[arg(long, default_value_t = 32)]
     embed_dim: usize,
@@ -294,7 +295,7 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_heads(a.heads)
         .with_window(a.window)
         .with_init_input(!a.no_init)
-        .with_strain_input(Some(a.strain_input));
+        .with_geometry_input(Some(a.geometry_input));
     model
         .check()
         .map_err(|e| anyhow::anyhow!("ISR network: {e}"))?;

@@ -26,59 +26,107 @@ pub const WEIGHTS_FILE: &str = "model.bpk";
 
 /// Length change that one unit of the stretch channels stands for (1 %).
 pub const STRAIN_UNIT: f32 = 0.01;
+/// Curvature that one unit of the curvature channels stands for, 1/m (a 20 mm radius).
+pub const CURVATURE_UNIT: f32 = 50.0;
+/// Stencil half-width of the curvature channels, pixels (10 mm at 2.5 mm pixels: the coarse
+/// mesh's scale, not the rasteriser's kinks at coarse edges).
+pub const CURVATURE_STENCIL_PX: usize = 4;
+/// Channels of [`geometry_channels`].
+pub const GEOMETRY_CHANNELS: usize = 9;
 
-/// The stretch of a coarse patch `(3, P, Q)` (metres, on a material grid of `pixel_m` pixels)
-/// as three channels `(3, P, Q)`: (|∂x/∂u| − 1, |∂x/∂v| − 1, cos ∠(∂x/∂u, ∂x/∂v)) in units of
-/// [`STRAIN_UNIT`], clamped to ±10. Derivatives are central differences where both neighbours
-/// are on the mask, one-sided where one is; a pixel with neither along an axis, and every pixel
-/// off the mask, gets zeros. A cloth shortened by its wrinkles shows here as negative stretch.
-pub fn strain_channels(
+/// The local geometry of a coarse map `(3, H, W)` (metres, on a material grid of `pixel_m`
+/// pixels) as [`GEOMETRY_CHANNELS`] channels `(9, H, W)`, zero off the mask:
+///
+/// * 0–2, stretch: (|∂x/∂u| − 1, |∂x/∂v| − 1, cos ∠(∂x/∂u, ∂x/∂v)) in units of
+///   [`STRAIN_UNIT`]. A cloth shortened by its wrinkles shows here as negative stretch.
+/// * 3–5, the unit normal ∂x/∂u × ∂x/∂v (normalised; its side is the pattern's orientation).
+/// * 6–8, the curvature vector: the Laplacian Σ_axes (x₊ − 2x + x₋)/(s h)², with s the largest
+///   step up to [`CURVATURE_STENCIL_PX`] whose two neighbours are on the mask (an axis without
+///   any contributes nothing), in units of [`CURVATURE_UNIT`]. It points into a fold's
+///   concave side with length 1/R for a fold of radius R.
+///
+/// First derivatives are central differences where both neighbours are on the mask,
+/// one-sided where one is; a pixel with neither along an axis has zero stretch and normal.
+/// Every channel is clamped to ±10 units.
+pub fn geometry_channels(
     coarse: ArrayView3<f32>,
     mask: ArrayView2<bool>,
     pixel_m: f32,
 ) -> Array3<f32> {
     let (_, p, q) = coarse.dim();
-    let mut out = Array3::zeros((3, p, q));
+    let mut out = Array3::zeros((GEOMETRY_CHANNELS, p, q));
     let at =
         |i: usize, j: usize| Vector3::new(coarse[(0, i, j)], coarse[(1, i, j)], coarse[(2, i, j)]);
     let on = |i: isize, j: isize| {
         i >= 0 && j >= 0 && (i as usize) < p && (j as usize) < q && mask[(i as usize, j as usize)]
     };
+    let step = |i: usize, j: usize, k: isize, di: isize, dj: isize| {
+        (
+            (i as isize + k * di) as usize,
+            (j as isize + k * dj) as usize,
+        )
+    };
     // The derivative along (di, dj) at (i, j), metres per metre of material.
     let derivative = |i: usize, j: usize, di: isize, dj: isize| -> Option<Vector3<f32>> {
         let (ii, jj) = (i as isize, j as isize);
-        let (fwd, back) = (on(ii + di, jj + dj), on(ii - di, jj - dj));
-        let idx = |k: isize| ((ii + k * di) as usize, (jj + k * dj) as usize);
-        let (f, b) = (idx(1), idx(-1));
-        match (fwd, back) {
+        let (f, b) = (step(i, j, 1, di, dj), step(i, j, -1, di, dj));
+        match (on(ii + di, jj + dj), on(ii - di, jj - dj)) {
             (true, true) => Some((at(f.0, f.1) - at(b.0, b.1)) / (2.0 * pixel_m)),
             (true, false) => Some((at(f.0, f.1) - at(i, j)) / pixel_m),
             (false, true) => Some((at(i, j) - at(b.0, b.1)) / pixel_m),
             (false, false) => None,
         }
     };
+    // The second derivative along (di, dj) on the widest symmetric stencil available.
+    let second = |i: usize, j: usize, di: isize, dj: isize| -> Vector3<f32> {
+        let (ii, jj) = (i as isize, j as isize);
+        for s in (1..=CURVATURE_STENCIL_PX as isize).rev() {
+            if on(ii + s * di, jj + s * dj) && on(ii - s * di, jj - s * dj) {
+                let (f, b) = (step(i, j, s, di, dj), step(i, j, -s, di, dj));
+                let hs = s as f32 * pixel_m;
+                return (at(f.0, f.1) - 2.0 * at(i, j) + at(b.0, b.1)) / (hs * hs);
+            }
+        }
+        Vector3::zeros()
+    };
+    let mut put = |c: usize, i: usize, j: usize, v: f32| {
+        out[(c, i, j)] = if v.is_finite() {
+            v.clamp(-10.0, 10.0)
+        } else {
+            0.0
+        };
+    };
     for ((i, j), &m) in mask.indexed_iter() {
         if !m {
             continue;
         }
-        let (Some(a), Some(b)) = (derivative(i, j, 1, 0), derivative(i, j, 0, 1)) else {
-            continue;
-        };
-        let (la, lb) = (a.norm(), b.norm());
-        if !(la > 0.0 && lb > 0.0) {
-            continue;
+        if let (Some(a), Some(b)) = (derivative(i, j, 1, 0), derivative(i, j, 0, 1)) {
+            let (la, lb) = (a.norm(), b.norm());
+            if la > 0.0 && lb > 0.0 {
+                put(0, i, j, (la - 1.0) / STRAIN_UNIT);
+                put(1, i, j, (lb - 1.0) / STRAIN_UNIT);
+                put(2, i, j, a.dot(&b) / (la * lb) / STRAIN_UNIT);
+            }
+            let n = a.cross(&b);
+            let ln = n.norm();
+            if ln > 0.0 {
+                for c in 0..3 {
+                    put(3 + c, i, j, n[c] / ln);
+                }
+            }
         }
-        let values = [la - 1.0, lb - 1.0, a.dot(&b) / (la * lb)];
-        for (c, v) in values.iter().enumerate() {
-            out[(c, i, j)] = (v / STRAIN_UNIT).clamp(-10.0, 10.0);
+        let lap = second(i, j, 1, 0) + second(i, j, 0, 1);
+        for c in 0..3 {
+            put(6 + c, i, j, lap[c] / CURVATURE_UNIT);
         }
     }
     out
 }
 
 /// The network's input for one patch, normalised: channels coarse shape (3), initialisation
-/// detail (3, when `init` is given), coarse stretch (3, when `strain_pixel_m` gives the pixel
-/// size: [`strain_channels`]) and mask (1), each `P × P`, zero off the mask. The coarse
+/// detail (3, when `init` is given), the coarse map's geometry (9, when `geometry` is given:
+/// the patch of [`geometry_channels`] of the whole map) and mask (1), each `P × P`, zero off
+/// the mask. The coarse
 /// positions are centred on the mean of the patch's masked pixels and divided by `scale_m`;
 /// the initialisation enters as its difference to the coarse patch divided by `detail_m`.
 /// `None` when no pixel is masked.
@@ -88,7 +136,7 @@ pub fn patch_input(
     mask: ArrayView2<bool>,
     scale_m: f32,
     detail_m: f32,
-    strain_pixel_m: Option<f32>,
+    geometry: Option<ArrayView3<f32>>,
 ) -> Option<Vec<f32>> {
     let count = mask.iter().filter(|&&m| m).count();
     if count == 0 {
@@ -106,7 +154,8 @@ pub fn patch_input(
         *centre = (sum / count as f64) as f32;
     }
     let (_, p, q) = coarse.dim();
-    let channels = 4 + 3 * usize::from(init.is_some()) + 3 * usize::from(strain_pixel_m.is_some());
+    let channels =
+        4 + 3 * usize::from(init.is_some()) + GEOMETRY_CHANNELS * usize::from(geometry.is_some());
     let mut out = Vec::with_capacity(channels * p * q);
     for (c, centre) in centre.iter().enumerate() {
         for ((i, j), &m) in mask.indexed_iter() {
@@ -128,8 +177,10 @@ pub fn patch_input(
             }
         }
     }
-    if let Some(pixel_m) = strain_pixel_m {
-        out.extend(strain_channels(coarse, mask, pixel_m).iter());
+    if let Some(g) = geometry {
+        for ((_, i, j), &v) in g.indexed_iter() {
+            out.push(if mask[(i, j)] { v } else { 0.0 });
+        }
     }
     out.extend(mask.iter().map(|&m| if m { 1.0 } else { 0.0 }));
     Some(out)
@@ -324,7 +375,7 @@ impl<'a> SuperResolver<'a> {
         let cfg = &self.isr.cfg;
         let (p, scale, detail) = (cfg.patch, cfg.scale_m as f32, cfg.detail_m as f32);
         let use_init = cfg.model.init_input;
-        let strain = cfg.model.strain().then_some(cfg.pixel_m as f32);
+        let use_geometry = cfg.model.geometry();
         let maps = self.rasteriser.rasterise(x);
         // Every patch of every panel: (grid, patch index) and its input.
         let mut index: Vec<(usize, usize)> = Vec::new();
@@ -338,15 +389,20 @@ impl<'a> SuperResolver<'a> {
             };
             let (cp, mp) = split_patches(&map.image, &map.mask, layout);
             let (ip, _) = split_patches(&init, &map.mask, layout);
+            let gp = use_geometry.then(|| {
+                let g = geometry_channels(map.image.view(), map.mask.view(), cfg.pixel_m as f32);
+                split_patches(&g, &map.mask, layout).0
+            });
             for k in 0..layout.num_patches() {
                 let init_k = use_init.then(|| ip.slice(s![k, .., .., ..]));
+                let geometry_k = gp.as_ref().map(|g| g.slice(s![k, .., .., ..]));
                 if let Some(input) = patch_input(
                     cp.slice(s![k, .., .., ..]),
                     init_k,
                     mp.slice(s![k, .., ..]),
                     scale,
                     detail,
-                    strain,
+                    geometry_k,
                 ) {
                     inputs.extend(input);
                     index.push((g, k));

@@ -3,8 +3,8 @@
 //!
 //! * **Shallow features**: a 3×3 convolution `in → C` of the input patch, whose channels are the
 //!   coarse coordinate-map patch (3), the previous frame's fine output patch (3, the
-//!   initialisation of §3.2.2; left out when `init_input` is off), the coarse map's stretch
-//!   (3, with `strain_input`) and the mask (1).
+//!   initialisation of §3.2.2; left out when `init_input` is off), the coarse map's geometry
+//!   (9, with `geometry_input`: stretch, normal, curvature) and the mask (1).
 //! * **Deep features**: `depths.len()` residual Swin transformer blocks (RSTB). Each holds
 //!   `depths[k]` Swin transformer layers (LayerNorm → window multi-head self-attention with a
 //!   learned relative-position bias → residual; LayerNorm → MLP (GELU) → residual), the windows
@@ -54,23 +54,26 @@ pub struct IsrConfig {
     /// The previous frame's fine output is an input (§3.2.2); off for the ablation.
     #[config(default = true)]
     pub init_input: bool,
-    /// The coarse map's stretch (three channels, [`super::inference::strain_channels`]) is an
-    /// input (beyond the paper: wrinkles take up the length the coarse map has lost, a ~1 %
-    /// change of its spacing that the coordinates alone show only as a 1 % ripple). `None`
-    /// (models saved before it existed) is off.
-    pub strain_input: Option<bool>,
+    /// The coarse map's local geometry (stretch, normal, curvature vector: nine channels,
+    /// [`super::inference::geometry_channels`]) is an input (beyond the paper). The fine
+    /// detail is mostly folds sharper than the coarse mesh, along its curved lines, and
+    /// wrinkles taking up the length it has lost; the coordinates show curvature and a ~1 %
+    /// shortening only as tiny second differences. `None` (models saved before it existed)
+    /// is off.
+    pub geometry_input: Option<bool>,
 }
 
 impl IsrConfig {
-    /// Input channels: coarse (3), previous fine (3, with `init_input`), coarse stretch (3,
-    /// with `strain_input`), mask (1).
+    /// Input channels: coarse (3), previous fine (3, with `init_input`), coarse geometry (9,
+    /// with `geometry_input`), mask (1).
     pub fn in_channels(&self) -> usize {
-        4 + 3 * usize::from(self.init_input) + 3 * usize::from(self.strain())
+        4 + 3 * usize::from(self.init_input)
+            + super::inference::GEOMETRY_CHANNELS * usize::from(self.geometry())
     }
 
-    /// Whether the coarse stretch is an input.
-    pub fn strain(&self) -> bool {
-        self.strain_input.unwrap_or(false)
+    /// Whether the coarse map's geometry is an input.
+    pub fn geometry(&self) -> bool {
+        self.geometry_input.unwrap_or(false)
     }
 
     /// Checks the sizes; `Err` names the problem.

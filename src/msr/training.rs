@@ -43,7 +43,9 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use super::data::IsrSequence;
-use super::inference::{patch_input, CONFIG_FILE, WEIGHTS_FILE};
+use super::inference::{
+    geometry_channels, patch_input, CONFIG_FILE, CURVATURE_STENCIL_PX, WEIGHTS_FILE,
+};
 use super::model::{IsrConfig, IsrNet};
 use crate::corrector::training::write_json;
 use crate::error::{Error, Result};
@@ -194,6 +196,8 @@ pub fn gradient_mask(mask: &Array2<bool>) -> Array2<bool> {
 /// One training patch before normalisation, metres.
 struct RawPatch {
     coarse: Array3<f32>,
+    /// The coarse map's geometry channels (with `geometry_input`).
+    geometry: Option<Array3<f32>>,
     init: Array3<f32>,
     fine: Array3<f32>,
     mask: Array2<bool>,
@@ -437,22 +441,37 @@ fn checkpoint(
     write_json(&dir.join("state.json"), &position)
 }
 
-/// Crops `(C, H, W)` at `(r0, c0)` to `p × p`, zero-padded past the border.
-fn crop3(a: &Array3<f32>, r0: usize, c0: usize, p: usize) -> Array3<f32> {
+/// The rows (or columns) of a `p`-long window starting at `r0` (possibly negative) that lie
+/// in `0..len`: (first index in the window, first index in the array, count).
+fn overlap(r0: isize, p: usize, len: usize) -> (usize, usize, usize) {
+    let start = r0.max(0);
+    let end = (r0 + p as isize).min(len as isize);
+    if end <= start {
+        return (0, 0, 0);
+    }
+    (
+        (start - r0) as usize,
+        start as usize,
+        (end - start) as usize,
+    )
+}
+
+/// Crops `(C, H, W)` at `(r0, c0)` (possibly negative) to `p × p`, zero-padded past the border.
+fn crop3(a: &Array3<f32>, r0: isize, c0: isize, p: usize) -> Array3<f32> {
     let (c, h, w) = a.dim();
-    let (hr, wc) = (p.min(h - r0), p.min(w - c0));
+    let ((oi, ai, ni), (oj, aj, nj)) = (overlap(r0, p, h), overlap(c0, p, w));
     let mut out = Array3::zeros((c, p, p));
-    out.slice_mut(s![.., ..hr, ..wc])
-        .assign(&a.slice(s![.., r0..r0 + hr, c0..c0 + wc]));
+    out.slice_mut(s![.., oi..oi + ni, oj..oj + nj])
+        .assign(&a.slice(s![.., ai..ai + ni, aj..aj + nj]));
     out
 }
 
-fn crop2(a: &Array2<bool>, r0: usize, c0: usize, p: usize) -> Array2<bool> {
+fn crop2(a: &Array2<bool>, r0: isize, c0: isize, p: usize) -> Array2<bool> {
     let (h, w) = a.dim();
-    let (hr, wc) = (p.min(h - r0), p.min(w - c0));
+    let ((oi, ai, ni), (oj, aj, nj)) = (overlap(r0, p, h), overlap(c0, p, w));
     let mut out = Array2::from_elem((p, p), false);
-    out.slice_mut(s![..hr, ..wc])
-        .assign(&a.slice(s![r0..r0 + hr, c0..c0 + wc]));
+    out.slice_mut(s![oi..oi + ni, oj..oj + nj])
+        .assign(&a.slice(s![ai..ai + ni, aj..aj + nj]));
     out
 }
 
@@ -470,7 +489,33 @@ struct Location {
 impl Location {
     /// The `(3, P, P)` crop of `maps` (one frame's maps of this location's sequence).
     fn crop(&self, maps: &[Array3<f32>], p: usize) -> Array3<f32> {
-        let mut a = crop3(&maps[self.grid], self.origin.0, self.origin.1, p);
+        let (r0, c0) = (self.origin.0 as isize, self.origin.1 as isize);
+        self.flipped(crop3(&maps[self.grid], r0, c0, p))
+    }
+
+    /// The `(9, P, P)` geometry channels of the coarse map `maps` at this location, computed
+    /// on a crop with a margin so that they equal those of the whole map (as at inference),
+    /// then cropped and mirrored like the maps.
+    fn geometry(
+        &self,
+        seqs: &[IsrSequence],
+        maps: &[Array3<f32>],
+        p: usize,
+        pixel_m: f32,
+    ) -> Array3<f32> {
+        let m = CURVATURE_STENCIL_PX;
+        let (r0, c0) = (
+            self.origin.0 as isize - m as isize,
+            self.origin.1 as isize - m as isize,
+        );
+        let wide = crop3(&maps[self.grid], r0, c0, p + 2 * m);
+        let mask = crop2(&seqs[self.seq].grids[self.grid].mask, r0, c0, p + 2 * m);
+        let g = geometry_channels(wide.view(), mask.view(), pixel_m);
+        self.flipped(g.slice(s![.., m..m + p, m..m + p]).to_owned())
+    }
+
+    /// `a` `(C, P, P)` mirrored by this location's flips.
+    fn flipped(&self, mut a: Array3<f32>) -> Array3<f32> {
         for (axis, &f) in self.flip.iter().enumerate() {
             if f {
                 a.invert_axis(ndarray::Axis(axis + 1));
@@ -481,7 +526,7 @@ impl Location {
 
     fn mask(&self, seqs: &[IsrSequence], p: usize) -> Array2<bool> {
         let full = &seqs[self.seq].grids[self.grid].mask;
-        let mut m = crop2(full, self.origin.0, self.origin.1, p);
+        let mut m = crop2(full, self.origin.0 as isize, self.origin.1 as isize, p);
         for (axis, &f) in self.flip.iter().enumerate() {
             if f {
                 m.invert_axis(ndarray::Axis(axis));
@@ -594,8 +639,13 @@ fn training_batch(
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| Error::Invalid("no training frames for the unroll length".into()))?;
     let masks: Vec<Array2<bool>> = locs.iter().map(|l| l.mask(seqs, p)).collect();
+    let pixel_m = cfg.pixel_m as f32;
     let raw = |l: &Location, m: &Array2<bool>, frame: usize, init: Array3<f32>| RawPatch {
         coarse: l.crop(&seqs[l.seq].frames[frame].coarse, p),
+        geometry: cfg
+            .model
+            .geometry()
+            .then(|| l.geometry(seqs, &seqs[l.seq].frames[frame].coarse, p, pixel_m)),
         init,
         fine: l.crop(&seqs[l.seq].frames[frame].fine, p),
         mask: m.clone(),
@@ -654,8 +704,15 @@ fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) ->
     let (mut mask_values, mut grad_values) = (0.0f32, 0.0f32);
     for r in raws {
         let init = cfg.model.init_input.then(|| r.init.view());
-        let strain = cfg.model.strain().then_some(cfg.pixel_m as f32);
-        match patch_input(r.coarse.view(), init, r.mask.view(), scale, detail, strain) {
+        let geometry = r.geometry.as_ref().map(|g| g.view());
+        match patch_input(
+            r.coarse.view(),
+            init,
+            r.mask.view(),
+            scale,
+            detail,
+            geometry,
+        ) {
             Some(input) => {
                 inputs.extend(input);
                 for c in 0..3 {
