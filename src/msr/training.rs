@@ -475,6 +475,27 @@ fn crop2(a: &Array2<bool>, r0: isize, c0: isize, p: usize) -> Array2<bool> {
     out
 }
 
+/// The `(9, p, p)` geometry channels ([`geometry_channels`]) of the `p × p` crop at `origin`
+/// of a whole coarse map `(3, H, W)` with its mask: computed on a crop with a margin of the
+/// curvature stencil, so that they equal the whole map's (as at inference) on every pixel.
+fn crop_geometry(
+    map: &Array3<f32>,
+    mask: &Array2<bool>,
+    origin: (usize, usize),
+    p: usize,
+    pixel_m: f32,
+) -> Array3<f32> {
+    let m = CURVATURE_STENCIL_PX;
+    let (r0, c0) = (
+        origin.0 as isize - m as isize,
+        origin.1 as isize - m as isize,
+    );
+    let wide = crop3(map, r0, c0, p + 2 * m);
+    let wide_mask = crop2(mask, r0, c0, p + 2 * m);
+    let g = geometry_channels(wide.view(), wide_mask.view(), pixel_m);
+    g.slice(s![.., m..m + p, m..m + p]).to_owned()
+}
+
 /// Where a training patch comes from: sequence, frame (index into its loaded frames), panel
 /// grid, top-left pixel and mirroring along rows and columns.
 #[derive(Debug, Clone, Copy)]
@@ -493,9 +514,8 @@ impl Location {
         self.flipped(crop3(&maps[self.grid], r0, c0, p))
     }
 
-    /// The `(9, P, P)` geometry channels of the coarse map `maps` at this location, computed
-    /// on a crop with a margin so that they equal those of the whole map (as at inference),
-    /// then cropped and mirrored like the maps.
+    /// The `(9, P, P)` geometry channels of the coarse map `maps` at this location
+    /// ([`crop_geometry`]), mirrored like the maps.
     fn geometry(
         &self,
         seqs: &[IsrSequence],
@@ -503,15 +523,14 @@ impl Location {
         p: usize,
         pixel_m: f32,
     ) -> Array3<f32> {
-        let m = CURVATURE_STENCIL_PX;
-        let (r0, c0) = (
-            self.origin.0 as isize - m as isize,
-            self.origin.1 as isize - m as isize,
-        );
-        let wide = crop3(&maps[self.grid], r0, c0, p + 2 * m);
-        let mask = crop2(&seqs[self.seq].grids[self.grid].mask, r0, c0, p + 2 * m);
-        let g = geometry_channels(wide.view(), mask.view(), pixel_m);
-        self.flipped(g.slice(s![.., m..m + p, m..m + p]).to_owned())
+        let mask = &seqs[self.seq].grids[self.grid].mask;
+        self.flipped(crop_geometry(
+            &maps[self.grid],
+            mask,
+            self.origin,
+            p,
+            pixel_m,
+        ))
     }
 
     /// `a` `(C, P, P)` mirrored by this location's flips.
@@ -747,5 +766,37 @@ fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) ->
         grad_mask: Tensor::from_data(TensorData::new(gmask, [b, 1, p - 2, p - 2]), device),
         mask_values,
         grad_values,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn geometry_of_a_crop_equals_the_whole_maps() {
+        let (h, w, p, px) = (30usize, 26usize, 8usize, 0.0025f32);
+        let map = Array3::from_shape_fn((3, h, w), |(c, i, j)| {
+            let (u, v) = (i as f32 * px, j as f32 * px);
+            [
+                u + 0.01 * (v * 90.0).sin(),
+                v,
+                0.02 * (u * 70.0).cos() * (v * 40.0).sin(),
+            ][c]
+        });
+        let mask = Array2::from_shape_fn((h, w), |(i, j)| i + j > 6 && !(i > 20 && j > 18));
+        let whole = geometry_channels(map.view(), mask.view(), px);
+        for origin in [(0, 0), (3, 5), (11, 9), (h - p, w - p), (25, 22)] {
+            let crop = crop_geometry(&map, &mask, origin, p, px);
+            for ((c, i, j), &v) in crop.indexed_iter() {
+                let (a, b) = (origin.0 + i, origin.1 + j);
+                let expect = if a < h && b < w {
+                    whole[(c, a, b)]
+                } else {
+                    0.0
+                };
+                assert_eq!(v, expect, "origin {origin:?} ({c}, {i}, {j})");
+            }
+        }
     }
 }
