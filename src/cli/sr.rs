@@ -71,17 +71,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     if let Some(csv) = &args.csv {
         let mut text = String::from(
-            "frame,sr_mm,sr_max_mm,upsampled_mm,phong_mm,rasterise_s,network_s,readout_s\n",
+            "frame,sr_mm,sr_max_mm,upsampled_mm,phong_mm,sr_normal_deg,phong_normal_deg,sr_jitter_mm,phong_jitter_mm,gt_jitter_mm,\
+             sr_jitter_error_mm,phong_jitter_error_mm,rasterise_s,network_s,readout_s\n",
         );
         for f in &e.frames {
+            let j = |v: fn(&clothsr::msr::eval::Jitter) -> f64| {
+                f.jitter_mm
+                    .map(|j| format!("{:.5}", v(&j)))
+                    .unwrap_or_default()
+            };
             let _ = writeln!(
                 text,
-                "{},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4}",
+                "{},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{},{},{},{},{},{:.4},{:.4},{:.4}",
                 f.frame,
                 f.sr_mm,
                 f.sr_max_mm,
                 f.upsampled_mm,
                 f.phong_mm,
+                f.sr_normal_deg,
+                f.phong_normal_deg,
+                j(|j| j.sr),
+                j(|j| j.phong),
+                j(|j| j.gt),
+                j(|j| j.sr_err),
+                j(|j| j.phong_err),
                 f.times.rasterise_s,
                 f.times.network_s,
                 f.times.readout_s
@@ -104,6 +117,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "mean error, SR           {sr:.4} mm  ({:.2}× upsampled)",
         sr / up
     );
+    let (sr_deg, phong_deg) = e.mean_normal_deg();
+    println!("normal angle error       SR {sr_deg:.2}°, Phong {phong_deg:.2}°");
+    if let Some(j) = e.mean_jitter_mm() {
+        println!(
+            "jitter                   SR {:.4} mm, Phong {:.4} mm, fine simulation {:.4} mm",
+            j.sr, j.phong, j.gt
+        );
+        println!(
+            "jitter against the fine  SR {:.4} mm, Phong {:.4} mm (mean ‖a − a_fine‖, a the second difference)",
+            j.sr_err, j.phong_err
+        );
+    }
     println!(
         "time per frame           {:.3} s ({:.0} % in the network)",
         t,

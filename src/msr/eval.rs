@@ -26,8 +26,32 @@ pub struct FrameErrors {
     pub upsampled_mm: f64,
     /// Mean vertex distance of M_int upsampled by Phong tessellation with the model's blend.
     pub phong_mm: f64,
+    /// Mean angle between the SR mesh's vertex normals and the fine simulation's, degrees.
+    pub sr_normal_deg: f64,
+    /// The same for the Phong-upsampled M_int.
+    pub phong_normal_deg: f64,
+    /// Temporal jitter ([`crate::eval::jitter_m`], mean ‖x_t − 2x_{t−1} + x_{t−2}‖ over
+    /// vertices) of the SR meshes, the Phong-upsampled M_int and the fine simulation, mm;
+    /// from the third frame on.
+    pub jitter_mm: Option<Jitter>,
     /// Time of the SR frame.
     pub times: FrameTimes,
+}
+
+/// Temporal jitter of a frame, mm (the second difference over the last three frames).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jitter {
+    /// The SR meshes.
+    pub sr: f64,
+    /// The Phong-upsampled M_int.
+    pub phong: f64,
+    /// The fine simulation (the ground truth's own motion).
+    pub gt: f64,
+    /// The SR meshes' second difference against the fine simulation's (mean ‖a_SR − a_gt‖):
+    /// temporal noise that the ground truth's motion does not have.
+    pub sr_err: f64,
+    /// The same for the Phong-upsampled M_int.
+    pub phong_err: f64,
 }
 
 /// Errors of a whole sequence.
@@ -51,6 +75,26 @@ impl SequenceErrors {
     /// Mean over frames of the Phong-upsampled error, mm.
     pub fn mean_phong_mm(&self) -> f64 {
         mean(self.frames.iter().map(|f| f.phong_mm))
+    }
+
+    /// Mean over frames of the normal-angle error of SR and of Phong, degrees.
+    pub fn mean_normal_deg(&self) -> (f64, f64) {
+        (
+            mean(self.frames.iter().map(|f| f.sr_normal_deg)),
+            mean(self.frames.iter().map(|f| f.phong_normal_deg)),
+        )
+    }
+
+    /// Mean jitter over the frames that have one (SR, Phong, ground truth), mm.
+    pub fn mean_jitter_mm(&self) -> Option<Jitter> {
+        let j: Vec<Jitter> = self.frames.iter().filter_map(|f| f.jitter_mm).collect();
+        (!j.is_empty()).then(|| Jitter {
+            sr: mean(j.iter().map(|j| j.sr)),
+            phong: mean(j.iter().map(|j| j.phong)),
+            gt: mean(j.iter().map(|j| j.gt)),
+            sr_err: mean(j.iter().map(|j| j.sr_err)),
+            phong_err: mean(j.iter().map(|j| j.phong_err)),
+        })
     }
 
     /// Mean time per frame and the network's share of it.
@@ -86,6 +130,8 @@ pub fn evaluate(
     let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh)?;
     let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
     let mut out = SequenceErrors::default();
+    // The last two frames' SR and Phong meshes, for the jitter.
+    let mut history: Vec<(Vec<Vector3<f64>>, Vec<Vector3<f64>>)> = Vec::new();
     for (k, (int, gt)) in seq.int_x.iter().zip(&seq.fine_x).enumerate() {
         if teacher_forcing && k > 0 {
             sr.set_previous(&seq.fine_mesh, &seq.fine_x[k - 1], &seq.int_x[k - 1])?;
@@ -95,12 +141,39 @@ pub fn evaluate(
         let (upsampled_mm, _) = vertex_error_mm(&transfer.upsample(int), gt);
         let phong = transfer.upsample_phong(int, &seq.coarse_mesh.triangles, isr.cfg.phong_alpha);
         let (phong_mm, _) = vertex_error_mm(&phong, gt);
+        let tris = &seq.fine_mesh.triangles;
+        let sr_normal_deg = crate::eval::normal_angle_deg(tris, gt, &fine);
+        let phong_normal_deg = crate::eval::normal_angle_deg(tris, gt, &phong);
+        let jitter_mm = (k >= 2).then(|| {
+            let ((s2, p2), (s1, p1)) = (&history[0], &history[1]);
+            let (g2, g1) = (&seq.fine_x[k - 2], &seq.fine_x[k - 1]);
+            let minus = |a: &[Vector3<f64>], b: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+                a.iter().zip(b).map(|(a, b)| a - b).collect()
+            };
+            let error = |x2: &[Vector3<f64>], x1: &[Vector3<f64>], x0: &[Vector3<f64>]| {
+                crate::eval::jitter_m(&minus(x2, g2), &minus(x1, g1), &minus(x0, gt)) * 1e3
+            };
+            Jitter {
+                sr: crate::eval::jitter_m(s2, s1, &fine) * 1e3,
+                phong: crate::eval::jitter_m(p2, p1, &phong) * 1e3,
+                gt: crate::eval::jitter_m(g2, g1, gt) * 1e3,
+                sr_err: error(s2, s1, &fine),
+                phong_err: error(p2, p1, &phong),
+            }
+        });
+        if history.len() == 2 {
+            history.remove(0);
+        }
+        history.push((fine, phong));
         out.frames.push(FrameErrors {
             frame: seq.first_frame + k,
             sr_mm,
             sr_max_mm,
             upsampled_mm,
             phong_mm,
+            sr_normal_deg,
+            phong_normal_deg,
+            jitter_mm,
             times: sr.times,
         });
         if progress(k + 1, seq.int_x.len()).is_break() {
