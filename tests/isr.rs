@@ -418,6 +418,16 @@ fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
         .frames
         .iter()
         .all(|f| f.sr_mm.is_finite() && f.upsampled_mm.is_finite()));
+    // Jitter from the third frame on; normal angles on every frame.
+    assert!(e.frames[..2].iter().all(|f| f.jitter_mm.is_none()));
+    for f in &e.frames[2..] {
+        let j = f.jitter_mm.expect("jitter from the third frame");
+        assert!(j.sr.is_finite() && j.gt > 0.0 && j.sr_err >= 0.0 && j.phong_err >= 0.0);
+    }
+    assert!(e
+        .frames
+        .iter()
+        .all(|f| f.sr_normal_deg.is_finite() && f.phong_normal_deg >= 0.0));
     // The upsampled coarse mesh is close to the fine simulation (a few mm, not metres).
     assert!(e.mean_upsampled_mm() < 20.0, "{}", e.mean_upsampled_mm());
 
