@@ -131,7 +131,8 @@ pub fn evaluate(
     let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
     let mut out = SequenceErrors::default();
     // The last two frames' SR and Phong meshes, for the jitter.
-    let mut history: Vec<(Vec<Vector3<f64>>, Vec<Vector3<f64>>)> = Vec::new();
+    type Positions = Vec<Vector3<f64>>;
+    let mut history: Vec<(Positions, Positions)> = Vec::new();
     for (k, (int, gt)) in seq.int_x.iter().zip(&seq.fine_x).enumerate() {
         if teacher_forcing && k > 0 {
             sr.set_previous(&seq.fine_mesh, &seq.fine_x[k - 1], &seq.int_x[k - 1])?;
