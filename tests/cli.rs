@@ -233,6 +233,9 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "--window".into(),
         "4".into(),
     ]);
+    // The geometry channels are on by default.
+    let config = std::fs::read_to_string(isr.join("config.json")).expect("config");
+    assert!(config.contains("\"geometry_input\": true"), "{config}");
     let report = run(vec![
         "sr".into(),
         "--model".into(),
