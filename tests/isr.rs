@@ -212,6 +212,29 @@ fn geometry_channels_measure_stretch_normal_and_curvature_of_the_coarse_map() {
         }
     }
 
+    // A slit (column 5 off the mask) with the cloth beyond it 1 cm away: no stencil reaches
+    // across it, so the flat pixels beside it have no curvature.
+    let p = 12usize; // the plane's size
+    let mut slit = Array2::from_elem((p, p), true);
+    for i in 0..p {
+        slit[(i, 5)] = false;
+    }
+    let torn = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+        plane[(c, i, j)] + if c == 2 && j > 5 { 0.01 } else { 0.0 }
+    });
+    let g = geometry_channels(torn.view(), slit.view(), h);
+    for i in 0..p {
+        for j in [2, 3, 4, 6, 7, 8] {
+            for c in 6..9 {
+                assert!(
+                    g[(c, i, j)].abs() < 2e-3,
+                    "({i}, {j}) {c}: {}",
+                    g[(c, i, j)]
+                );
+            }
+        }
+    }
+
     // In the network's input they come after the initialisation, before the mask, zero off it.
     let g = geometry_channels(plane.view(), mask.view(), h);
     let p = 12usize;

@@ -41,8 +41,8 @@ pub const GEOMETRY_CHANNELS: usize = 9;
 ///   [`STRAIN_UNIT`]. A cloth shortened by its wrinkles shows here as negative stretch.
 /// * 3–5, the unit normal ∂x/∂u × ∂x/∂v (normalised; its side is the pattern's orientation).
 /// * 6–8, the curvature vector: the Laplacian Σ_axes (x₊ − 2x + x₋)/(s h)², with s the largest
-///   step up to [`CURVATURE_STENCIL_PX`] whose two neighbours are on the mask (an axis without
-///   any contributes nothing), in units of [`CURVATURE_UNIT`]. It points into a fold's
+///   step up to [`CURVATURE_STENCIL_PX`] whose whole stencil (every pixel up to s either side)
+///   is on the mask (an axis without even s = 1 contributes nothing), in units of [`CURVATURE_UNIT`]. It points into a fold's
 ///   concave side with length 1/R for a fold of radius R.
 ///
 /// First derivatives are central differences where both neighbours are on the mask,
@@ -80,14 +80,17 @@ pub fn geometry_channels(
     // The second derivative along (di, dj) on the widest symmetric stencil available.
     let second = |i: usize, j: usize, di: isize, dj: isize| -> Vector3<f32> {
         let (ii, jj) = (i as isize, j as isize);
-        for s in (1..=CURVATURE_STENCIL_PX as isize).rev() {
-            if on(ii + s * di, jj + s * dj) && on(ii - s * di, jj - s * dj) {
-                let (f, b) = (step(i, j, s, di, dj), step(i, j, -s, di, dj));
-                let hs = s as f32 * pixel_m;
-                return (at(f.0, f.1) - 2.0 * at(i, j) + at(b.0, b.1)) / (hs * hs);
-            }
-        }
-        Vector3::zeros()
+        // The widest s whose whole stencil is on the mask (no differencing across a slit or
+        // a notch of the pattern).
+        let reach = (1..=CURVATURE_STENCIL_PX as isize)
+            .take_while(|&k| on(ii + k * di, jj + k * dj) && on(ii - k * di, jj - k * dj))
+            .last();
+        let Some(s) = reach else {
+            return Vector3::zeros();
+        };
+        let (f, b) = (step(i, j, s, di, dj), step(i, j, -s, di, dj));
+        let hs = s as f32 * pixel_m;
+        (at(f.0, f.1) - 2.0 * at(i, j) + at(b.0, b.1)) / (hs * hs)
     };
     let mut put = |c: usize, i: usize, j: usize, v: f32| {
         out[(c, i, j)] = if v.is_finite() {

@@ -234,6 +234,9 @@ fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
     if !(cfg.phong_alpha.is_finite() && (0.0..=1.0).contains(&cfg.phong_alpha)) {
         return bad("phong_alpha must lie in [0, 1]".into());
     }
+    if !(cfg.coarse_init_prob.is_finite() && (0.0..=1.0).contains(&cfg.coarse_init_prob)) {
+        return bad("coarse_init_prob must lie in [0, 1]".into());
+    }
     for s in seqs {
         if (s.grids[0].pixel_m - cfg.pixel_m).abs() > 1e-9 {
             return bad(format!(
@@ -266,7 +269,13 @@ pub fn train(
     if resuming {
         let old = IsrTrainingConfig::load(&config_path)
             .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
-        if &old != cfg {
+        // A run saved before the geometry input existed has `None`, which means off.
+        let settled = |c: &IsrTrainingConfig| {
+            let mut c = c.clone();
+            c.model.geometry_input = Some(c.model.geometry());
+            c
+        };
+        if settled(&old) != settled(cfg) {
             return Err(Error::bad_input(
                 &config_path,
                 "a training run with another configuration is here; choose another output",
@@ -496,6 +505,24 @@ fn crop_geometry(
     g.slice(s![.., m..m + p, m..m + p]).to_owned()
 }
 
+/// Geometry channels `(9, P, P)` of a patch as those of the patch mirrored along rows
+/// (`flip[0]`) and columns (`flip[1]`): the pixels move, and a single mirror reverses one
+/// material axis, which negates the angle's cosine (channel 2) and the normal (3–5); stretch
+/// and curvature stay. So a mirrored training patch gets what [`geometry_channels`] gives for
+/// the mirrored map, as inference would.
+fn mirror_geometry(mut g: Array3<f32>, flip: [bool; 2]) -> Array3<f32> {
+    for (axis, &f) in flip.iter().enumerate() {
+        if f {
+            g.invert_axis(ndarray::Axis(axis + 1));
+        }
+    }
+    let mut g = g.as_standard_layout().to_owned();
+    if flip[0] != flip[1] {
+        g.slice_mut(s![2..6, .., ..]).mapv_inplace(|v| -v);
+    }
+    g
+}
+
 /// Where a training patch comes from: sequence, frame (index into its loaded frames), panel
 /// grid, top-left pixel and mirroring along rows and columns.
 #[derive(Debug, Clone, Copy)]
@@ -515,7 +542,7 @@ impl Location {
     }
 
     /// The `(9, P, P)` geometry channels of the coarse map `maps` at this location
-    /// ([`crop_geometry`]), mirrored like the maps.
+    /// ([`crop_geometry`]), mirrored like the maps ([`mirror_geometry`]).
     fn geometry(
         &self,
         seqs: &[IsrSequence],
@@ -524,13 +551,10 @@ impl Location {
         pixel_m: f32,
     ) -> Array3<f32> {
         let mask = &seqs[self.seq].grids[self.grid].mask;
-        self.flipped(crop_geometry(
-            &maps[self.grid],
-            mask,
-            self.origin,
-            p,
-            pixel_m,
-        ))
+        mirror_geometry(
+            crop_geometry(&maps[self.grid], mask, self.origin, p, pixel_m),
+            self.flip,
+        )
     }
 
     /// `a` `(C, P, P)` mirrored by this location's flips.
@@ -772,6 +796,43 @@ fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mirrored_geometry_is_the_geometry_of_the_mirrored_map() {
+        let (p, px) = (10usize, 0.0025f32);
+        let map = Array3::from_shape_fn((3, p, p), |(c, i, j)| {
+            let (u, v) = (i as f32 * px, j as f32 * px);
+            [
+                1.01 * u + 0.02 * v,
+                v + 0.01 * (u * 80.0).sin(),
+                0.01 * (u * 60.0 + v * 30.0).cos(),
+            ][c]
+        });
+        let mask = Array2::from_shape_fn((p, p), |(i, j)| i + 2 * j > 3);
+        let g = geometry_channels(map.view(), mask.view(), px);
+        for flip in [[true, false], [false, true], [true, true], [false, false]] {
+            let (mut m, mut k) = (map.clone(), mask.clone());
+            for (axis, &f) in flip.iter().enumerate() {
+                if f {
+                    m.invert_axis(ndarray::Axis(axis + 1));
+                    k.invert_axis(ndarray::Axis(axis));
+                }
+            }
+            let direct = geometry_channels(
+                m.as_standard_layout().view(),
+                k.as_standard_layout().view(),
+                px,
+            );
+            let mirrored = mirror_geometry(g.clone(), flip);
+            for ((c, i, j), &v) in direct.indexed_iter() {
+                let w = mirrored[(c, i, j)];
+                assert!((v - w).abs() < 1e-4, "{flip:?} ({c}, {i}, {j}): {v} vs {w}");
+            }
+            if flip[0] != flip[1] {
+                assert!(g.slice(s![3..6, .., ..]).iter().any(|v| v.abs() > 0.5));
+            }
+        }
+    }
 
     #[test]
     fn geometry_of_a_crop_equals_the_whole_maps() {
