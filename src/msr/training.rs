@@ -36,7 +36,7 @@ use burn::config::Config;
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
-use ndarray::{s, Array2, Array3};
+use ndarray::{s, Array, Array2, Array3, Dimension};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -505,18 +505,25 @@ fn crop_geometry(
     g.slice(s![.., m..m + p, m..m + p]).to_owned()
 }
 
+/// A `(…, P, P)` array mirrored along its last two axes, rows (`flip[0]`) and columns
+/// (`flip[1]`), in standard layout.
+fn mirror<A: Clone, D: Dimension>(mut a: Array<A, D>, flip: [bool; 2]) -> Array<A, D> {
+    let first = a.ndim() - 2;
+    for (k, &f) in flip.iter().enumerate() {
+        if f {
+            a.invert_axis(ndarray::Axis(first + k));
+        }
+    }
+    a.as_standard_layout().into_owned()
+}
+
 /// Geometry channels `(9, P, P)` of a patch as those of the patch mirrored along rows
 /// (`flip[0]`) and columns (`flip[1]`): the pixels move, and a single mirror reverses one
 /// material axis, which negates the angle's cosine (channel 2) and the normal (3–5); stretch
 /// and curvature stay. So a mirrored training patch gets what [`geometry_channels`] gives for
 /// the mirrored map, as inference would.
-fn mirror_geometry(mut g: Array3<f32>, flip: [bool; 2]) -> Array3<f32> {
-    for (axis, &f) in flip.iter().enumerate() {
-        if f {
-            g.invert_axis(ndarray::Axis(axis + 1));
-        }
-    }
-    let mut g = g.as_standard_layout().to_owned();
+fn mirror_geometry(g: Array3<f32>, flip: [bool; 2]) -> Array3<f32> {
+    let mut g = mirror(g, flip);
     if flip[0] != flip[1] {
         g.slice_mut(s![2..6, .., ..]).mapv_inplace(|v| -v);
     }
@@ -538,7 +545,7 @@ impl Location {
     /// The `(3, P, P)` crop of `maps` (one frame's maps of this location's sequence).
     fn crop(&self, maps: &[Array3<f32>], p: usize) -> Array3<f32> {
         let (r0, c0) = (self.origin.0 as isize, self.origin.1 as isize);
-        self.flipped(crop3(&maps[self.grid], r0, c0, p))
+        mirror(crop3(&maps[self.grid], r0, c0, p), self.flip)
     }
 
     /// The `(9, P, P)` geometry channels of the coarse map `maps` at this location
@@ -557,25 +564,10 @@ impl Location {
         )
     }
 
-    /// `a` `(C, P, P)` mirrored by this location's flips.
-    fn flipped(&self, mut a: Array3<f32>) -> Array3<f32> {
-        for (axis, &f) in self.flip.iter().enumerate() {
-            if f {
-                a.invert_axis(ndarray::Axis(axis + 1));
-            }
-        }
-        a.as_standard_layout().to_owned()
-    }
-
     fn mask(&self, seqs: &[IsrSequence], p: usize) -> Array2<bool> {
         let full = &seqs[self.seq].grids[self.grid].mask;
-        let mut m = crop2(full, self.origin.0 as isize, self.origin.1 as isize, p);
-        for (axis, &f) in self.flip.iter().enumerate() {
-            if f {
-                m.invert_axis(ndarray::Axis(axis));
-            }
-        }
-        m.as_standard_layout().to_owned()
+        let m = crop2(full, self.origin.0 as isize, self.origin.1 as isize, p);
+        mirror(m, self.flip)
     }
 }
 
