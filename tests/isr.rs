@@ -17,7 +17,8 @@ use clothsr::msr::inference::{
     geometry_channels, patch_input, CURVATURE_UNIT, GEOMETRY_CHANNELS, STRAIN_UNIT,
 };
 use clothsr::msr::model::{
-    relative_position_index, shift_mask, window_partition, window_reverse, IsrConfig,
+    pixel_shuffle, pixel_unshuffle, relative_position_index, shift_mask, window_partition,
+    window_reverse, IsrConfig,
 };
 use clothsr::msr::training::{
     gradient_mask, isr_loss, save_model, train, Batch, IsrTrainingConfig,
@@ -276,6 +277,99 @@ fn a_model_saved_before_the_geometry_input_loads_without_it() {
     let isr = Isr::load(dir.path()).expect("load");
     assert!(!isr.cfg.model.geometry());
     assert_eq!(isr.cfg.model.in_channels(), 7);
+}
+
+#[test]
+fn pixel_unshuffle_gathers_blocks_in_pytorch_order_and_shuffle_inverts_it() {
+    let device = default_device().expect("device");
+    let (b, c, h, w, s) = (2, 3, 4, 6, 2);
+    let values: Vec<f32> = (0..b * c * h * w).map(|i| i as f32).collect();
+    let x = Tensor::<4>::from_data(TensorData::new(values.clone(), [b, c, h, w]), &device);
+    let u = pixel_unshuffle(x, s);
+    let (ho, wo) = (h / s, w / s);
+    assert_eq!(u.dims(), [b, c * s * s, ho, wo]);
+    let v: Vec<f32> = u.clone().into_data().try_to_vec::<f32>().expect("data");
+    for n in 0..b {
+        for ch in 0..c {
+            for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                for (y, x) in [(0, 0), (1, 2), (0, 1)] {
+                    let out = ((n * c * s * s + ch * s * s + i * s + j) * ho + y) * wo + x;
+                    let inp = ((n * c + ch) * h + s * y + i) * w + s * x + j;
+                    assert_eq!(
+                        v[out], values[inp],
+                        "n {n} c {ch} block ({i}, {j}) at ({y}, {x})"
+                    );
+                }
+            }
+        }
+    }
+    let back: Vec<f32> = pixel_shuffle(u, s)
+        .into_data()
+        .try_to_vec::<f32>()
+        .expect("data");
+    assert_eq!(back, values);
+}
+
+#[test]
+fn an_unshuffled_network_keeps_the_full_resolution_and_checks_its_patch_size() {
+    let device = default_device().expect("device");
+    let cfg = tiny_model().with_unshuffle(Some(2));
+    assert_eq!(cfg.patch_multiple(), 8);
+    let net = cfg.init(&device);
+    let x = Tensor::<4>::random(
+        [2, cfg.in_channels(), 16, 16],
+        burn::tensor::Distribution::Normal(0.0, 1.0),
+        &device,
+    );
+    assert_eq!(net.forward(x).dims(), [2, 3, 16, 16]);
+    assert!(cfg.clone().with_unshuffle(Some(0)).check().is_err());
+
+    // A model saved without the field is not unshuffled; a patch that is not a multiple of
+    // window × factor is refused with the file named.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut tc = tiny_config().with_patch(16);
+    tc.model = cfg.clone();
+    save_model(dir.path(), &tc, &net).expect("save");
+    assert_eq!(
+        Isr::load(dir.path())
+            .expect("load")
+            .cfg
+            .model
+            .unshuffle_factor(),
+        2
+    );
+    let path = dir.path().join("config.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+    json["patch"] = serde_json::json!(12);
+    std::fs::write(&path, json.to_string()).expect("write");
+    let err = Isr::load(dir.path())
+        .err()
+        .expect("patch 12 refused")
+        .to_string();
+    assert!(
+        err.contains("config.json") && err.contains("multiple of 8"),
+        "{err}"
+    );
+    let plain = tempfile::tempdir().expect("tempdir");
+    let tc = tiny_config();
+    save_model(plain.path(), &tc, &tc.model.init(&device)).expect("save");
+    let path = plain.path().join("config.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+    json["model"]
+        .as_object_mut()
+        .expect("model object")
+        .remove("unshuffle");
+    std::fs::write(&path, json.to_string()).expect("write");
+    assert_eq!(
+        Isr::load(plain.path())
+            .expect("load")
+            .cfg
+            .model
+            .unshuffle_factor(),
+        1
+    );
 }
 
 #[test]

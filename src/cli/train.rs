@@ -74,6 +74,10 @@ pub struct IsrArgs {
     /// Attention window side, pixels.
     #[arg(long, default_value_t = 8)]
     window: usize,
+    /// Pixel-unshuffle factor: the Swin body works on s × s pixel blocks (s² times cheaper;
+    /// 1: every pixel a token, as SwinIR). Patches must be multiples of window × s.
+    #[arg(long, default_value_t = 1)]
+    unshuffle: usize,
     /// σ of the Gaussian smoothing of the training initialisation, pixels.
     #[arg(long, default_value_t = 1.0)]
     init_blur_px: f64,
@@ -158,6 +162,11 @@ pub struct CorrectorArgs {
     /// only near colliders).
     #[arg(long, value_enum, default_value = "gated")]
     decoder: clothsr::corrector::model::Decoder,
+    /// The gated decoder's tension limit: the share of the step's velocity change taken
+    /// back falls linearly to zero as the mean strain of a vertex's edges rises from 0 to
+    /// this (the fine cloth's wrinkles take up compression, not tension); 0: no limit.
+    #[arg(long, default_value_t = 0.01)]
+    tension_ramp: f64,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -190,7 +199,8 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             .with_latent(a.latent)
             .with_steps(a.mp_steps)
             .with_attention(a.attention)
-            .with_decoder(Some(a.decoder)),
+            .with_decoder(Some(a.decoder))
+            .with_tension_ramp((a.tension_ramp > 0.0).then_some(a.tension_ramp)),
     )
     .with_steps(a.steps)
     .with_batch(a.batch)
@@ -295,7 +305,8 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_heads(a.heads)
         .with_window(a.window)
         .with_init_input(!a.no_init)
-        .with_geometry_input(Some(!a.no_geometry_input));
+        .with_geometry_input(Some(!a.no_geometry_input))
+        .with_unshuffle(Some(a.unshuffle));
     model
         .check()
         .map_err(|e| anyhow::anyhow!("ISR network: {e}"))?;

@@ -207,6 +207,16 @@ impl Isr {
         cfg.model
             .check()
             .map_err(|e| Error::bad_input(&cfg_path, e))?;
+        let m = cfg.model.patch_multiple();
+        if cfg.patch == 0 || !cfg.patch.is_multiple_of(m) {
+            return Err(Error::bad_input(
+                &cfg_path,
+                format!(
+                    "the patch ({}) must be a positive multiple of {m}",
+                    cfg.patch
+                ),
+            ));
+        }
         let device = crate::corrector::inference::default_device()?;
         let weights = dir.join(WEIGHTS_FILE);
         let net = cfg

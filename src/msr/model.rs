@@ -61,6 +61,12 @@ pub struct IsrConfig {
     /// shortening only as tiny second differences. `None` (models saved before it existed)
     /// is off.
     pub geometry_input: Option<bool>,
+    /// Pixel-unshuffle factor s (beyond the paper): the patch's s × s pixel blocks become one
+    /// token of `in·s²` channels, the Swin body works on a `P/s × P/s` grid and a pixel
+    /// shuffle of a `C → 3·s²` reconstruction returns the full fine resolution. The body's
+    /// cost falls by s² and a window covers s² times the cloth; the fine cloth's folds are
+    /// 10–20 mm wide, several 2.5 mm pixels. `None` (models saved before it existed) is 1.
+    pub unshuffle: Option<usize>,
 }
 
 impl IsrConfig {
@@ -69,6 +75,16 @@ impl IsrConfig {
     pub fn in_channels(&self) -> usize {
         4 + 3 * usize::from(self.init_input)
             + super::inference::GEOMETRY_CHANNELS * usize::from(self.geometry())
+    }
+
+    /// The pixel-unshuffle factor (1: none).
+    pub fn unshuffle_factor(&self) -> usize {
+        self.unshuffle.unwrap_or(1)
+    }
+
+    /// Patch sides must be multiples of this: the window times the unshuffle factor.
+    pub fn patch_multiple(&self) -> usize {
+        self.window * self.unshuffle_factor()
     }
 
     /// Whether the coarse map's geometry is an input.
@@ -90,6 +106,12 @@ impl IsrConfig {
         if !(self.mlp_ratio.is_finite() && self.mlp_ratio > 0.0) {
             return Err("mlp_ratio must be positive".into());
         }
+        if !(1..=8).contains(&self.unshuffle_factor()) {
+            return Err(format!(
+                "unshuffle must lie in 1..=8, got {}",
+                self.unshuffle_factor()
+            ));
+        }
         Ok(())
     }
 
@@ -107,18 +129,20 @@ impl IsrConfig {
                 conv: conv3(c, c, device),
             })
             .collect();
+        let s2 = self.unshuffle_factor().pow(2);
         IsrNet {
-            conv_first: conv3(self.in_channels(), c, device),
+            conv_first: conv3(self.in_channels() * s2, c, device),
             layers,
             norm: LayerNormConfig::new(c).init(device),
             conv_after_body: conv3(c, c, device),
             // Zero-initialised: an untrained network returns the coarse patch unchanged, so
             // training starts from the upsampled baseline instead of from noise.
-            conv_last: Conv2dConfig::new([c, 3], [3, 3])
+            conv_last: Conv2dConfig::new([c, 3 * s2], [3, 3])
                 .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
                 .with_initializer(Initializer::Zeros)
                 .init(device),
             window: self.window,
+            unshuffle: self.unshuffle_factor(),
         }
     }
 }
@@ -138,6 +162,31 @@ pub struct IsrNet {
     conv_after_body: Conv2d,
     conv_last: Conv2d,
     window: usize,
+    unshuffle: usize,
+}
+
+/// Pixel unshuffle: `[B, C, H, W] → [B, C·s², H/s, W/s]`, channel `c·s² + i·s + j` holding
+/// pixel `(s·y + i, s·x + j)` of channel c (PyTorch's `pixel_unshuffle` order).
+pub fn pixel_unshuffle(x: Tensor<4>, s: usize) -> Tensor<4> {
+    if s == 1 {
+        return x;
+    }
+    let [b, c, h, w] = x.dims();
+    x.reshape([b, c, h / s, s, w / s, s])
+        .permute([0, 1, 3, 5, 2, 4])
+        .reshape([b, c * s * s, h / s, w / s])
+}
+
+/// The inverse of [`pixel_unshuffle`]: `[B, C·s², H, W] → [B, C, H·s, W·s]`.
+pub fn pixel_shuffle(x: Tensor<4>, s: usize) -> Tensor<4> {
+    if s == 1 {
+        return x;
+    }
+    let [b, cs, h, w] = x.dims();
+    let c = cs / (s * s);
+    x.reshape([b, c, s, s, h, w])
+        .permute([0, 1, 4, 2, 5, 3])
+        .reshape([b, c, h * s, w * s])
 }
 
 /// A residual Swin transformer block.
@@ -328,22 +377,23 @@ pub fn window_reverse(x: Tensor<3>, ws: usize, b: usize, h: usize, w: usize) -> 
 }
 
 impl IsrNet {
-    /// The window side (patches must be multiples of it).
-    pub fn window(&self) -> usize {
-        self.window
+    /// Patch sides must be multiples of this: the window times the unshuffle factor.
+    pub fn patch_multiple(&self) -> usize {
+        self.window * self.unshuffle
     }
 
     /// `input [B, in, P, P]` (normalised: coarse shape, initialisation detail, mask)
     /// `→ [B, 3, P, P]`, the fine patch's detail (fine − coarse)
-    /// in detail units. P must be a multiple of the window.
+    /// in detail units. P must be a multiple of [`Self::patch_multiple`].
     pub fn forward(&self, input: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = input.dims();
+        let m = self.patch_multiple();
         assert!(
-            h.is_multiple_of(self.window) && w.is_multiple_of(self.window),
-            "ISR patches ({h}×{w}) must be multiples of the window ({})",
-            self.window
+            h.is_multiple_of(m) && w.is_multiple_of(m),
+            "ISR patches ({h}×{w}) must be multiples of the window times the unshuffle factor ({m})"
         );
-        let shallow = self.conv_first.forward(input); // [B, C, P, P]
+        let input = pixel_unshuffle(input, self.unshuffle); // [B, in·s², P/s, P/s]
+        let shallow = self.conv_first.forward(input); // [B, C, P/s, P/s]
         let mut x = shallow.clone();
         for rstb in &self.layers {
             let mut y = x.clone().permute([0, 2, 3, 1]); // [B, P, P, C]
@@ -357,6 +407,6 @@ impl IsrNet {
             .forward(x.permute([0, 2, 3, 1]))
             .permute([0, 3, 1, 2]);
         let deep = self.conv_after_body.forward(x) + shallow;
-        self.conv_last.forward(deep)
+        pixel_shuffle(self.conv_last.forward(deep), self.unshuffle) // [B, 3, P, P]
     }
 }

@@ -212,10 +212,12 @@ fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
     if seqs.is_empty() || seqs.iter().all(|s| s.frames.is_empty()) {
         return bad("no training data".into());
     }
-    if cfg.patch < 4 || !cfg.patch.is_multiple_of(cfg.model.window) {
+    if cfg.patch < 4 || !cfg.patch.is_multiple_of(cfg.model.patch_multiple()) {
         return bad(format!(
-            "the patch ({}) must be a multiple of the window ({})",
-            cfg.patch, cfg.model.window
+            "the patch ({}) must be a multiple of the window ({}) times the unshuffle factor ({})",
+            cfg.patch,
+            cfg.model.window,
+            cfg.model.unshuffle_factor()
         ));
     }
     if cfg.batch == 0 {
@@ -269,10 +271,12 @@ pub fn train(
     if resuming {
         let old = IsrTrainingConfig::load(&config_path)
             .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
-        // A run saved before the geometry input existed has `None`, which means off.
+        // A run saved before the geometry input or the unshuffle existed has `None`, which
+        // means off (factor 1).
         let settled = |c: &IsrTrainingConfig| {
             let mut c = c.clone();
             c.model.geometry_input = Some(c.model.geometry());
+            c.model.unshuffle = Some(c.model.unshuffle_factor());
             c
         };
         if settled(&old) != settled(cfg) {
