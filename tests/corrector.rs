@@ -9,7 +9,7 @@ use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector};
 use clothsr::corrector::model::{Decoder, GraphTensors};
-use clothsr::corrector::rollout::evaluate;
+use clothsr::corrector::rollout::{evaluate, evaluate_from, sequence_distance_mm, HorizonErrors};
 use clothsr::corrector::training::{fit_normalisation, save_model, train, TrainSet};
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
 use clothsr::data::{coarse_simulation, generate, Options, Variation};
@@ -262,6 +262,27 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             let zero = vec![Vector3::zeros(); x.len()];
             let p = loaded.predict(&x, &v, &zero, &far).expect("predict");
             assert!(p.iter().all(|p| *p == Vector3::zeros()), "free fall");
+            // With a tension limit the same weights take back w = clamp(1 − ε̄/ramp, 0, 1)
+            // times as much at each vertex, nothing where the cloth is stretched past it.
+            let mut limited = cfg.clone();
+            limited.model.tension_ramp = Some(0.01);
+            let dir = tempfile::tempdir().expect("tmp");
+            save_model(dir.path(), &limited, &norm, &net).expect("save");
+            let lim = Corrector::load(dir.path(), &seq.mesh).expect("load");
+            let free = loaded.predict(&x, &v, &dv, &far).expect("predict");
+            let held = lim.predict(&x, &v, &dv, &far).expect("predict");
+            let w = seq.graph.tension_weight(&x, 0.01);
+            assert!(w.iter().any(|&w| w > 0.0) && w.iter().all(|w| (0.0..=1.0).contains(w)));
+            for ((a, b), w) in free.iter().zip(&held).zip(&w) {
+                assert!(
+                    (a * f64::from(*w) - b).norm() <= 1e-6 * (1.0 + a.norm()),
+                    "{a} {b} {w}"
+                );
+            }
+            let c = x.iter().sum::<Vector3<f64>>() / x.len() as f64;
+            let stretched: Vec<Vector3<f64>> = x.iter().map(|p| c + (p - c) * 1.05).collect();
+            let p = lim.predict(&stretched, &v, &dv, &far).expect("predict");
+            assert!(p.iter().all(|p| *p == Vector3::zeros()), "stretched 5 %");
         }
         // A mesh collapsed to a point at rest still gets a finite correction.
         let zeros = vec![Vector3::zeros(); x.len()];
@@ -367,6 +388,84 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         e.sim_alone_mm
     );
     assert!(e.csv().lines().count() == 4);
+    assert_eq!(e.strain_pct.len(), 3);
+    // Interleaved and alone start from the ground truth: a percent-level strain gap after
+    // one frame would be a bookkeeping error.
+    let [g, a, b] = e.strain_pct[0];
+    assert!(
+        g.is_finite() && (a - g).abs() < 1.0 && (b - g).abs() < 1.0,
+        "{g} {a} {b}"
+    );
+
+    // From the ground truth at frame 2 of the loaded sequence: the same as a sequence loaded
+    // from frame 2 (fresh simulators each), numbered in the data set's frames.
+    let fresh = || coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let (mut a, mut b, mut c) = (fresh(), fresh(), fresh());
+    let spf = seq.manifest.steps_per_frame;
+    let later = evaluate_from(
+        &seq,
+        spf,
+        [&mut a, &mut b, &mut c],
+        t0,
+        &corrector,
+        2,
+        |_, _, _, _| {},
+    )
+    .expect("evaluate from frame 2");
+    let from2 = Sequence::load(&dir, Some(2..=seq.manifest.frames_done), &fresh()).expect("load");
+    let (mut a, mut b, mut c) = (fresh(), fresh(), fresh());
+    let direct = evaluate(
+        &from2,
+        [&mut a, &mut b, &mut c],
+        t0,
+        &corrector,
+        2,
+        |_, _, _, _| {},
+    )
+    .expect("evaluate");
+    assert_eq!(later.frame, vec![2, 3]);
+    for (x, y) in [
+        (&later.sim_alone_mm, &direct.sim_alone_mm),
+        (&later.interleaved_mm, &direct.interleaved_mm),
+        (&later.not_interleaved_mm, &direct.not_interleaved_mm),
+        (&later.one_step_corrected_mm, &direct.one_step_corrected_mm),
+    ] {
+        assert_eq!(x, y);
+    }
+    let (mut a, mut b, mut c) = (fresh(), fresh(), fresh());
+    assert!(evaluate_from(
+        &seq,
+        1,
+        [&mut a, &mut b, &mut c],
+        t0,
+        &corrector,
+        1,
+        |_, _, _, _| {}
+    )
+    .is_err());
+    // Short horizons average per frame after the start; the distance of a sequence to itself
+    // is zero, to the stored M_c not.
+    let h = HorizonErrors::from_runs(&[1, 2], &[e.clone(), later.clone()], 2).expect("average");
+    assert!(
+        (h.interleaved_mm[1] - (e.interleaved_mm[1] + later.interleaved_mm[1]) / 2.0).abs() < 1e-12
+    );
+    assert!(HorizonErrors::from_runs(&[1], std::slice::from_ref(&later), 3).is_err());
+    assert_eq!(
+        sequence_distance_mm(&seq, &seq, &[1, 3]).expect("distance"),
+        vec![0.0, 0.0]
+    );
+    let mut moved = seq.clone();
+    for st in &mut moved.steps {
+        for (k, x) in st.int_x.iter_mut().enumerate() {
+            if k % 3 == 1 {
+                *x += 0.002;
+            }
+        }
+    }
+    for d in sequence_distance_mm(&seq, &moved, &[1, 2]).expect("distance") {
+        assert!((d - 2.0).abs() < 1e-3, "{d}");
+    }
+    assert!(sequence_distance_mm(&seq, &moved, &[9]).is_err());
 
     // A scene that meshes differently is refused, naming the stored meshes.
     let mut other = scene();

@@ -6,9 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clothsr::corrector::data::Sequence;
-use clothsr::corrector::rollout::evaluate;
+use clothsr::corrector::rollout::{evaluate, evaluate_from, sequence_distance_mm, HorizonErrors};
 use clothsr::corrector::Corrector;
 use clothsr::data::{coarse_simulation, read_manifest};
+use clothsr::scene::Scene;
 
 /// Arguments of `rollout`.
 #[derive(Debug, clap::Args)]
@@ -25,9 +26,24 @@ pub struct Args {
     /// Start from the ground truth at the first step of this frame (1-based).
     #[arg(long, default_value_t = 1)]
     start_frame: usize,
-    /// Write per-frame errors as CSV here.
+    /// Write per-frame errors as CSV here (with `--horizon`: per frame after the start).
     #[arg(long)]
     csv: Option<PathBuf>,
+    /// A second data set of the same scene and coarse mesh, started next to the first (a
+    /// `clothsr dataset` run whose `--garment-offset` differs by a fraction of a millimetre):
+    /// the distance between the two ground truths is reported beside the errors as the
+    /// predictability floor, which no predictor of the first from its start can be expected
+    /// to beat where the scene is chaotic (folds, contact and friction are).
+    #[arg(long)]
+    floor: Option<PathBuf>,
+    /// Short-horizon mode: instead of one long rollout, roll out this many frames from the
+    /// ground truth at every `--every`-th frame from the start and report the errors averaged
+    /// per frame after the start.
+    #[arg(long)]
+    horizon: Option<usize>,
+    /// The spacing of the short-horizon starts, frames.
+    #[arg(long, default_value_t = 10)]
+    every: usize,
 }
 
 /// Runs `rollout`.
@@ -50,6 +66,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
     })?;
     let scene = source.load()?;
+    if let Some(horizon) = args.horizon {
+        return short_horizons(&args, &scene, frames, horizon);
+    }
     let mut sim = coarse_simulation(&scene, &args.data, args.start_frame)?;
     let t0 = sim.state.t_s;
     let seq = Sequence::load(
@@ -77,8 +96,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         },
     )?;
+    let floor = match &args.floor {
+        Some(dir) => {
+            let other = Sequence::load(
+                dir,
+                Some(args.start_frame..=args.start_frame + frames),
+                &sim,
+            )?;
+            Some(sequence_distance_mm(&seq, &other, &e.frame)?)
+        }
+        None => None,
+    };
     if let Some(csv) = &args.csv {
-        clothsr::io::write_atomic(csv, e.csv().as_bytes())?;
+        let mut text = e.csv();
+        if let Some(fl) = &floor {
+            text = text
+                .lines()
+                .enumerate()
+                .map(|(k, l)| match k {
+                    0 => format!("{l},floor_mm\n"),
+                    _ => format!("{l},{:.4}\n", fl[k - 1]),
+                })
+                .collect();
+        }
+        clothsr::io::write_atomic(csv, text.as_bytes())?;
     }
     let (a, b, c) = e.means();
     println!("frames                      {}", e.frame.len());
@@ -93,6 +134,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "mean error, not interleaved {c:.3} mm  ({:.2}× sim alone)",
         c / a
+    );
+    if let Some(fl) = &floor {
+        let f = fl.iter().sum::<f64>() / fl.len().max(1) as f64;
+        println!(
+            "predictability floor        {f:.3} mm  (the two ground truths' distance; sim alone {:.2}×, interleaved {:.2}× it)",
+            a / f,
+            b / f
+        );
+    }
+    let [sg, sa, si] = e.strain_means();
+    println!(
+        "mean edge strain            ground truth {sg:+.3} %, sim alone {sa:+.3} %, interleaved {si:+.3} %"
     );
     let (u, c) = e.one_step_means();
     println!(
@@ -113,5 +166,69 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "corrector per call: body proximity {prox:.2} ms, features {feat:.2} ms, network {net:.2} ms"
     );
+    Ok(())
+}
+
+/// `--horizon`: rollouts of `horizon` frames from the ground truth at every `--every`-th frame
+/// of the `frames` from `--start-frame`, each with fresh simulators, averaged per frame after
+/// the start.
+fn short_horizons(args: &Args, scene: &Scene, frames: usize, horizon: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        horizon > 0 && args.every > 0 && horizon <= frames,
+        "--horizon ({horizon}) and --every ({}) must be positive and the horizon at most the \
+         {frames} frames rolled over",
+        args.every
+    );
+    let last = args.start_frame + frames;
+    let starts: Vec<usize> = (args.start_frame..=last - horizon)
+        .step_by(args.every)
+        .collect();
+    let make = |f: usize| coarse_simulation(scene, &args.data, f);
+    let probe = make(args.start_frame)?;
+    let seq = Sequence::load(&args.data, Some(args.start_frame..=last), &probe)?;
+    let corrector = Corrector::load(&args.model, &seq.mesh)?;
+    let s = seq.manifest.steps_per_frame;
+    let mut runs = Vec::new();
+    for &start in &starts {
+        let mut sims = [make(start)?, make(start)?, make(start)?];
+        let t0 = sims[0].state.t_s;
+        for sim in &mut sims {
+            corrector.training.prepare_coarse(sim)?;
+        }
+        let [a, b, c] = &mut sims;
+        let e = evaluate_from(
+            &seq,
+            (start - args.start_frame) * s,
+            [a, b, c],
+            t0,
+            &corrector,
+            horizon,
+            |_, _, _, _| {},
+        )?;
+        let (x, y, _) = e.means();
+        tracing::info!("from frame {start}: sim alone {x:.3} mm, interleaved {y:.3} mm");
+        runs.push(e);
+    }
+    let h = HorizonErrors::from_runs(&starts, &runs, horizon)?;
+    if let Some(csv) = &args.csv {
+        clothsr::io::write_atomic(csv, h.csv().as_bytes())?;
+    }
+    println!(
+        "{} rollouts of {horizon} frames, from frames {}..={} every {}",
+        starts.len(),
+        starts[0],
+        starts[starts.len() - 1],
+        args.every
+    );
+    println!("frames after start   sim alone mm   interleaved mm   ratio");
+    for k in 0..horizon {
+        println!(
+            "{:>18}   {:>12.3}   {:>14.3}   {:.2}×",
+            k + 1,
+            h.sim_alone_mm[k],
+            h.interleaved_mm[k],
+            h.interleaved_mm[k] / h.sim_alone_mm[k]
+        );
+    }
     Ok(())
 }

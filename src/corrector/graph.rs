@@ -222,6 +222,38 @@ impl MeshGraph {
         }
     }
 
+    /// Mean strain |x_i − x_j| / |u_i − u_j| − 1 of each vertex's mesh edges (seam pairs,
+    /// which have no material length, left out; 0 for a vertex with none) at positions `x`.
+    pub fn vertex_strain(&self, x: &[Vector3<f64>]) -> Vec<f64> {
+        debug_assert_eq!(x.len(), self.num_nodes);
+        let (mut sum, mut count) = (vec![0.0; self.num_nodes], vec![0u32; self.num_nodes]);
+        for k in 0..self.num_edges() {
+            if self.seam_edge[k] {
+                continue;
+            }
+            let (i, j) = (self.senders[k] as usize, self.receivers[k] as usize);
+            let rest = (self.material[i] - self.material[j]).norm();
+            if rest > 0.0 {
+                sum[j] += (x[i] - x[j]).norm() / rest - 1.0;
+                count[j] += 1;
+            }
+        }
+        sum.iter()
+            .zip(&count)
+            .map(|(s, &c)| if c > 0 { s / f64::from(c) } else { 0.0 })
+            .collect()
+    }
+
+    /// The gated decoder's tension limit at positions `x`: per vertex
+    /// w = clamp(1 − ε̄/`ramp`, 0, 1), ε̄ its [`Self::vertex_strain`]. 1 where the cloth is
+    /// compressed or at rest length, 0 where it is stretched by `ramp` or more.
+    pub fn tension_weight(&self, x: &[Vector3<f64>], ramp: f64) -> Vec<f32> {
+        self.vertex_strain(x)
+            .iter()
+            .map(|e| (1.0 - e / ramp).clamp(0.0, 1.0) as f32)
+            .collect()
+    }
+
     /// Appends the edge features for positions `x` and velocities `v`: [num_edges,
     /// EDGE_FEATURES] row-major.
     pub fn edge_features(&self, x: &[Vector3<f64>], v: &[Vector3<f64>], out: &mut Vec<f32>) {
@@ -325,6 +357,26 @@ mod tests {
     fn sheet() -> ClothMesh {
         let g = flat_sheet("s", 0.2, 0.1, Vector3::zeros(), Fabric::default());
         mesh_garment(&g, &MeshOptions::with_edge(0.05)).expect("mesh")
+    }
+
+    #[test]
+    fn vertex_strain_and_tension_weight_of_a_uniformly_scaled_sheet() {
+        let mesh = sheet();
+        let g = MeshGraph::new(&mesh);
+        let at = |k: f64| -> Vec<Vector3<f64>> {
+            mesh.material
+                .iter()
+                .map(|u| Vector3::new(u.x * k, 0.3, u.y * k))
+                .collect()
+        };
+        for (k, w) in [(1.0, 1.0), (0.97, 1.0), (1.005, 0.5), (1.02, 0.0)] {
+            for e in g.vertex_strain(&at(k)) {
+                assert!((e - (k - 1.0)).abs() < 1e-12, "scale {k}: strain {e}");
+            }
+            for t in g.tension_weight(&at(k), 0.01) {
+                assert!((f64::from(t) - w).abs() < 1e-6, "scale {k}: weight {t}");
+            }
+        }
     }
 
     #[test]

@@ -217,6 +217,7 @@ impl Corrector {
         let t = Instant::now();
         let mut step_change = flat32(dv);
         self.norm.targets.apply(&mut step_change);
+        let ramp = self.config.tension_ramp;
         let g = GraphTensors::with_indices(
             nodes,
             edges,
@@ -224,7 +225,8 @@ impl Corrector {
             self.receivers.clone(),
             self.inv_mass.clone(),
             step_change.clone(),
-        );
+        )
+        .with_tension(ramp.map(|r| self.graph.tension_weight(x, r)));
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()

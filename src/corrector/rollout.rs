@@ -39,6 +39,11 @@ pub struct RolloutErrors {
     /// ([`super::inference::MAX_CORRECTION_STD`], [`super::inference::MAX_CORRECTED_SPEED_M_S`]);
     /// the report then ends with the last complete frame.
     pub diverged_at_frame: Option<usize>,
+    /// Mean edge strain at every frame end, % ([`super::graph::MeshGraph::vertex_strain`]
+    /// averaged over vertices): the ground truth's, the simulation alone's and the
+    /// interleaved run's. The data's M_int is shortened by its wrinkles (negative); an
+    /// interleaved run far from it has left the states the corrector was trained on.
+    pub strain_pct: Vec<[f64; 3]>,
     /// Mean coarse simulator step, ms (interleaved run).
     pub sim_step_ms: f64,
     /// Mean corrector call, ms.
@@ -54,6 +59,18 @@ fn mean(v: &[f64]) -> f64 {
 }
 
 impl RolloutErrors {
+    /// Mean over frames of the mean edge strain, %: (ground truth, sim alone, interleaved).
+    pub fn strain_means(&self) -> [f64; 3] {
+        let n = self.strain_pct.len().max(1) as f64;
+        let mut m = [0.0; 3];
+        for row in &self.strain_pct {
+            for k in 0..3 {
+                m[k] += row[k] / n;
+            }
+        }
+        m
+    }
+
     /// Mean one-step errors over frames: (uncorrected M_c, corrected M_c), mm.
     pub fn one_step_means(&self) -> (f64, f64) {
         (
@@ -96,17 +113,114 @@ impl RolloutErrors {
     pub fn csv(&self) -> String {
         let mut s = String::from(
             "frame,sim_alone_mm,interleaved_mm,not_interleaved_mm,one_step_uncorrected_mm,\
-             one_step_corrected_mm\n",
+             one_step_corrected_mm,strain_gt_pct,strain_sim_alone_pct,strain_interleaved_pct\n",
         );
         for i in 0..self.frame.len() {
+            let [g, a, b] = self.strain_pct[i];
             s += &format!(
-                "{},{:.4},{:.4},{:.4},{:.5},{:.5}\n",
+                "{},{:.4},{:.4},{:.4},{:.5},{:.5},{g:.4},{a:.4},{b:.4}\n",
                 self.frame[i],
                 self.sim_alone_mm[i],
                 self.interleaved_mm[i],
                 self.not_interleaved_mm[i],
                 self.one_step_uncorrected_mm[i],
                 self.one_step_corrected_mm[i]
+            );
+        }
+        s
+    }
+}
+
+/// Mean vertex distance, mm, between the M_int of two data sets of the same coarse mesh at
+/// the end of each frame in `frames` (both loaded over ranges holding them). With `other` a
+/// fine simulation of the same scene from a start moved by a tiny offset, this is the
+/// predictability floor: how far the ground truth itself goes from a trajectory that started
+/// next to it.
+pub fn sequence_distance_mm(
+    seq: &Sequence,
+    other: &Sequence,
+    frames: &[usize],
+) -> Result<Vec<f64>> {
+    let s = seq.manifest.steps_per_frame;
+    if other.manifest.steps_per_frame != s
+        || other.manifest.coarse_vertices != seq.manifest.coarse_vertices
+    {
+        return Err(Error::bad_input(
+            &other.dir,
+            format!(
+                "not comparable with {}: {} coarse vertices and {} steps a frame against {} and {s}",
+                seq.dir.display(),
+                other.manifest.coarse_vertices,
+                other.manifest.steps_per_frame,
+                seq.manifest.coarse_vertices
+            ),
+        ));
+    }
+    fn end(q: &Sequence, f: usize, s: usize) -> Result<&super::data::Step> {
+        f.checked_sub(q.first_frame)
+            .map(|k| k * s + s - 1)
+            .and_then(|i| q.steps.get(i))
+            .ok_or_else(|| Error::bad_input(&q.dir, format!("frame {f} is not loaded")))
+    }
+    frames
+        .iter()
+        .map(|&f| {
+            Ok(mean_distance_mm(
+                &vectors(&end(seq, f, s)?.int_x),
+                &vectors(&end(other, f, s)?.int_x),
+            ))
+        })
+        .collect()
+}
+
+/// Short-horizon errors: rollouts of a few frames from the ground truth at many starts, their
+/// errors averaged per frame after the start (the accuracy within the horizon over which the
+/// ground truth itself is predictable; see [`sequence_distance_mm`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct HorizonErrors {
+    /// The start frames.
+    pub starts: Vec<usize>,
+    /// Mean over starts of the simulation alone's error k + 1 frames after the start, mm.
+    pub sim_alone_mm: Vec<f64>,
+    /// The same for the interleaved run.
+    pub interleaved_mm: Vec<f64>,
+}
+
+impl HorizonErrors {
+    /// Averages `runs` (each [`evaluate_from`] one start, `starts` their start frames) frame
+    /// by frame over the first `horizon` frames; a run shorter than that (diverged) is an
+    /// error naming its start.
+    pub fn from_runs(starts: &[usize], runs: &[RolloutErrors], horizon: usize) -> Result<Self> {
+        let mut out = HorizonErrors {
+            starts: starts.to_vec(),
+            sim_alone_mm: vec![0.0; horizon],
+            interleaved_mm: vec![0.0; horizon],
+        };
+        for (start, r) in starts.iter().zip(runs) {
+            if r.interleaved_mm.len() < horizon {
+                return Err(Error::Simulation(format!(
+                    "the interleaved run from frame {start} stopped after {} of {horizon} frames",
+                    r.interleaved_mm.len()
+                )));
+            }
+            for k in 0..horizon {
+                out.sim_alone_mm[k] += r.sim_alone_mm[k] / runs.len() as f64;
+                out.interleaved_mm[k] += r.interleaved_mm[k] / runs.len() as f64;
+            }
+        }
+        Ok(out)
+    }
+
+    /// CSV: one row per frame after the start.
+    pub fn csv(&self) -> String {
+        let mut s = String::from("frames_after_start,sim_alone_mm,interleaved_mm,ratio\n");
+        for k in 0..self.sim_alone_mm.len() {
+            s += &format!(
+                "{},{:.4},{:.4},{:.4}\n",
+                k + 1,
+                self.sim_alone_mm[k],
+                self.interleaved_mm[k],
+                self.interleaved_mm[k] / self.sim_alone_mm[k]
             );
         }
         s
@@ -128,25 +242,41 @@ pub fn evaluate(
     t0_s: f64,
     corrector: &Corrector,
     frames: usize,
+    on_frame: impl FnMut(usize, f64, f64, f64),
+) -> Result<RolloutErrors> {
+    evaluate_from(seq, 0, sims, t0_s, corrector, frames, on_frame)
+}
+
+/// [`evaluate`] from the ground truth at the loaded sequence's step `start_step` (a multiple
+/// of the steps per frame: the first step of one of its frames) instead of its first.
+pub fn evaluate_from(
+    seq: &Sequence,
+    start_step: usize,
+    sims: [&mut Simulation; 3],
+    t0_s: f64,
+    corrector: &Corrector,
+    frames: usize,
     mut on_frame: impl FnMut(usize, f64, f64, f64),
 ) -> Result<RolloutErrors> {
     let s = seq.manifest.steps_per_frame;
     let h = seq.manifest.dt_s;
     let steps = frames * s;
-    if steps + 1 > seq.steps.len() {
+    if !start_step.is_multiple_of(s) || start_step + steps + 1 > seq.steps.len() {
         return Err(Error::bad_input(
             &seq.dir,
             format!(
-                "{frames} frames asked for, the loaded sequence has {} steps after its first",
+                "{frames} frames from step {start_step} asked for, the loaded sequence has {} \
+                 steps after its first ({s} a frame)",
                 seq.steps.len().saturating_sub(1)
             ),
         ));
     }
-    let first = &seq.steps[0];
+    let steps_at = |i: usize| &seq.steps[start_step + i];
+    let first = steps_at(0);
     let start = SimState {
         x: vectors(&first.int_x),
         v: vectors(&first.int_v),
-        t_s: t0_s + seq.step_time_s(0),
+        t_s: t0_s + seq.step_time_s(start_step),
     };
     let (mut alone, mut inter) = (start.clone(), start);
     let mut out = RolloutErrors::default();
@@ -167,7 +297,7 @@ pub fn evaluate(
         let corrected = corrector.correct(&inter.v, &mut c, sims[1]);
         corr_s += t.elapsed().as_secs_f64();
         if let Err(e) = corrected {
-            let frame = seq.first_frame + (i + 1).div_ceil(s) - 1;
+            let frame = seq.first_frame + (start_step + i + 1).div_ceil(s) - 1;
             tracing::warn!("interleaved rollout stopped in frame {frame}: {e}");
             out.diverged_at_frame = Some(frame);
             break;
@@ -175,7 +305,7 @@ pub fn evaluate(
         inter = c;
         // The data set's frame ends are its steps s, 2s, …; step 0 here is its step 1.
         if frame_end {
-            let gt = vectors(&seq.steps[i].int_x);
+            let gt = vectors(&steps_at(i).int_x);
             let mut fixed = alone.clone();
             corrector.correct(&alone_start_v, &mut fixed, sims[0])?;
             let e = (
@@ -183,7 +313,7 @@ pub fn evaluate(
                 mean_distance_mm(&inter.x, &gt),
                 mean_distance_mm(&fixed.x, &gt),
             );
-            let before = &seq.steps[i - 1];
+            let before = steps_at(i - 1);
             let mut data_c = sims[2]
                 .step_from(&SimState {
                     x: vectors(&before.int_x),
@@ -196,7 +326,13 @@ pub fn evaluate(
             corrector.correct(&vectors(&before.int_v), &mut data_c, sims[2])?;
             out.one_step_corrected_mm
                 .push(mean_distance_mm(&data_c.x, &gt));
-            let frame = seq.first_frame + i / s;
+            let strain = |x: &[Vector3<f64>]| {
+                let e = seq.graph.vertex_strain(x);
+                100.0 * e.iter().sum::<f64>() / e.len().max(1) as f64
+            };
+            out.strain_pct
+                .push([strain(&gt), strain(&alone.x), strain(&inter.x)]);
+            let frame = seq.first_frame + (start_step + i) / s;
             out.frame.push(frame);
             out.sim_alone_mm.push(e.0);
             out.interleaved_mm.push(e.1);
