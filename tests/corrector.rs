@@ -8,7 +8,7 @@ mod common;
 use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector};
-use clothsr::corrector::model::{Decoder, GraphTensors};
+use clothsr::corrector::model::{Decoder, GraphTensors, DEFAULT_TENSION_RAMP};
 use clothsr::corrector::rollout::{evaluate, evaluate_from, sequence_distance_mm, HorizonErrors};
 use clothsr::corrector::training::{fit_normalisation, save_model, train, TrainSet};
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
@@ -145,7 +145,14 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                 .with_latent(16)
                 .with_steps(3)
                 .with_attention(attention)
-                .with_decoder(Some(decoder)),
+                .with_decoder(Some(decoder))
+                .with_tension_ramp(Some(0.0)),
+        );
+        assert_eq!(cfg.model.tension_ramp(), None);
+        let default = cfg.model.clone().with_tension_ramp(None);
+        assert_eq!(
+            default.tension_ramp(),
+            (decoder == Decoder::Gated).then_some(DEFAULT_TENSION_RAMP)
         );
         let device = default_device().expect("device");
         let net = cfg.model.init(&device);

@@ -162,10 +162,11 @@ pub struct CorrectorArgs {
     /// only near colliders).
     #[arg(long, value_enum, default_value = "gated")]
     decoder: clothsr::corrector::model::Decoder,
-    /// The gated decoder's tension limit: the share of the step's velocity change taken
-    /// back falls linearly to zero as the mean strain of a vertex's edges rises from 0 to
-    /// this (the fine cloth's wrinkles take up compression, not tension); 0: no limit.
-    #[arg(long, default_value_t = 0.01)]
+    /// The gated decoder's tension limit at inference, saved with the model: the share of
+    /// the step's velocity change taken back falls linearly to zero as the mean strain of a
+    /// vertex's edges after the step rises from 0 to this (the fine cloth's wrinkles take up
+    /// compression, not tension); 0: no limit.
+    #[arg(long, default_value_t = clothsr::corrector::model::DEFAULT_TENSION_RAMP)]
     tension_ramp: f64,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
@@ -200,7 +201,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             .with_steps(a.mp_steps)
             .with_attention(a.attention)
             .with_decoder(Some(a.decoder))
-            .with_tension_ramp((a.tension_ramp > 0.0).then_some(a.tension_ramp)),
+            .with_tension_ramp(Some(a.tension_ramp)),
     )
     .with_steps(a.steps)
     .with_batch(a.batch)

@@ -149,6 +149,16 @@ pub fn load_net(
     }
     let config = TrainingConfig::load(&config_path)
         .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+    if config
+        .model
+        .tension_ramp
+        .is_some_and(|r| !(r.is_finite() && r >= 0.0))
+    {
+        return Err(Error::bad_input(
+            &config_path,
+            "the tension ramp must not be negative (0: no limit)",
+        ));
+    }
     let norm_path = dir.join(NORMALISATION_FILE);
     let norm: Normalisation = read_json(&norm_path)?;
     if norm.nodes.mean.len() != NODE_FEATURES || norm.edges.mean.len() != EDGE_FEATURES {
@@ -196,6 +206,7 @@ impl Corrector {
     /// The predicted velocity correction p for M_c = (x, v), reached by a step that changed
     /// the velocities by `dv` beyond gravity ([`step_change`]), with body proximities `body`
     /// ([`body_proximity`]), m/s per vertex.
+    /// The gated decoder's tension limit ([`CorrectorConfig::tension_ramp`]) is measured at x.
     pub fn predict(
         &self,
         x: &[Vector3<f64>],
@@ -217,7 +228,7 @@ impl Corrector {
         let t = Instant::now();
         let mut step_change = flat32(dv);
         self.norm.targets.apply(&mut step_change);
-        let ramp = self.config.tension_ramp;
+        let ramp = self.config.tension_ramp();
         let g = GraphTensors::with_indices(
             nodes,
             edges,

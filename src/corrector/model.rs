@@ -25,7 +25,10 @@
 //!   a cloth that responds less (a fine cloth wrinkles where the coarse mesh must stretch),
 //!   never one that gains energy from the corrector. In contact, where Δq holds the
 //!   collider's push (which taking back would drive the cloth in), the correction is free
-//!   instead: the resolutions' contacts differ.
+//!   instead: the resolutions' contacts differ. At inference the share taken back is
+//!   further scaled per vertex by w = clamp(1 − ε̄/ramp, 0, 1), ε̄ the mean strain of its
+//!   edges after the step ([`CorrectorConfig::tension_ramp`]): the fine cloth's wrinkles take
+//!   up compression, not tension.
 //!
 //! Every MLP is ReLU with `hidden_layers` hidden layers of `latent` units; all but the decoder
 //! end in a LayerNorm. Inputs and outputs are normalised outside the network
@@ -58,14 +61,18 @@ pub struct CorrectorConfig {
     /// The decoder (`None`: [`Decoder::Node`], the paper's; optional so that models saved
     /// before the choice existed load as they were trained).
     pub decoder: Option<Decoder>,
-    /// The gated decoder's tension limit (beyond the paper): the share of the step's
-    /// velocity change taken back is scaled by w = clamp(1 − ε̄/ramp, 0, 1), ε̄ the mean
-    /// strain of the vertex's edges ([`super::graph::MeshGraph::tension_weight`]). The finer
-    /// cloth's wrinkles take up compression, not tension: the fine and coarse membranes
-    /// resist stretching alike, and a corrector taking back their tension lets gravity
-    /// stretch the interleaved cloth without bound (measured: +3 to +10 % mean strain against
-    /// the data's −0.3 %, states never seen in training). `None`: no limit (models saved
-    /// before it existed).
+    /// The gated decoder's tension limit at inference (beyond the paper): the share of the
+    /// step's velocity change taken back is scaled by w = clamp(1 − ε̄/ramp, 0, 1), ε̄ the
+    /// mean strain of the vertex's edges after the step
+    /// ([`super::graph::MeshGraph::tension_weight`]). The finer cloth's wrinkles take up
+    /// compression, not tension: the fine and coarse membranes resist stretching alike, and
+    /// a corrector taking back their tension lets gravity stretch the interleaved cloth
+    /// (measured: +3 to +10 % mean strain against the data's −0.3 %, states never seen in
+    /// training). `None`: [`DEFAULT_TENSION_RAMP`] (also for models saved before it
+    /// existed); 0: no limit. Training leaves it out: the data's one-step results are
+    /// stretched by the simulator's spring-back at many vertices, and a corrector trained
+    /// with the limit moved what it could not take back there into its free contact term
+    /// and diverged (frame 18 of the held-out drop).
     pub tension_ramp: Option<f64>,
 }
 
@@ -83,7 +90,19 @@ pub enum Decoder {
     Gated,
 }
 
+/// The gated decoder's tension ramp when the model names none: 1 % strain (the data's
+/// M_int is shortened by 0.3 % on average, the simulator's spring-back from it stretches
+/// by 0.1 %).
+pub const DEFAULT_TENSION_RAMP: f64 = 0.01;
+
 impl CorrectorConfig {
+    /// The gated decoder's tension ramp at inference ([`Self::tension_ramp`]); `None`: no
+    /// limit (other decoders, or a ramp of 0).
+    pub fn tension_ramp(&self) -> Option<f64> {
+        let r = self.tension_ramp.unwrap_or(DEFAULT_TENSION_RAMP);
+        (self.decoder_kind() == Decoder::Gated && r > 0.0).then_some(r)
+    }
+
     /// The decoder.
     pub fn decoder_kind(&self) -> Decoder {
         self.decoder.unwrap_or(Decoder::Node)

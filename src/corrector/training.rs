@@ -161,8 +161,6 @@ struct Sample {
     step_change: Vec<f32>,
     targets: Vec<f32>,
     mask: Vec<f32>,
-    /// The gated decoder's tension limit per node (with a tension ramp).
-    tension: Option<Vec<f32>>,
 }
 
 /// A batch of samples concatenated into one graph, normalised, on `device`.
@@ -174,12 +172,8 @@ fn batch_tensors(
     let (mut nodes, mut edges, mut targets, mut mask) = (vec![], vec![], vec![], vec![]);
     let (mut senders, mut receivers, mut inv_mass) = (vec![], vec![], vec![]);
     let mut step_change = vec![];
-    let mut tension = samples.iter().all(|s| s.tension.is_some()).then(Vec::new);
     let mut offset = 0u32;
     for s in samples {
-        if let (Some(all), Some(w)) = (tension.as_mut(), s.tension.as_ref()) {
-            all.extend_from_slice(w);
-        }
         inv_mass.extend(inverse_masses(&s.graph.mass));
         step_change.extend_from_slice(&s.step_change);
         nodes.extend_from_slice(&s.nodes);
@@ -205,8 +199,7 @@ fn batch_tensors(
             inv_mass,
             step_change,
             device,
-        )
-        .with_tension(tension),
+        ),
         Tensor::from_data(TensorData::new(targets, [n, 3]), device),
         Tensor::from_data(TensorData::new(mask, [n, 1]), device),
         weight,
@@ -251,9 +244,9 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
     if cfg
         .model
         .tension_ramp
-        .is_some_and(|r| !(r.is_finite() && r > 0.0))
+        .is_some_and(|r| !(r.is_finite() && r >= 0.0))
     {
-        return bad("the tension ramp must be positive");
+        return bad("the tension ramp must not be negative");
     }
     if cfg.rollout_iters > 0
         && !sets
@@ -497,11 +490,6 @@ impl Trainer<'_> {
         let (mut nodes, mut edges) = (Vec::new(), Vec::new());
         graph.node_features(&vs, &dvs, &body, &mut nodes);
         graph.edge_features(&xs, &vs, &mut edges);
-        let tension = self
-            .cfg
-            .model
-            .tension_ramp
-            .map(|r| graph.tension_weight(&xs, r));
         Sample {
             graph,
             nodes,
@@ -509,7 +497,6 @@ impl Trainer<'_> {
             step_change: flat32(&dvs),
             targets: flat32(&ts),
             mask,
-            tension,
         }
     }
 
@@ -613,7 +600,6 @@ impl Trainer<'_> {
                 start,
                 cfg.window,
                 cfg.rollout_lr,
-                cfg.model.tension_ramp,
                 &self.device,
             )?;
             self.position.phase2_done += 1;
@@ -663,7 +649,6 @@ fn rollout_window(
     start: usize,
     window: usize,
     lr: f64,
-    tension_ramp: Option<f64>,
     device: &Device,
 ) -> Result<f64> {
     let seq = &set.seq;
@@ -694,9 +679,7 @@ fn rollout_window(
         let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &dv, &body, norm);
         let mut step_change = flat32(&dv);
         norm.targets.apply(&mut step_change);
-        let tension = tension_ramp.map(|r| seq.graph.tension_weight(&c.x, r));
-        let g =
-            GraphTensors::of(&seq.graph, nodes, edges, step_change, device).with_tension(tension);
+        let g = GraphTensors::of(&seq.graph, nodes, edges, step_change, device);
         let pred = net.forward(&g); // [n, 3], normalised
         let mut p: Vec<f32> = pred
             .clone()
