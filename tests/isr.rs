@@ -75,6 +75,26 @@ fn tiny_config() -> IsrTrainingConfig {
         .with_unroll_max(1)
 }
 
+/// Rewrites the `config.json` in `dir` through `edit` (as files written by older versions,
+/// or edited by hand, look).
+fn edit_config(dir: &std::path::Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let path = dir.join("config.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+    edit(&mut json);
+    std::fs::write(&path, json.to_string()).expect("write");
+}
+
+/// Removes the model setting `field` from the `config.json` in `dir`.
+fn drop_model_field(dir: &std::path::Path, field: &str) {
+    edit_config(dir, |json| {
+        json["model"]
+            .as_object_mut()
+            .expect("model object")
+            .remove(field);
+    });
+}
+
 #[test]
 fn windows_partition_and_reverse_exactly_and_shift_masks_separate_wrapped_tokens() {
     let device = default_device().expect("device");
@@ -266,14 +286,7 @@ fn a_model_saved_before_the_geometry_input_loads_without_it() {
     let cfg = tiny_config();
     save_model(dir.path(), &cfg, &cfg.model.init(&device)).expect("save");
     // Drop the field, as in config.json files written before it existed.
-    let path = dir.path().join("config.json");
-    let mut json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
-    json["model"]
-        .as_object_mut()
-        .expect("model object")
-        .remove("geometry_input");
-    std::fs::write(&path, json.to_string()).expect("write");
+    drop_model_field(dir.path(), "geometry_input");
     let isr = Isr::load(dir.path()).expect("load");
     assert!(!isr.cfg.model.geometry());
     assert_eq!(isr.cfg.model.in_channels(), 7);
@@ -338,11 +351,7 @@ fn an_unshuffled_network_keeps_the_full_resolution_and_checks_its_patch_size() {
             .unshuffle_factor(),
         2
     );
-    let path = dir.path().join("config.json");
-    let mut json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
-    json["patch"] = serde_json::json!(12);
-    std::fs::write(&path, json.to_string()).expect("write");
+    edit_config(dir.path(), |json| json["patch"] = serde_json::json!(12));
     let err = Isr::load(dir.path())
         .err()
         .expect("patch 12 refused")
@@ -354,14 +363,7 @@ fn an_unshuffled_network_keeps_the_full_resolution_and_checks_its_patch_size() {
     let plain = tempfile::tempdir().expect("tempdir");
     let tc = tiny_config();
     save_model(plain.path(), &tc, &tc.model.init(&device)).expect("save");
-    let path = plain.path().join("config.json");
-    let mut json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
-    json["model"]
-        .as_object_mut()
-        .expect("model object")
-        .remove("unshuffle");
-    std::fs::write(&path, json.to_string()).expect("write");
+    drop_model_field(plain.path(), "unshuffle");
     assert_eq!(
         Isr::load(plain.path())
             .expect("load")

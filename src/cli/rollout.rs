@@ -82,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for s in [&mut sim, &mut alone, &mut check] {
         corrector.training.prepare_coarse(s)?;
     }
-    let e = evaluate(
+    let mut e = evaluate(
         &seq,
         [&mut alone, &mut sim, &mut check],
         t0,
@@ -96,30 +96,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         },
     )?;
-    let floor = match &args.floor {
-        Some(dir) => {
-            let other = Sequence::load(
-                dir,
-                Some(args.start_frame..=args.start_frame + frames),
-                &sim,
-            )?;
-            Some(sequence_distance_mm(&seq, &other, &e.frame)?)
-        }
-        None => None,
-    };
+    if let Some(dir) = &args.floor {
+        let other = Sequence::load(
+            dir,
+            Some(args.start_frame..=args.start_frame + frames),
+            &sim,
+        )?;
+        e.floor_mm = sequence_distance_mm(&seq, &other, &e.frame)?;
+    }
     if let Some(csv) = &args.csv {
-        let mut text = e.csv();
-        if let Some(fl) = &floor {
-            text = text
-                .lines()
-                .enumerate()
-                .map(|(k, l)| match k {
-                    0 => format!("{l},floor_mm\n"),
-                    _ => format!("{l},{:.4}\n", fl[k - 1]),
-                })
-                .collect();
-        }
-        clothsr::io::write_atomic(csv, text.as_bytes())?;
+        clothsr::io::write_atomic(csv, e.csv().as_bytes())?;
     }
     let (a, b, c) = e.means();
     println!("frames                      {}", e.frame.len());
@@ -135,8 +121,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "mean error, not interleaved {c:.3} mm  ({:.2}× sim alone)",
         c / a
     );
-    if let Some(fl) = &floor {
-        let f = fl.iter().sum::<f64>() / fl.len().max(1) as f64;
+    if let Some(f) = e.floor_mean() {
         println!(
             "predictability floor        {f:.3} mm  (the two ground truths' distance; sim alone {:.2}×, interleaved {:.2}× it)",
             a / f,

@@ -149,16 +149,10 @@ pub fn load_net(
     }
     let config = TrainingConfig::load(&config_path)
         .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
-    if config
+    config
         .model
-        .tension_ramp
-        .is_some_and(|r| !(r.is_finite() && r >= 0.0))
-    {
-        return Err(Error::bad_input(
-            &config_path,
-            "the tension ramp must not be negative (0: no limit)",
-        ));
-    }
+        .check()
+        .map_err(|e| Error::bad_input(&config_path, e))?;
     let norm_path = dir.join(NORMALISATION_FILE);
     let norm: Normalisation = read_json(&norm_path)?;
     if norm.nodes.mean.len() != NODE_FEATURES || norm.edges.mean.len() != EDGE_FEATURES {

@@ -96,6 +96,17 @@ pub enum Decoder {
 pub const DEFAULT_TENSION_RAMP: f64 = 0.01;
 
 impl CorrectorConfig {
+    /// Checks the settings a saved configuration may hold wrong; `Err` names the problem.
+    pub fn check(&self) -> Result<(), String> {
+        if self
+            .tension_ramp
+            .is_some_and(|r| !(r.is_finite() && r >= 0.0))
+        {
+            return Err("the tension ramp must not be negative (0: no limit)".into());
+        }
+        Ok(())
+    }
+
     /// The gated decoder's tension ramp at inference ([`Self::tension_ramp`]); `None`: no
     /// limit (other decoders, or a ramp of 0).
     pub fn tension_ramp(&self) -> Option<f64> {

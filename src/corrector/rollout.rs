@@ -44,6 +44,9 @@ pub struct RolloutErrors {
     /// interleaved run's. The data's M_int is shortened by its wrinkles (negative); an
     /// interleaved run far from it has left the states the corrector was trained on.
     pub strain_pct: Vec<[f64; 3]>,
+    /// The predictability floor at every frame end, mm ([`sequence_distance_mm`]), when the
+    /// caller measured it; empty otherwise.
+    pub floor_mm: Vec<f64>,
     /// Mean coarse simulator step, ms (interleaved run).
     pub sim_step_ms: f64,
     /// Mean corrector call, ms.
@@ -61,14 +64,12 @@ fn mean(v: &[f64]) -> f64 {
 impl RolloutErrors {
     /// Mean over frames of the mean edge strain, %: (ground truth, sim alone, interleaved).
     pub fn strain_means(&self) -> [f64; 3] {
-        let n = self.strain_pct.len().max(1) as f64;
-        let mut m = [0.0; 3];
-        for row in &self.strain_pct {
-            for k in 0..3 {
-                m[k] += row[k] / n;
-            }
-        }
-        m
+        [0, 1, 2].map(|k| mean(&self.strain_pct.iter().map(|r| r[k]).collect::<Vec<_>>()))
+    }
+
+    /// Mean of the predictability floor over frames, mm (`None` when it was not measured).
+    pub fn floor_mean(&self) -> Option<f64> {
+        (!self.floor_mm.is_empty()).then(|| mean(&self.floor_mm))
     }
 
     /// Mean one-step errors over frames: (uncorrected M_c, corrected M_c), mm.
@@ -109,16 +110,24 @@ impl RolloutErrors {
         100.0 * cov / var
     }
 
-    /// CSV: one row per frame, the columns named after the fields.
+    /// CSV: one row per frame, the columns named after the fields (`floor_mm` last, when
+    /// measured).
     pub fn csv(&self) -> String {
+        let floor = !self.floor_mm.is_empty();
         let mut s = String::from(
             "frame,sim_alone_mm,interleaved_mm,not_interleaved_mm,one_step_uncorrected_mm,\
-             one_step_corrected_mm,strain_gt_pct,strain_sim_alone_pct,strain_interleaved_pct\n",
+             one_step_corrected_mm,strain_gt_pct,strain_sim_alone_pct,strain_interleaved_pct",
         );
+        s += if floor { ",floor_mm\n" } else { "\n" };
         for i in 0..self.frame.len() {
             let [g, a, b] = self.strain_pct[i];
+            let f = if floor {
+                format!(",{:.4}", self.floor_mm[i])
+            } else {
+                String::new()
+            };
             s += &format!(
-                "{},{:.4},{:.4},{:.4},{:.5},{:.5},{g:.4},{a:.4},{b:.4}\n",
+                "{},{:.4},{:.4},{:.4},{:.5},{:.5},{g:.4},{a:.4},{b:.4}{f}\n",
                 self.frame[i],
                 self.sim_alone_mm[i],
                 self.interleaved_mm[i],

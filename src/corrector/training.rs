@@ -241,12 +241,8 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
     if !(cfg.noise_ratio.is_finite() && cfg.noise_ratio >= 0.0) {
         return bad("noise_ratio must not be negative");
     }
-    if cfg
-        .model
-        .tension_ramp
-        .is_some_and(|r| !(r.is_finite() && r >= 0.0))
-    {
-        return bad("the tension ramp must not be negative");
+    if let Err(e) = cfg.model.check() {
+        return bad(&e);
     }
     if cfg.rollout_iters > 0
         && !sets
