@@ -403,6 +403,16 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         g.is_finite() && (a - g).abs() < 1.0 && (b - g).abs() < 1.0,
         "{g} {a} {b}"
     );
+    // The rigid part |mean(x − x_gt)| never exceeds the mean distance (triangle inequality).
+    assert_eq!(e.offset_mm.len(), 3);
+    for (k, [oa, oi]) in e.offset_mm.iter().enumerate() {
+        assert!(*oa >= 0.0 && *oa <= e.sim_alone_mm[k] + 1e-9, "{oa}");
+        assert!(*oi >= 0.0 && *oi <= e.interleaved_mm[k] + 1e-9, "{oi}");
+    }
+    assert_eq!(
+        e.csv().lines().next().map(|l| l.split(',').count()),
+        Some(11)
+    );
 
     // From the ground truth at frame 2 of the loaded sequence: the same as a sequence loaded
     // from frame 2 (fresh simulators each), numbered in the data set's frames.

@@ -132,6 +132,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "mean edge strain            ground truth {sg:+.3} %, sim alone {sa:+.3} %, interleaved {si:+.3} %"
     );
+    let [oa, oi] = e.offset_means();
+    println!(
+        "rigid part of the error     sim alone {oa:.3} mm, interleaved {oi:.3} mm (|mean of x − x_gt|)"
+    );
     let (u, c) = e.one_step_means();
     println!(
         "one step: M_c → M_int      {u:.4} mm uncorrected, {c:.4} mm corrected ({:.2}×)",

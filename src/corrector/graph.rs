@@ -42,37 +42,84 @@ use crate::sim::collide::distance::point_triangle;
 
 /// Body proximity of every point of `x` to `colliders` at time `t_s`:
 /// max(0, 1 − d/`BODY_RADIUS_M`), d the distance to the nearest collider triangle.
+/// Builds the colliders' BVHs afresh; [`ProximityCache`] keeps them between calls.
 pub fn body_proximity(x: &[Vector3<f64>], colliders: &[Collider], t_s: f64) -> Vec<f32> {
-    let mut nearest = vec![BODY_RADIUS_M; x.len()];
-    let mut points = Vec::new();
-    for c in colliders {
-        c.positions_at(t_s, &mut points);
-        let boxes: Vec<Aabb> = c
-            .triangles
-            .iter()
-            .map(|t| Aabb::from_points(t.iter().map(|&v| &points[v as usize])))
-            .collect();
-        if boxes.is_empty() {
-            continue;
-        }
-        let bvh = Bvh::build(&boxes);
-        x.par_iter()
-            .zip(nearest.par_iter_mut())
-            .with_min_len(64)
-            .for_each(|(p, best)| {
-                let hit = bvh.nearest(p, *best, |i| {
-                    let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
-                    point_triangle(p, &a, &b, &c).dist
-                });
-                if let Some((_, d)) = hit {
-                    *best = best.min(d);
+    ProximityCache::default().proximity(x, colliders, t_s)
+}
+
+/// [`body_proximity`] with each collider's triangle BVH kept between calls: built on the
+/// first call, then refitted to the collider's points at each call (rebuilt every
+/// [`ProximityCache::REBUILD_EVERY`] refits, as a tree loosens when the body deforms). A
+/// static collider whose points are those cached is left as it is.
+#[derive(Debug, Default)]
+pub struct ProximityCache {
+    bodies: Vec<CachedBody>,
+}
+
+#[derive(Debug, Default)]
+struct CachedBody {
+    /// The static collider's points the tree was made for (empty for an animated one).
+    still: Vec<Vector3<f32>>,
+    bvh: Bvh,
+    points: Vec<Vector3<f64>>,
+    refits: usize,
+}
+
+impl ProximityCache {
+    /// Refits of a collider's tree between rebuilds.
+    pub const REBUILD_EVERY: usize = 100;
+
+    /// Body proximities, as [`body_proximity`].
+    pub fn proximity(&mut self, x: &[Vector3<f64>], colliders: &[Collider], t_s: f64) -> Vec<f32> {
+        self.bodies
+            .resize_with(colliders.len(), CachedBody::default);
+        let mut nearest = vec![BODY_RADIUS_M; x.len()];
+        for (c, body) in colliders.iter().zip(&mut self.bodies) {
+            if c.triangles.is_empty() {
+                continue;
+            }
+            let unchanged = c.times_s.len() == 1
+                && body.bvh.len() == c.triangles.len()
+                && c.frames.first() == Some(&body.still);
+            if !unchanged {
+                c.positions_at(t_s, &mut body.points);
+                let points = &body.points;
+                let boxes: Vec<Aabb> = c
+                    .triangles
+                    .iter()
+                    .map(|t| Aabb::from_points(t.iter().map(|&v| &points[v as usize])))
+                    .collect();
+                if body.bvh.len() != boxes.len() || body.refits >= Self::REBUILD_EVERY {
+                    body.bvh.rebuild(&boxes);
+                    body.refits = 0;
+                } else {
+                    body.bvh.refit(&boxes);
+                    body.refits += 1;
                 }
-            });
+                body.still = match c.times_s.len() {
+                    1 => c.frames.first().cloned().unwrap_or_default(),
+                    _ => Vec::new(),
+                };
+            }
+            let (bvh, points) = (&body.bvh, &body.points);
+            x.par_iter()
+                .zip(nearest.par_iter_mut())
+                .with_min_len(64)
+                .for_each(|(p, best)| {
+                    let hit = bvh.nearest(p, *best, |i| {
+                        let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
+                        point_triangle(p, &a, &b, &c).dist
+                    });
+                    if let Some((_, d)) = hit {
+                        *best = best.min(d);
+                    }
+                });
+        }
+        nearest
+            .iter()
+            .map(|d| (1.0 - d / BODY_RADIUS_M).max(0.0) as f32)
+            .collect()
     }
-    nearest
-        .iter()
-        .map(|d| (1.0 - d / BODY_RADIUS_M).max(0.0) as f32)
-        .collect()
 }
 
 /// Features per node: proximity-weighted velocity (3), the step's velocity change beyond
@@ -471,6 +518,40 @@ mod tests {
         assert!((p[1] - 0.5).abs() < 0.03, "{p:?}");
         assert_eq!(p[2], 0.0);
         assert_eq!(body_proximity(&x, &[], 0.0), vec![0.0; 3]);
+    }
+
+    #[test]
+    fn the_proximity_cache_follows_a_moving_body_as_a_fresh_tree_does() {
+        // A ball moving 5 cm along x over one second (two key frames), and a static one.
+        let moving = |dx: f64| Collider::sphere("m", Vector3::new(dx, 0.0, 0.0), 0.1, 3);
+        let mut ball = moving(0.0);
+        ball.times_s = vec![0.0, 1.0];
+        ball.frames.push(moving(0.05).frames[0].clone());
+        let still = Collider::sphere("s", Vector3::new(0.0, 0.5, 0.0), 0.1, 3);
+        let bodies = [ball, still];
+        let x: Vec<Vector3<f64>> = (0..40)
+            .map(|k| Vector3::new(-0.1 + 0.01 * k as f64, 0.11, 0.02 * (k % 3) as f64))
+            .chain([Vector3::new(0.0, 0.39, 0.0)])
+            .collect();
+        let mut cache = ProximityCache::default();
+        let mut changed = 0;
+        // More calls than REBUILD_EVERY, so both refits and a rebuild are compared.
+        for k in 0..=ProximityCache::REBUILD_EVERY + 5 {
+            let t = k as f64 / (ProximityCache::REBUILD_EVERY + 5) as f64;
+            let cached = cache.proximity(&x, &bodies, t);
+            assert_eq!(cached, body_proximity(&x, &bodies, t), "t = {t}");
+            changed += usize::from(cached != body_proximity(&x, &bodies, 0.0));
+        }
+        assert!(changed > 50, "the moving ball must change the proximities");
+        // Another body set of the same size gets fresh trees, not the cached ones.
+        let other = [
+            moving(0.2),
+            Collider::sphere("s2", Vector3::zeros(), 0.1, 3),
+        ];
+        assert_eq!(
+            cache.proximity(&x, &other, 0.0),
+            body_proximity(&x, &other, 0.0)
+        );
     }
 
     #[test]

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use burn::config::Config;
@@ -13,7 +14,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Int, Tensor};
 use nalgebra::Vector3;
 
-use super::graph::{body_proximity, step_change, MeshGraph, EDGE_FEATURES, NODE_FEATURES};
+use super::graph::{step_change, MeshGraph, ProximityCache, EDGE_FEATURES, NODE_FEATURES};
 use super::model::{index_tensor, inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
@@ -126,6 +127,8 @@ pub struct Corrector {
     pub training: TrainingConfig,
     /// Where it was loaded from.
     pub dir: PathBuf,
+    /// The colliders' BVHs for the body proximity, kept between steps.
+    proximity: Mutex<ProximityCache>,
 }
 
 /// Reads a JSON file, naming it in errors.
@@ -194,12 +197,13 @@ impl Corrector {
             config: config.model.clone(),
             training: config,
             dir: dir.to_path_buf(),
+            proximity: Mutex::default(),
         })
     }
 
     /// The predicted velocity correction p for M_c = (x, v), reached by a step that changed
     /// the velocities by `dv` beyond gravity ([`step_change`]), with body proximities `body`
-    /// ([`body_proximity`]), m/s per vertex.
+    /// ([`super::graph::body_proximity`]), m/s per vertex.
     /// The gated decoder's tension limit ([`CorrectorConfig::tension_ramp`]) is measured at x.
     pub fn predict(
         &self,
@@ -274,7 +278,11 @@ impl Corrector {
     ) -> Result<()> {
         let t = Instant::now();
         self.times.calls.fetch_add(1, Ordering::Relaxed);
-        let body = body_proximity(&state.x, &sim.colliders, state.t_s);
+        let body = self
+            .proximity
+            .lock()
+            .map_err(|_| Error::Invalid("the corrector's collider cache was poisoned".into()))?
+            .proximity(&state.x, &sim.colliders, state.t_s);
         let dt_s = sim.sim.params.dt_s;
         let dv = step_change(&state.v, start_v, sim.sim.params.gravity_m_s2 * dt_s);
         CorrectorTimes::add(&self.times.proximity_ns, t);

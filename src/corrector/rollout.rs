@@ -44,6 +44,10 @@ pub struct RolloutErrors {
     /// interleaved run's. The data's M_int is shortened by its wrinkles (negative); an
     /// interleaved run far from it has left the states the corrector was trained on.
     pub strain_pct: Vec<[f64; 3]>,
+    /// The rigid part of the error at every frame end, mm: |mean over vertices of x − x_gt|,
+    /// for the simulation alone and the interleaved run. Near the mean distance, the mesh
+    /// has slid or sagged as a whole; far below it, its shape differs.
+    pub offset_mm: Vec<[f64; 2]>,
     /// The predictability floor at every frame end, mm ([`sequence_distance_mm`]), when the
     /// caller measured it; empty otherwise.
     pub floor_mm: Vec<f64>,
@@ -57,6 +61,12 @@ fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     1e3 * a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len().max(1) as f64
 }
 
+/// |mean(a − b)|, mm.
+fn mean_offset_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    let sum: Vector3<f64> = a.iter().zip(b).map(|(p, q)| p - q).sum();
+    1e3 * sum.norm() / a.len().max(1) as f64
+}
+
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
@@ -65,6 +75,11 @@ impl RolloutErrors {
     /// Mean over frames of the mean edge strain, %: (ground truth, sim alone, interleaved).
     pub fn strain_means(&self) -> [f64; 3] {
         [0, 1, 2].map(|k| mean(&self.strain_pct.iter().map(|r| r[k]).collect::<Vec<_>>()))
+    }
+
+    /// Mean over frames of the rigid part of the error, mm: (sim alone, interleaved).
+    pub fn offset_means(&self) -> [f64; 2] {
+        [0, 1].map(|k| mean(&self.offset_mm.iter().map(|r| r[k]).collect::<Vec<_>>()))
     }
 
     /// Mean of the predictability floor over frames, mm (`None` when it was not measured).
@@ -116,18 +131,20 @@ impl RolloutErrors {
         let floor = !self.floor_mm.is_empty();
         let mut s = String::from(
             "frame,sim_alone_mm,interleaved_mm,not_interleaved_mm,one_step_uncorrected_mm,\
-             one_step_corrected_mm,strain_gt_pct,strain_sim_alone_pct,strain_interleaved_pct",
+             one_step_corrected_mm,strain_gt_pct,strain_sim_alone_pct,strain_interleaved_pct,\
+             offset_sim_alone_mm,offset_interleaved_mm",
         );
         s += if floor { ",floor_mm\n" } else { "\n" };
         for i in 0..self.frame.len() {
             let [g, a, b] = self.strain_pct[i];
+            let [oa, oi] = self.offset_mm[i];
             let f = if floor {
                 format!(",{:.4}", self.floor_mm[i])
             } else {
                 String::new()
             };
             s += &format!(
-                "{},{:.4},{:.4},{:.4},{:.5},{:.5},{g:.4},{a:.4},{b:.4}{f}\n",
+                "{},{:.4},{:.4},{:.4},{:.5},{:.5},{g:.4},{a:.4},{b:.4},{oa:.4},{oi:.4}{f}\n",
                 self.frame[i],
                 self.sim_alone_mm[i],
                 self.interleaved_mm[i],
@@ -341,6 +358,8 @@ pub fn evaluate_from(
             };
             out.strain_pct
                 .push([strain(&gt), strain(&alone.x), strain(&inter.x)]);
+            out.offset_mm
+                .push([mean_offset_mm(&alone.x, &gt), mean_offset_mm(&inter.x, &gt)]);
             let frame = seq.first_frame + (start_step + i) / s;
             out.frame.push(frame);
             out.sim_alone_mm.push(e.0);
