@@ -89,6 +89,12 @@ pub struct Args {
     /// Cloth self-collision in the coarse simulation.
     #[arg(long)]
     self_collision: bool,
+    /// The coarse membrane's stiffness under compression, as a factor (0, 1] of its stretch
+    /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
+    /// in wrinkles (default: the corrector's, else 1; a corrector trained with another is an
+    /// error).
+    #[arg(long)]
+    coarse_compression: Option<f64>,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -203,6 +209,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         self_collision: args.self_collision,
         match_contact_thickness: true,
         dress: !args.no_dress,
+        coarse_compression: args.coarse_compression,
     };
     let multi = MultiProgress::new();
     let overall = (jobs.len() > 1).then(|| {

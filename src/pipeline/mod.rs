@@ -39,6 +39,12 @@ pub struct Options {
     pub match_contact_thickness: bool,
     /// Sew and settle garments with seams before the first frame (as `clothsr dataset` does).
     pub dress: bool,
+    /// The coarse membrane's stiffness under compression as a factor of its stretch stiffness
+    /// ([`crate::sim::model::ClothModel::set_membrane_compression`]): below 1 the coarse mesh
+    /// gives way to the shortening that the fine cloth takes up in wrinkles. `None`: the
+    /// corrector's (the one it was trained beside), else 1. A corrector trained with another
+    /// factor is an error.
+    pub coarse_compression: Option<f64>,
 }
 
 impl Default for Options {
@@ -49,6 +55,7 @@ impl Default for Options {
             self_collision: false,
             match_contact_thickness: true,
             dress: true,
+            coarse_compression: None,
         }
     }
 }
@@ -151,9 +158,19 @@ impl<'a> Pipeline<'a> {
         let corrector = corrector_dir
             .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
             .transpose()?;
-        if let Some(c) = &corrector {
-            // After dressing: sewing is done with the full membrane.
-            c.training.prepare_coarse(&mut coarse)?;
+        // After dressing: sewing is done with the full membrane.
+        match (&corrector, opts.coarse_compression) {
+            (Some(c), Some(f)) if c.training.coarse_compression.unwrap_or(1.0) != f => {
+                return Err(Error::Invalid(format!(
+                    "the corrector in {} was trained beside a coarse membrane compression \
+                     factor of {}, not {f}",
+                    c.dir.display(),
+                    c.training.coarse_compression.unwrap_or(1.0)
+                )));
+            }
+            (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
+            (None, Some(f)) => coarse.sim.model.set_membrane_compression(f)?,
+            (None, None) => {}
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {
