@@ -286,6 +286,24 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                     "{a} {b} {w}"
                 );
             }
+            // A take-back scale k multiplies the same share once more: k·w·p exactly.
+            let mut scaled = limited.clone();
+            scaled.model.take_back = Some(0.5);
+            let dir = tempfile::tempdir().expect("tmp");
+            save_model(dir.path(), &scaled, &norm, &net).expect("save");
+            let half = Corrector::load(dir.path(), &seq.mesh).expect("load");
+            let halved = half.predict(&x, &v, &dv, &far).expect("predict");
+            for ((a, b), w) in free.iter().zip(&halved).zip(&w) {
+                assert!(
+                    (a * 0.5 * f64::from(*w) - b).norm() <= 1e-6 * (1.0 + a.norm()),
+                    "{a} {b} {w}"
+                );
+            }
+            for bad in [0.0, 1.5, f64::NAN] {
+                let mut c = limited.clone();
+                c.model.take_back = Some(bad);
+                assert!(c.model.check().is_err(), "take-back {bad}");
+            }
             let c = x.iter().sum::<Vector3<f64>>() / x.len() as f64;
             let stretched: Vec<Vector3<f64>> = x.iter().map(|p| c + (p - c) * 1.05).collect();
             let p = lim.predict(&stretched, &v, &dv, &far).expect("predict");

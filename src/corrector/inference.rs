@@ -235,7 +235,7 @@ impl Corrector {
             self.inv_mass.clone(),
             step_change.clone(),
         )
-        .with_tension(ramp.map(|r| self.graph.tension_weight(x, r)));
+        .with_tension(self.take_back_weights(x, ramp));
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
@@ -264,6 +264,22 @@ impl Corrector {
             ));
         }
         Ok(p)
+    }
+
+    /// Per-vertex weights on the gated decoder's take-back at positions `x`: the tension
+    /// limit ([`CorrectorConfig::tension_ramp`], `ramp`) times the take-back scale
+    /// ([`CorrectorConfig::take_back`]); `None` when neither applies.
+    fn take_back_weights(&self, x: &[Vector3<f64>], ramp: Option<f64>) -> Option<Vec<f32>> {
+        let scale = self.config.take_back();
+        let mut w = match ramp {
+            Some(r) => self.graph.tension_weight(x, r),
+            None if scale.is_some() => vec![1.0; x.len()],
+            None => return None,
+        };
+        if let Some(k) = scale {
+            w.iter_mut().for_each(|w| *w *= k as f32);
+        }
+        Some(w)
     }
 
     /// Corrects M_c = `state`, the result of a step of `sim` from velocities `start_v`, in
