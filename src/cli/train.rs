@@ -168,6 +168,11 @@ pub struct CorrectorArgs {
     /// compression, not tension); 0: no limit.
     #[arg(long, default_value_t = clothsr::corrector::model::DEFAULT_TENSION_RAMP)]
     tension_ramp: f64,
+    /// The gated decoder's take-back scale at inference, saved with the model: the share of
+    /// the step's velocity change taken back is multiplied by this, in (0, 1] (taking back
+    /// most of it also takes back the cloth's restoring force, and the corrected cloth drifts).
+    #[arg(long, default_value_t = 1.0)]
+    take_back: f64,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -201,7 +206,8 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             .with_steps(a.mp_steps)
             .with_attention(a.attention)
             .with_decoder(Some(a.decoder))
-            .with_tension_ramp(Some(a.tension_ramp)),
+            .with_tension_ramp(Some(a.tension_ramp))
+            .with_take_back((a.take_back != 1.0).then_some(a.take_back)),
     )
     .with_steps(a.steps)
     .with_batch(a.batch)
