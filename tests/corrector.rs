@@ -271,33 +271,32 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             assert!(p.iter().all(|p| *p == Vector3::zeros()), "free fall");
             // With a tension limit the same weights take back w = clamp(1 − ε̄/ramp, 0, 1)
             // times as much at each vertex, nothing where the cloth is stretched past it.
+            // A take-back scale k multiplies the same share once more: k·w·p exactly.
+            // (The weights are read from the file as they are used: the folder must outlive
+            // the corrector.)
+            let with_config = |c: &TrainingConfig| {
+                let dir = tempfile::tempdir().expect("tmp");
+                save_model(dir.path(), c, &norm, &net).expect("save");
+                let loaded = Corrector::load(dir.path(), &seq.mesh).expect("load");
+                (dir, loaded)
+            };
             let mut limited = cfg.clone();
             limited.model.tension_ramp = Some(0.01);
-            let dir = tempfile::tempdir().expect("tmp");
-            save_model(dir.path(), &limited, &norm, &net).expect("save");
-            let lim = Corrector::load(dir.path(), &seq.mesh).expect("load");
-            let free = loaded.predict(&x, &v, &dv, &far).expect("predict");
-            let held = lim.predict(&x, &v, &dv, &far).expect("predict");
-            let w = seq.graph.tension_weight(&x, 0.01);
-            assert!(w.iter().any(|&w| w > 0.0) && w.iter().all(|w| (0.0..=1.0).contains(w)));
-            for ((a, b), w) in free.iter().zip(&held).zip(&w) {
-                assert!(
-                    (a * f64::from(*w) - b).norm() <= 1e-6 * (1.0 + a.norm()),
-                    "{a} {b} {w}"
-                );
-            }
-            // A take-back scale k multiplies the same share once more: k·w·p exactly.
+            let (_lim_dir, lim) = with_config(&limited);
             let mut scaled = limited.clone();
             scaled.model.take_back = Some(0.5);
-            let dir = tempfile::tempdir().expect("tmp");
-            save_model(dir.path(), &scaled, &norm, &net).expect("save");
-            let half = Corrector::load(dir.path(), &seq.mesh).expect("load");
-            let halved = half.predict(&x, &v, &dv, &far).expect("predict");
-            for ((a, b), w) in free.iter().zip(&halved).zip(&w) {
-                assert!(
-                    (a * 0.5 * f64::from(*w) - b).norm() <= 1e-6 * (1.0 + a.norm()),
-                    "{a} {b} {w}"
-                );
+            let (_half_dir, half) = with_config(&scaled);
+            let free = loaded.predict(&x, &v, &dv, &far).expect("predict");
+            let w = seq.graph.tension_weight(&x, 0.01);
+            assert!(w.iter().any(|&w| w > 0.0) && w.iter().all(|w| (0.0..=1.0).contains(w)));
+            for (c, k) in [(&lim, 1.0), (&half, 0.5)] {
+                let held = c.predict(&x, &v, &dv, &far).expect("predict");
+                for ((a, b), w) in free.iter().zip(&held).zip(&w) {
+                    assert!(
+                        (a * k * f64::from(*w) - b).norm() <= 1e-6 * (1.0 + a.norm()),
+                        "{a} {b} {w} {k}"
+                    );
+                }
             }
             for bad in [0.0, 1.5, f64::NAN] {
                 let mut c = limited.clone();

@@ -62,6 +62,8 @@ struct CachedBody {
     still: Vec<Vector3<f32>>,
     bvh: Bvh,
     points: Vec<Vector3<f64>>,
+    /// The triangles' boxes (kept to reuse the allocation).
+    boxes: Vec<Aabb>,
     refits: usize,
 }
 
@@ -84,16 +86,17 @@ impl ProximityCache {
             if !unchanged {
                 c.positions_at(t_s, &mut body.points);
                 let points = &body.points;
-                let boxes: Vec<Aabb> = c
-                    .triangles
-                    .iter()
-                    .map(|t| Aabb::from_points(t.iter().map(|&v| &points[v as usize])))
-                    .collect();
-                if body.bvh.len() != boxes.len() || body.refits >= Self::REBUILD_EVERY {
-                    body.bvh.rebuild(&boxes);
+                body.boxes.clear();
+                body.boxes.extend(
+                    c.triangles
+                        .iter()
+                        .map(|t| Aabb::from_points(t.iter().map(|&v| &points[v as usize]))),
+                );
+                if body.bvh.len() != body.boxes.len() || body.refits >= Self::REBUILD_EVERY {
+                    body.bvh.rebuild(&body.boxes);
                     body.refits = 0;
                 } else {
-                    body.bvh.refit(&boxes);
+                    body.bvh.refit(&body.boxes);
                     body.refits += 1;
                 }
                 body.still = match c.times_s.len() {

@@ -226,7 +226,6 @@ impl Corrector {
         let t = Instant::now();
         let mut step_change = flat32(dv);
         self.norm.targets.apply(&mut step_change);
-        let ramp = self.config.tension_ramp();
         let g = GraphTensors::with_indices(
             nodes,
             edges,
@@ -235,7 +234,7 @@ impl Corrector {
             self.inv_mass.clone(),
             step_change.clone(),
         )
-        .with_tension(self.take_back_weights(x, ramp));
+        .with_tension(self.take_back_weights(x));
         let out = self.net.forward(&g).into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
@@ -267,11 +266,11 @@ impl Corrector {
     }
 
     /// Per-vertex weights on the gated decoder's take-back at positions `x`: the tension
-    /// limit ([`CorrectorConfig::tension_ramp`], `ramp`) times the take-back scale
+    /// limit ([`CorrectorConfig::tension_ramp`]) times the take-back scale
     /// ([`CorrectorConfig::take_back`]); `None` when neither applies.
-    fn take_back_weights(&self, x: &[Vector3<f64>], ramp: Option<f64>) -> Option<Vec<f32>> {
+    fn take_back_weights(&self, x: &[Vector3<f64>]) -> Option<Vec<f32>> {
         let scale = self.config.take_back();
-        let mut w = match ramp {
+        let mut w = match self.config.tension_ramp() {
             Some(r) => self.graph.tension_weight(x, r),
             None if scale.is_some() => vec![1.0; x.len()],
             None => return None,

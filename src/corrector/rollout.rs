@@ -71,15 +71,20 @@ fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
+/// The mean of each column of `rows`.
+fn column_means<const N: usize>(rows: &[[f64; N]]) -> [f64; N] {
+    std::array::from_fn(|k| mean(&rows.iter().map(|r| r[k]).collect::<Vec<_>>()))
+}
+
 impl RolloutErrors {
     /// Mean over frames of the mean edge strain, %: (ground truth, sim alone, interleaved).
     pub fn strain_means(&self) -> [f64; 3] {
-        [0, 1, 2].map(|k| mean(&self.strain_pct.iter().map(|r| r[k]).collect::<Vec<_>>()))
+        column_means(&self.strain_pct)
     }
 
     /// Mean over frames of the rigid part of the error, mm: (sim alone, interleaved).
     pub fn offset_means(&self) -> [f64; 2] {
-        [0, 1].map(|k| mean(&self.offset_mm.iter().map(|r| r[k]).collect::<Vec<_>>()))
+        column_means(&self.offset_mm)
     }
 
     /// Mean of the predictability floor over frames, mm (`None` when it was not measured).
