@@ -266,6 +266,20 @@ fn usd_validation_reports_real_problems() {
         "#usda 1.0\ndef Mesh \"M\" {\n point3f[] points = [(0,0,0)]\n}\n",
     )
     .expect("write");
+    // The only test here that starts Python in this process, while the others spawn clothsr: the
+    // bridge must not write the environment they hand to their children (a `putenv` during a
+    // spawn gave one child a freed environment, EFAULT). numpy's two variables are set through
+    // `std::env` first, so they may appear; nothing else may.
+    let before: std::collections::BTreeMap<_, _> = std::env::vars_os().collect();
     let issues = clothsr::io::usd::validate_usd(&path).expect("validate");
     assert!(issues.iter().any(|i| i.0 == "error"), "{issues:?}");
+    let after: std::collections::BTreeMap<_, _> = std::env::vars_os().collect();
+    let changed: Vec<_> = after
+        .iter()
+        .filter(|(k, v)| before.get(*k) != Some(*v))
+        .map(|(k, _)| k.to_string_lossy().into_owned())
+        .filter(|k| !k.ends_with("BLAS_MAIN_FREE"))
+        .collect();
+    assert!(changed.is_empty(), "the bridge wrote {changed:?}");
+    assert!(before.keys().all(|k| after.contains_key(k)));
 }

@@ -1,7 +1,9 @@
 """clothsr's USD bridge: reads and writes USD stages for the clothsr binary (and DCC scripts).
 
 Arrays cross as whole numpy buffers; no pxr object leaves this package. Importing it registers
-clothsr's codeless schema (``schemas/``) through ``PXR_PLUGINPATH_NAME`` before ``pxr`` loads.
+clothsr's codeless schema (``schemas/``, or ``CLOTHSR_SCHEMAS``) with ``Plug.Registry`` before
+``Usd`` loads. The process environment is never written: a ``setenv`` while another thread of the
+host spawns a process can hand that process a freed environment (seen as EFAULT from exec).
 """
 import os
 import pathlib
@@ -9,12 +11,11 @@ import pathlib
 _SCHEMAS = os.environ.get("CLOTHSR_SCHEMAS") or str(
     pathlib.Path(__file__).resolve().parent.parent.parent / "schemas"
 )
-if "pxr" not in __import__("sys").modules:
-    _prev = os.environ.get("PXR_PLUGINPATH_NAME", "")
-    if _SCHEMAS not in _prev.split(os.pathsep):
-        os.environ["PXR_PLUGINPATH_NAME"] = os.pathsep.join(p for p in (_SCHEMAS, _prev) if p)
 
 try:
+    from pxr import Plug
+
+    Plug.Registry().RegisterPlugins(_SCHEMAS)
     from pxr import Usd  # noqa: F401
 except ImportError as exc:  # pragma: no cover - the message is the point
     raise ImportError(

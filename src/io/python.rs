@@ -1,7 +1,7 @@
 //! The embedded Python interpreter (pyo3) that runs clothsr's USD bridge (`bridge/clothsr_usd`).
 //!
 //! On first use it adds the project venv's site-packages (where usd-core and numpy live), puts
-//! `bridge/` on `sys.path`, points the bridge at `schemas/`, and imports it. Locations default to
+//! `bridge/` on `sys.path` and imports it (the bridge registers `schemas/` beside it). Locations default to
 //! the repository the binary was built from, so nothing has to be exported:
 //! - `CLOTHSR_ROOT`: the directory holding `bridge/` and `schemas/`;
 //! - `CLOTHSR_VENV` (else `VIRTUAL_ENV`, else `<root>/.venv`): the Python environment.
@@ -81,16 +81,6 @@ fn init(py: Python<'_>) -> std::result::Result<(), String> {
     sys.getattr("path")
         .and_then(|p| p.call_method1("insert", (0, bridge_dir.to_string_lossy().as_ref())))
         .map_err(fail)?;
-    let environ = py
-        .import("os")
-        .and_then(|os| os.getattr("environ"))
-        .map_err(fail)?;
-    environ
-        .set_item(
-            "CLOTHSR_SCHEMAS",
-            root.join("schemas").to_string_lossy().as_ref(),
-        )
-        .map_err(fail)?;
     match py.import(BRIDGE) {
         Ok(_) => Ok(()),
         Err(e) if e.is_instance_of::<PyImportError>(py) => Err(format!(
@@ -118,6 +108,22 @@ fn to_error(py: Python<'_>, e: PyErr) -> Error {
     }
 }
 
+/// Variables numpy sets at import when they are absent (`numpy/_core/__init__.py`), which it does
+/// with `putenv`, outside the lock that `std::process::Command` holds while it hands the
+/// environment to a child. A `putenv` that reallocates the environment while another thread spawns
+/// gives that child a freed pointer (seen as `EFAULT` from exec in our CLI tests). Setting them
+/// first, through `std::env`, which takes that lock, leaves numpy nothing to write. (The bridge
+/// itself registers the schema without touching the environment.)
+const NUMPY_SETS: [&str; 2] = ["OPENBLAS_MAIN_FREE", "GOTOBLAS_MAIN_FREE"];
+
+fn settle_environment() {
+    for key in NUMPY_SETS {
+        if std::env::var_os(key).is_none() {
+            std::env::set_var(key, "1");
+        }
+    }
+}
+
 /// Runs `f` with the imported bridge module, starting Python on first use.
 pub fn with_bridge<T>(
     f: impl for<'py> FnOnce(Python<'py>, &Bound<'py, PyModule>) -> PyResult<T>,
@@ -125,9 +131,12 @@ pub fn with_bridge<T>(
     static INIT: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     // Initialise before taking the GIL for the call: a thread waiting on the OnceLock must not
     // hold the GIL, which the initialising thread (importing modules) gives up and takes back.
-    INIT.get_or_init(|| Python::attach(init))
-        .clone()
-        .map_err(Error::Bridge)?;
+    INIT.get_or_init(|| {
+        settle_environment();
+        Python::attach(init)
+    })
+    .clone()
+    .map_err(Error::Bridge)?;
     Python::attach(|py| {
         let module = py.import(BRIDGE).map_err(|e| to_error(py, e))?;
         f(py, &module).map_err(|e| to_error(py, e))
