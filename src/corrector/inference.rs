@@ -11,7 +11,8 @@ use std::time::Instant;
 
 use burn::config::Config;
 use burn::module::Module;
-use burn::tensor::{Device, Int, Tensor};
+use burn::store::ModuleRecord;
+use burn::tensor::{Bytes, Device, Int, Tensor};
 use nalgebra::Vector3;
 
 use super::graph::{step_change, MeshGraph, ProximityCache, EDGE_FEATURES, NODE_FEATURES};
@@ -48,6 +49,21 @@ pub fn features(
     norm.nodes.apply(&mut nodes);
     norm.edges.apply(&mut edges);
     (nodes, edges)
+}
+
+/// Loads `module`'s weights from the burnpack file at `path`, read whole into memory first.
+/// burn's own `try_load_file` keeps the file open as the tensors' lazy source and reads each one
+/// when it is first used, so a model folder removed or rewritten during a long run (a re-train
+/// beside `clothsr run`) made burn panic mid-run; here it is read, or refused with the file
+/// named, before any work.
+pub fn load_weights<M: Module>(module: M, path: &Path) -> Result<M> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::bad_input(path, format!("cannot read the weights: {e}")))?;
+    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes))
+        .map_err(|e| Error::bad_input(path, format!("cannot load the weights: {e}")))?;
+    module
+        .try_load_record(record)
+        .map_err(|e| Error::bad_input(path, format!("cannot load the weights: {e}")))
 }
 
 /// The device networks run on, chosen at run time by `CLOTHSR_DEVICE`: `flex` (the default:
@@ -172,11 +188,7 @@ pub fn load_net(
         ));
     }
     let weights = dir.join(WEIGHTS_FILE);
-    let net = config
-        .model
-        .init(device)
-        .try_load_file(&weights)
-        .map_err(|e| Error::bad_input(&weights, format!("cannot load the weights: {e}")))?;
+    let net = load_weights(config.model.init(device), &weights)?;
     Ok((net, norm, config))
 }
 

@@ -7,7 +7,6 @@
 use std::path::Path;
 use std::time::Instant;
 
-use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Vector3;
 use ndarray::{s, Array3, Array4, ArrayView2, ArrayView3};
@@ -219,11 +218,7 @@ impl Isr {
         }
         let device = crate::corrector::inference::default_device()?;
         let weights = dir.join(WEIGHTS_FILE);
-        let net = cfg
-            .model
-            .init(&device)
-            .try_load_file(&weights)
-            .map_err(|e| Error::bad_input(&weights, e.to_string()))?;
+        let net = crate::corrector::inference::load_weights(cfg.model.init(&device), &weights)?;
         Ok(Isr { cfg, net, device })
     }
 

@@ -302,9 +302,7 @@ pub fn train(
     let mut optim = AdamConfig::new().init();
     if resuming {
         let dir = out.join(CHECKPOINT_DIR);
-        net = net
-            .try_load_file(dir.join(WEIGHTS_FILE))
-            .map_err(|e| Error::bad_input(dir.join(WEIGHTS_FILE), e.to_string()))?;
+        net = crate::corrector::inference::load_weights(net, &dir.join(WEIGHTS_FILE))?;
         optim = optim
             .load(dir.join("optim.bpk"))
             .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
