@@ -2,11 +2,13 @@
 //! M_int, beside the coarse simulation alone and the corrector without interleaving (see
 //! [`clothsr::corrector::rollout`]).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::corrector::data::Sequence;
-use clothsr::corrector::rollout::{evaluate, evaluate_from, sequence_distance_mm, HorizonErrors};
+use clothsr::corrector::rollout::{
+    evaluate, evaluate_from, sequence_distance_mm, HorizonErrors, RolloutErrors,
+};
 use clothsr::corrector::Corrector;
 use clothsr::data::{coarse_simulation, read_manifest};
 use clothsr::scene::Scene;
@@ -18,15 +20,18 @@ pub struct Args {
     #[arg(long)]
     model: PathBuf,
     /// Data set directory (`clothsr dataset`) with the ground truth; not one trained on.
-    #[arg(long)]
-    data: PathBuf,
+    /// Repeat it for several held-out drops: each is rolled out and reported, then the errors
+    /// are pooled over all their frames (one chaotic drop cannot rank two correctors).
+    #[arg(long, required = true)]
+    data: Vec<PathBuf>,
     /// Frames to roll out (default: all the data set has after the start).
     #[arg(long)]
     frames: Option<usize>,
     /// Start from the ground truth at the first step of this frame (1-based).
     #[arg(long, default_value_t = 1)]
     start_frame: usize,
-    /// Write per-frame errors as CSV here (with `--horizon`: per frame after the start).
+    /// Write per-frame errors as CSV here (with `--horizon`: per frame after the start; with
+    /// several `--data`, a first column names each row's data set).
     #[arg(long)]
     csv: Option<PathBuf>,
     /// A second data set of the same scene and coarse mesh, started next to the first (a
@@ -48,37 +53,102 @@ pub struct Args {
 
 /// Runs `rollout`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let m = read_manifest(&args.data)?;
     anyhow::ensure!(args.start_frame >= 1, "--start-frame counts from 1");
+    if let [data] = args.data.as_slice() {
+        let (scene, frames) = open(&args, data)?;
+        if let Some(horizon) = args.horizon {
+            return short_horizons(&args, data, &scene, frames, horizon);
+        }
+        let (e, corrector) = long_rollout(&args, data, &scene, frames)?;
+        if let Some(csv) = &args.csv {
+            clothsr::io::write_atomic(csv, e.csv().as_bytes())?;
+        }
+        report(&e, &corrector);
+        return Ok(());
+    }
+    anyhow::ensure!(
+        args.horizon.is_none() && args.floor.is_none(),
+        "--horizon and --floor take one --data"
+    );
+    let mut runs = Vec::new();
+    let mut csv = String::new();
+    for data in &args.data {
+        let (scene, frames) = open(&args, data)?;
+        let (e, corrector) = long_rollout(&args, data, &scene, frames)?;
+        println!("== {}", data.display());
+        report(&e, &corrector);
+        let name = data.display().to_string().replace(',', "_");
+        for (i, line) in e.csv().lines().enumerate() {
+            if i == 0 {
+                if csv.is_empty() {
+                    csv += &format!("data,{line}\n");
+                }
+            } else {
+                csv += &format!("{name},{line}\n");
+            }
+        }
+        runs.push(e);
+    }
+    if let Some(path) = &args.csv {
+        clothsr::io::write_atomic(path, csv.as_bytes())?;
+    }
+    let p = clothsr::corrector::rollout::RolloutErrors::pooled(&runs);
+    let ratios: Vec<String> = p.ratios.iter().map(|r| format!("{r:.2}×")).collect();
+    println!(
+        "== pooled over {} data sets, {} frames",
+        runs.len(),
+        p.frames
+    );
+    println!("mean error, sim alone       {:.3} mm", p.sim_alone_mm);
+    println!(
+        "mean error, interleaved     {:.3} mm  ({:.2}× sim alone; per data set {}, worst {:.2}×)",
+        p.interleaved_mm,
+        p.ratio(),
+        ratios.join(", "),
+        p.worst_ratio()
+    );
+    Ok(())
+}
+
+/// The scene of data set `data` and the frames to roll out of it.
+fn open(args: &Args, data: &Path) -> anyhow::Result<(Scene, usize)> {
+    let m = read_manifest(data)?;
     let frames = args
         .frames
         .unwrap_or(m.frames_done.saturating_sub(args.start_frame));
     anyhow::ensure!(
         frames > 0 && args.start_frame + frames <= m.frames_done,
-        "the data set has {} frames: too few to roll out {frames} from frame {}",
+        "{}: the data set has {} frames: too few to roll out {frames} from frame {}",
+        data.display(),
         m.frames_done,
         args.start_frame
     );
     let source = m.source.as_ref().with_context(|| {
         format!(
             "{}: the data set does not record its scene files",
-            args.data.join("manifest.json").display()
+            data.join("manifest.json").display()
         )
     })?;
-    let scene = source.load()?;
-    if let Some(horizon) = args.horizon {
-        return short_horizons(&args, &scene, frames, horizon);
-    }
-    let mut sim = coarse_simulation(&scene, &args.data, args.start_frame)?;
+    Ok((source.load()?, frames))
+}
+
+/// One long rollout of `frames` from `--start-frame` on `data`, with the floor when asked.
+fn long_rollout(
+    args: &Args,
+    data: &Path,
+    scene: &Scene,
+    frames: usize,
+) -> anyhow::Result<(RolloutErrors, Corrector)> {
+    let mut sim = coarse_simulation(scene, data, args.start_frame)?;
     let t0 = sim.state.t_s;
     let seq = Sequence::load(
-        &args.data,
+        data,
         Some(args.start_frame..=args.start_frame + frames),
         &sim,
     )?;
     let corrector = Corrector::load(&args.model, &seq.mesh)?;
-    let mut alone = coarse_simulation(&scene, &args.data, args.start_frame)?;
-    let mut check = coarse_simulation(&scene, &args.data, args.start_frame)?;
+    let mut alone = coarse_simulation(scene, data, args.start_frame)?;
+    let mut check = coarse_simulation(scene, data, args.start_frame)?;
     for s in [&mut sim, &mut alone, &mut check] {
         corrector.training.prepare_coarse(s)?;
     }
@@ -104,9 +174,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
         e.floor_mm = sequence_distance_mm(&seq, &other, &e.frame)?;
     }
-    if let Some(csv) = &args.csv {
-        clothsr::io::write_atomic(csv, e.csv().as_bytes())?;
-    }
+    Ok((e, corrector))
+}
+
+/// Prints one rollout's summary.
+fn report(e: &RolloutErrors, corrector: &Corrector) {
     let (a, b, c) = e.means();
     println!("frames                      {}", e.frame.len());
     if let Some(f) = e.diverged_at_frame {
@@ -155,13 +227,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "corrector per call: body proximity {prox:.2} ms, features {feat:.2} ms, network {net:.2} ms"
     );
-    Ok(())
 }
 
 /// `--horizon`: rollouts of `horizon` frames from the ground truth at every `--every`-th frame
 /// of the `frames` from `--start-frame`, each with fresh simulators, averaged per frame after
 /// the start.
-fn short_horizons(args: &Args, scene: &Scene, frames: usize, horizon: usize) -> anyhow::Result<()> {
+fn short_horizons(
+    args: &Args,
+    data: &Path,
+    scene: &Scene,
+    frames: usize,
+    horizon: usize,
+) -> anyhow::Result<()> {
     anyhow::ensure!(
         horizon > 0 && args.every > 0 && horizon <= frames,
         "--horizon ({horizon}) and --every ({}) must be positive and the horizon at most the \
@@ -172,9 +249,9 @@ fn short_horizons(args: &Args, scene: &Scene, frames: usize, horizon: usize) -> 
     let starts: Vec<usize> = (args.start_frame..=last - horizon)
         .step_by(args.every)
         .collect();
-    let make = |f: usize| coarse_simulation(scene, &args.data, f);
+    let make = |f: usize| coarse_simulation(scene, data, f);
     let probe = make(args.start_frame)?;
-    let seq = Sequence::load(&args.data, Some(args.start_frame..=last), &probe)?;
+    let seq = Sequence::load(data, Some(args.start_frame..=last), &probe)?;
     let corrector = Corrector::load(&args.model, &seq.mesh)?;
     let s = seq.manifest.steps_per_frame;
     let mut runs = Vec::new();

@@ -57,6 +57,34 @@ pub struct RolloutErrors {
     pub corrector_ms: f64,
 }
 
+/// [`RolloutErrors::pooled`]: rollouts on several data sets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PooledErrors {
+    /// Frames over all data sets.
+    pub frames: usize,
+    /// Mean over all frames of the simulation alone's error, mm.
+    pub sim_alone_mm: f64,
+    /// … and of the interleaved run's, mm.
+    pub interleaved_mm: f64,
+    /// Each data set's interleaved / sim-alone ratio of its own means.
+    pub ratios: Vec<f64>,
+}
+
+impl PooledErrors {
+    /// The pooled interleaved / sim-alone ratio.
+    pub fn ratio(&self) -> f64 {
+        self.interleaved_mm / self.sim_alone_mm
+    }
+
+    /// The largest per-data-set ratio.
+    pub fn worst_ratio(&self) -> f64 {
+        self.ratios
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
 fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     1e3 * a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len().max(1) as f64
 }
@@ -107,6 +135,28 @@ impl RolloutErrors {
             mean(&self.interleaved_mm),
             mean(&self.not_interleaved_mm),
         )
+    }
+
+    /// Several rollouts (one per held-out data set) summed up: one drop's rollout cannot rank
+    /// two correctors whose means differ by less than ~20 % (the trajectories are chaotic), so
+    /// figures are pooled over frames of several drops, with each drop's ratio beside them.
+    pub fn pooled(runs: &[RolloutErrors]) -> PooledErrors {
+        let frames: usize = runs.iter().map(|e| e.sim_alone_mm.len()).sum();
+        let total = |f: fn(&RolloutErrors) -> &Vec<f64>| -> f64 {
+            runs.iter().flat_map(|e| f(e).iter()).sum::<f64>() / frames.max(1) as f64
+        };
+        PooledErrors {
+            frames,
+            sim_alone_mm: total(|e| &e.sim_alone_mm),
+            interleaved_mm: total(|e| &e.interleaved_mm),
+            ratios: runs
+                .iter()
+                .map(|e| {
+                    let (a, b, _) = e.means();
+                    b / a
+                })
+                .collect(),
+        }
     }
 
     /// Least-squares slope of the interleaved error over frames, mm per 100 frames (the
@@ -377,4 +427,31 @@ pub fn evaluate_from(
     out.sim_step_ms = 1e3 * sim_s / done;
     out.corrector_ms = 1e3 * corr_s / done;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(alone: &[f64], inter: &[f64]) -> RolloutErrors {
+        RolloutErrors {
+            sim_alone_mm: alone.to_vec(),
+            interleaved_mm: inter.to_vec(),
+            not_interleaved_mm: alone.to_vec(),
+            ..RolloutErrors::default()
+        }
+    }
+
+    #[test]
+    fn pooled_means_weigh_every_frame_and_keep_each_sets_ratio() {
+        // 3 frames at 10 → 5 mm and 1 frame at 2 → 4 mm: pooled over 4 frames 8 → 4.75 mm,
+        // not the mean of the sets' means (6 → 4.5).
+        let p = RolloutErrors::pooled(&[run(&[10.0; 3], &[5.0; 3]), run(&[2.0], &[4.0])]);
+        assert_eq!(p.frames, 4);
+        assert!((p.sim_alone_mm - 8.0).abs() < 1e-12);
+        assert!((p.interleaved_mm - 4.75).abs() < 1e-12);
+        assert!((p.ratio() - 4.75 / 8.0).abs() < 1e-12);
+        assert_eq!(p.ratios, vec![0.5, 2.0]);
+        assert_eq!(p.worst_ratio(), 2.0);
+    }
 }
