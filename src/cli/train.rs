@@ -144,6 +144,10 @@ pub struct CorrectorArgs {
     /// Phase-2 learning rate.
     #[arg(long, default_value_t = 1e-5)]
     rollout_lr: f64,
+    /// Phase-2 target's pull-back time, steps: the target is the ground truth's velocity plus a
+    /// pull towards its positions over this many steps (1: land on them in one step).
+    #[arg(long, default_value_t = 1.0)]
+    rollout_tau: f64,
     /// Stop phase 2 once the mean loss of the last 20 windows is below this (0: never).
     #[arg(long, default_value_t = 0.0)]
     rollout_stop_loss: f64,
@@ -219,6 +223,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     .with_window(a.window)
     .with_rollout_lr(a.rollout_lr)
     .with_rollout_stop_loss(a.rollout_stop_loss)
+    .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
     .with_seed(a.seed)
     .with_coarse_compression((a.coarse_compression != 1.0).then_some(a.coarse_compression));
     let mut sets = Vec::new();

@@ -79,6 +79,13 @@ pub struct TrainingConfig {
     /// Phase-2 learning rate.
     #[config(default = 1e-5)]
     pub rollout_lr: f64,
+    /// Phase-2 target's pull-back time τ, in simulator steps (`None`: 1). The target is
+    /// p̄ = Δv + (Δx − hΔv)/τ with Δx = x_int − x_c and Δv = v_int − v_c: the ground truth's
+    /// velocity plus a pull towards its positions over τ steps. With τ = 1 it is Δx/h, which
+    /// lands the step on M_int but leaves a drifted rollout's whole position gap in the
+    /// velocity, to be overshot at the next step. From a ground-truth state (phase 1) Δx = hΔv
+    /// and every τ gives the same target. Optional so that models saved before it load.
+    pub rollout_tau_steps: Option<f64>,
     /// Phase 2 stops early once the mean window loss of the last 20 windows is below this
     /// (0: run all `rollout_iters`).
     #[config(default = 0.0)]
@@ -243,6 +250,12 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
     }
     if let Err(e) = cfg.model.check() {
         return bad(&e);
+    }
+    if cfg
+        .rollout_tau_steps
+        .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
+    {
+        return bad("rollout_tau_steps must be at least 1");
     }
     if cfg.rollout_iters > 0
         && !sets
@@ -592,8 +605,7 @@ impl Trainer<'_> {
                 &self.norm,
                 set,
                 start,
-                cfg.window,
-                cfg.rollout_lr,
+                cfg,
                 &self.device,
             )?;
             self.position.phase2_done += 1;
@@ -635,16 +647,37 @@ impl Trainer<'_> {
 /// One phase-2 update: rolls out `window` interleaved steps from the ground-truth M_int at
 /// `set.seq.steps[start]` and steps the optimiser on the mean window loss.
 #[allow(clippy::too_many_arguments)]
+/// The phase-2 target p̄ = Δv + (Δx − hΔv)/τ ([`TrainingConfig::rollout_tau_steps`]) per
+/// vertex, from the ground truth (`x_gt`, `v_gt`) and the coarse step (`x_c`, `v_c`).
+pub fn pull_back_target(
+    x_gt: &[Vector3<f64>],
+    v_gt: &[Vector3<f64>],
+    x_c: &[Vector3<f64>],
+    v_c: &[Vector3<f64>],
+    h: f64,
+    tau_steps: f64,
+) -> Vec<Vector3<f64>> {
+    x_gt.iter()
+        .zip(v_gt)
+        .zip(x_c.iter().zip(v_c))
+        .map(|((xg, vg), (xc, vc))| {
+            let dv = vg - vc;
+            dv + (xg - xc - dv * h) / (tau_steps * h)
+        })
+        .collect()
+}
+
 fn rollout_window(
     net: &mut CorrectorNet,
     optim: &mut burn::optim::ModuleOptimizer,
     norm: &Normalisation,
     set: &mut TrainSet,
     start: usize,
-    window: usize,
-    lr: f64,
+    cfg: &TrainingConfig,
     device: &Device,
 ) -> Result<f64> {
+    let (window, lr) = (cfg.window, cfg.rollout_lr);
+    let tau_steps = cfg.rollout_tau_steps.unwrap_or(1.0);
     let seq = &set.seq;
     let Some((sim, t0)) = set.sim.as_mut() else {
         return Err(Error::Invalid("phase 2 needs a coarse simulator".into()));
@@ -660,14 +693,15 @@ fn rollout_window(
     let n = seq.graph.num_nodes;
     for w in 1..=window {
         let (mut c, _) = sim.step_from(&state)?;
-        let x_gt = vectors(&seq.steps[start + w].int_x);
-        let target: Vec<f32> = flat32(
-            &x_gt
-                .iter()
-                .zip(&c.x)
-                .map(|(a, b)| (a - b) / h)
-                .collect::<Vec<_>>(),
-        );
+        let gt = &seq.steps[start + w];
+        let target: Vec<f32> = flat32(&pull_back_target(
+            &vectors(&gt.int_x),
+            &vectors(&gt.int_v),
+            &c.x,
+            &c.v,
+            h,
+            tau_steps,
+        ));
         let body = body_proximity(&c.x, &sim.colliders, c.t_s);
         let dv = step_change(&c.v, &state.v, sim.sim.params.gravity_m_s2 * h);
         let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &dv, &body, norm);
@@ -709,4 +743,41 @@ fn rollout_window(
     let grads = GradientsParams::from_grads(loss.backward(), &*net);
     *net = optim.step(lr, net.clone(), grads);
     Ok(value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pull_back_target_lands_in_one_step_at_tau_one_and_shrinks_the_gap_by_one_over_tau() {
+        let h = 1.0 / 300.0;
+        let x_prev = [Vector3::new(0.1, 0.2, 0.3), Vector3::new(-0.4, 0.0, 0.25)];
+        let v_gt = [Vector3::new(0.5, -1.0, 0.2), Vector3::new(0.0, 0.3, -0.7)];
+        let v_c = [Vector3::new(0.45, -0.9, 0.1), Vector3::new(0.05, 0.2, -0.6)];
+        let step = |v: &[Vector3<f64>; 2]| -> Vec<Vector3<f64>> {
+            x_prev.iter().zip(v).map(|(x, v)| x + v * h).collect()
+        };
+        // From a ground-truth state (both steps start at x_prev) every τ gives Δv.
+        let (x_gt, x_c) = (step(&v_gt), step(&v_c));
+        for tau in [1.0, 4.0, 30.0] {
+            let p = pull_back_target(&x_gt, &v_gt, &x_c, &v_c, h, tau);
+            for i in 0..2 {
+                assert!((p[i] - (v_gt[i] - v_c[i])).norm() < 1e-9, "τ {tau}");
+            }
+        }
+        // A drifted coarse state: 2 mm off. τ = 1 lands on x_gt (p = Δx/h); τ = 4 keeps ¾ of
+        // the gap left after matching the velocity, and the velocity is v_gt plus the pull.
+        let drift = Vector3::new(0.002, 0.0, -0.001);
+        let x_c: Vec<_> = x_c.iter().map(|x| x + drift).collect();
+        let p1 = pull_back_target(&x_gt, &v_gt, &x_c, &v_c, h, 1.0);
+        let p4 = pull_back_target(&x_gt, &v_gt, &x_c, &v_c, h, 4.0);
+        for i in 0..2 {
+            assert!((x_c[i] + p1[i] * h - x_gt[i]).norm() < 1e-12);
+            let gap = x_c[i] + p4[i] * h - x_gt[i];
+            assert!((gap - drift * 0.75).norm() < 1e-12);
+            let v = v_c[i] + p4[i];
+            assert!((v - (v_gt[i] - drift / (4.0 * h))).norm() < 1e-9);
+        }
+    }
 }
