@@ -17,13 +17,13 @@ pub enum Error {
     #[error("{0}")]
     Invalid(String),
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The OS error.
-        #[source]
-        source: std::io::Error,
+        /// The OS error (in the message, not also as the error's source: the CLI prints the
+        /// whole chain, which then said it twice).
+        error: std::io::Error,
     },
     /// The simulation could not continue (NaN, no progress, penetration) even with smaller steps.
     #[error("simulation failed: {0}")]
@@ -46,7 +46,7 @@ impl Error {
     pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.as_ref().to_path_buf(),
-            source,
+            error: source,
         }
     }
 

@@ -283,3 +283,24 @@ fn usd_validation_reports_real_problems() {
     assert!(changed.is_empty(), "the bridge wrote {changed:?}");
     assert!(before.keys().all(|k| after.contains_key(k)));
 }
+
+#[test]
+fn a_missing_file_is_named_once_with_its_reason() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let missing = dir.path().join("no_such_drop");
+    let res = Command::new(env!("CARGO_BIN_EXE_clothsr"))
+        .args(["rollout", "--model"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/models/three_balls/corrector"))
+        .arg("--data")
+        .arg(&missing)
+        .output()
+        .expect("run");
+    assert!(!res.status.success());
+    let stderr = String::from_utf8_lossy(&res.stderr);
+    assert!(stderr.contains("no_such_drop"), "{stderr}");
+    assert_eq!(
+        stderr.matches("No such file or directory").count(),
+        1,
+        "{stderr}"
+    );
+}

@@ -70,10 +70,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.horizon.is_none() && args.floor.is_none(),
         "--horizon and --floor take one --data"
     );
+    // Every data set is checked before the first rollout starts.
+    let opened = args
+        .data
+        .iter()
+        .map(|d| open(&args, d))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let mut runs = Vec::new();
     let mut csv = String::new();
-    for data in &args.data {
-        let (scene, frames) = open(&args, data)?;
+    for (data, (scene, frames)) in args.data.iter().zip(opened) {
         let (e, corrector) = long_rollout(&args, data, &scene, frames)?;
         println!("== {}", data.display());
         report(&e, &corrector);
@@ -92,7 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(path) = &args.csv {
         clothsr::io::write_atomic(path, csv.as_bytes())?;
     }
-    let p = clothsr::corrector::rollout::RolloutErrors::pooled(&runs);
+    let p = RolloutErrors::pooled(&runs);
     let ratios: Vec<String> = p.ratios.iter().map(|r| format!("{r:.2}×")).collect();
     println!(
         "== pooled over {} data sets, {} frames",
