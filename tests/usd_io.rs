@@ -283,3 +283,18 @@ def Xform "World"
         assert!((got - expect).norm() < 1e-9, "{got} vs {expect}");
     }
 }
+
+/// The bridge registers the codeless schema itself (through `Plug.Registry`, never the process
+/// environment): USD's validators do not flag prims of unknown types, so the files written
+/// above would pass without it.
+#[test]
+fn the_bridge_registers_the_schema_without_the_environment() {
+    use pyo3::types::PyAnyMethods;
+    let before = std::env::var_os("PXR_PLUGINPATH_NAME");
+    let registered = clothsr::io::python::with_bridge(|_py, m| {
+        m.call_method0("schema_registered")?.extract::<bool>()
+    })
+    .expect("bridge");
+    assert!(registered, "ClothPanel is unknown to USD's schema registry");
+    assert_eq!(std::env::var_os("PXR_PLUGINPATH_NAME"), before);
+}
