@@ -43,10 +43,10 @@ impl Error {
     }
 
     /// An I/O error for `path`.
-    pub fn io(path: impl AsRef<Path>, source: std::io::Error) -> Self {
+    pub fn io(path: impl AsRef<Path>, error: std::io::Error) -> Self {
         Error::Io {
             path: path.as_ref().to_path_buf(),
-            error: source,
+            error,
         }
     }
 

@@ -275,20 +275,17 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             // With a tension limit the same weights take back w = clamp(1 − ε̄/ramp, 0, 1)
             // times as much at each vertex, nothing where the cloth is stretched past it.
             // A take-back scale k multiplies the same share once more: k·w·p exactly.
-            // (The weights are read from the file as they are used: the folder must outlive
-            // the corrector.)
             let with_config = |c: &TrainingConfig| {
                 let dir = tempfile::tempdir().expect("tmp");
                 save_model(dir.path(), c, &norm, &net).expect("save");
-                let loaded = Corrector::load(dir.path(), &seq.mesh).expect("load");
-                (dir, loaded)
+                Corrector::load(dir.path(), &seq.mesh).expect("load")
             };
             let mut limited = cfg.clone();
             limited.model.tension_ramp = Some(0.01);
-            let (_lim_dir, lim) = with_config(&limited);
+            let lim = with_config(&limited);
             let mut scaled = limited.clone();
             scaled.model.take_back = Some(0.5);
-            let (_half_dir, half) = with_config(&scaled);
+            let half = with_config(&scaled);
             let free = loaded.predict(&x, &v, &dv, &far).expect("predict");
             let w = seq.graph.tension_weight(&x, 0.01);
             assert!(w.iter().any(|&w| w > 0.0) && w.iter().all(|w| (0.0..=1.0).contains(w)));

@@ -83,14 +83,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("== {}", data.display());
         report(&e, &corrector);
         let name = data.display().to_string().replace(',', "_");
-        for (i, line) in e.csv().lines().enumerate() {
-            if i == 0 {
-                if csv.is_empty() {
-                    csv += &format!("data,{line}\n");
-                }
-            } else {
-                csv += &format!("{name},{line}\n");
-            }
+        let table = e.csv();
+        let mut lines = table.lines();
+        let header = lines.next().unwrap_or_default();
+        if csv.is_empty() {
+            csv += &format!("data,{header}\n");
+        }
+        for line in lines {
+            csv += &format!("{name},{line}\n");
         }
         runs.push(e);
     }

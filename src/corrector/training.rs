@@ -104,11 +104,17 @@ pub struct TrainingConfig {
 }
 
 impl TrainingConfig {
+    /// The coarse membrane's compression factor the corrector was trained beside
+    /// ([`Self::coarse_compression`], 1 when unset).
+    pub fn compression_factor(&self) -> f64 {
+        self.coarse_compression.unwrap_or(1.0)
+    }
+
     /// Sets up `sim` (a coarse simulation) as the corrector was trained with.
     pub fn prepare_coarse(&self, sim: &mut Simulation) -> Result<()> {
         sim.sim
             .model
-            .set_membrane_compression(self.coarse_compression.unwrap_or(1.0))
+            .set_membrane_compression(self.compression_factor())
     }
 }
 

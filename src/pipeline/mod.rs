@@ -160,12 +160,12 @@ impl<'a> Pipeline<'a> {
             .transpose()?;
         // After dressing: sewing is done with the full membrane.
         match (&corrector, opts.coarse_compression) {
-            (Some(c), Some(f)) if c.training.coarse_compression.unwrap_or(1.0) != f => {
+            (Some(c), Some(f)) if c.training.compression_factor() != f => {
                 return Err(Error::Invalid(format!(
                     "the corrector in {} was trained beside a coarse membrane compression \
                      factor of {}, not {f}",
                     c.dir.display(),
-                    c.training.coarse_compression.unwrap_or(1.0)
+                    c.training.compression_factor()
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
