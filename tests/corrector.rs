@@ -9,8 +9,12 @@ use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector, WEIGHTS_FILE};
 use clothsr::corrector::model::{Decoder, GraphTensors, DEFAULT_TENSION_RAMP};
-use clothsr::corrector::rollout::{evaluate, evaluate_from, sequence_distance_mm, HorizonErrors};
-use clothsr::corrector::training::{fit_normalisation, save_model, train, TrainSet};
+use clothsr::corrector::rollout::{
+    evaluate, evaluate_from, interleaved_errors, sequence_distance_mm, HorizonErrors,
+};
+use clothsr::corrector::training::{
+    fit_normalisation, save_model, train, TrainSet, ValidationSet, VALIDATION_LOG,
+};
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
 use clothsr::data::{coarse_simulation, generate, Options, Variation};
 use clothsr::garment::Fabric;
@@ -23,26 +27,30 @@ fn scene() -> Scene {
     common::sheet_over_ball("silk", 0.17)
 }
 
-/// A 4-frame data set at 40 mm / 15 mm (coarse ~80 vertices), made once per test binary.
+/// A 4-frame data set at 40 mm / 15 mm (coarse ~80 vertices) of `variation`.
+fn make_dataset(variation: Variation) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("tmp");
+    let opts = Options {
+        coarse_edge_m: 0.04,
+        fine_edge_m: 0.015,
+        frames: 4,
+        dress: false,
+        self_collision: false,
+        variation,
+        fast: true,
+        match_contact_thickness: true,
+        source: None,
+    };
+    generate(&scene(), "test", &opts, dir.path(), |_| {}).expect("generate");
+    dir
+}
+
+/// The tests' data set ([`make_dataset`] of the scene as it is), made once per test binary.
 fn dataset() -> std::path::PathBuf {
     static DIR: std::sync::OnceLock<tempfile::TempDir> = std::sync::OnceLock::new();
-    let dir = DIR.get_or_init(|| {
-        let dir = tempfile::tempdir().expect("tmp");
-        let opts = Options {
-            coarse_edge_m: 0.04,
-            fine_edge_m: 0.015,
-            frames: 4,
-            dress: false,
-            self_collision: false,
-            variation: Variation::default(),
-            fast: true,
-            match_contact_thickness: true,
-            source: None,
-        };
-        generate(&scene(), "test", &opts, dir.path(), |_| {}).expect("generate");
-        dir
-    });
-    dir.path().to_path_buf()
+    DIR.get_or_init(|| make_dataset(Variation::default()))
+        .path()
+        .to_path_buf()
 }
 
 fn load(frames: Option<std::ops::RangeInclusive<usize>>) -> Sequence {
@@ -76,7 +84,7 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
         .with_lr_start(3e-3)
         .with_lr_end(1e-3)
         .with_noise_ratio(0.0);
-    let summary = train(&cfg, &mut sets, &model, |p| {
+    let summary = train(&cfg, &mut sets, &[], &model, |p| {
         losses.push(p.loss);
         ControlFlow::Continue(())
     })
@@ -94,7 +102,8 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
     assert!(log.starts_with("phase,step,lr,loss,seconds") && log.lines().count() >= 3);
 
     // Training again into a finished model directory is refused, naming the file.
-    let e = train(&cfg, &mut sets, &model, |_| ControlFlow::Continue(())).expect_err("finished");
+    let e =
+        train(&cfg, &mut sets, &[], &model, |_| ControlFlow::Continue(())).expect_err("finished");
     assert!(e.to_string().contains("model.bpk"), "{e}");
 
     // The loaded corrector moves M_c towards M_int on average over the training steps.
@@ -375,7 +384,10 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         .with_window(3)
         .with_rollout_lr(1e-3);
     let out = tempfile::tempdir().expect("tmp");
-    let s = train(&cfg, &mut sets, out.path(), |_| ControlFlow::Continue(())).expect("train");
+    let s = train(&cfg, &mut sets, &[], out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("train");
     assert_eq!(s.phase2_iters, 4);
     assert!(s.noise_std_m > 0.0);
     assert!(s.phase2_first_last.0.is_finite() && s.phase2_first_last.1.is_finite());
@@ -412,6 +424,14 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         e.sim_alone_mm
     );
     assert!(e.csv().lines().count() == 4);
+    // The interleaved run alone (what training validates on) is evaluate's interleaved
+    // column, bit for bit, from a fresh simulator.
+    let mut fresh = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let only = interleaved_errors(&seq, &mut fresh, t0, &corrector, 3)
+        .expect("interleaved")
+        .expect("not diverged");
+    assert_eq!(only, e.interleaved_mm);
+    assert!(interleaved_errors(&seq, &mut fresh, t0, &corrector, 4).is_err());
     assert_eq!(e.strain_pct.len(), 3);
     // Interleaved and alone start from the ground truth: a percent-level strain gap after
     // one frame would be a bookkeeping error.
@@ -522,7 +542,7 @@ fn an_interrupted_training_run_resumes_from_its_checkpoint() {
     let mut sets = vec![TrainSet { seq, sim: None }];
     let cfg = tiny_config().with_steps(40).with_checkpoint_every(10);
     let out = tempfile::tempdir().expect("tmp");
-    let s = train(&cfg, &mut sets, out.path(), |p| {
+    let s = train(&cfg, &mut sets, &[], out.path(), |p| {
         if p.step == 25 {
             ControlFlow::Break(())
         } else {
@@ -534,13 +554,17 @@ fn an_interrupted_training_run_resumes_from_its_checkpoint() {
     assert!(!out.path().join("model.bpk").exists());
     assert!(out.path().join("checkpoint/state.json").exists());
     // Another configuration is refused, naming the config file.
-    let e = train(&cfg.clone().with_steps(41), &mut sets, out.path(), |_| {
-        ControlFlow::Continue(())
-    })
+    let e = train(
+        &cfg.clone().with_steps(41),
+        &mut sets,
+        &[],
+        out.path(),
+        |_| ControlFlow::Continue(()),
+    )
     .expect_err("other config");
     assert!(e.to_string().contains("config.json"), "{e}");
     let mut steps = Vec::new();
-    let s = train(&cfg, &mut sets, out.path(), |p| {
+    let s = train(&cfg, &mut sets, &[], out.path(), |p| {
         steps.push(p.step);
         ControlFlow::Continue(())
     })
@@ -552,4 +576,118 @@ fn an_interrupted_training_run_resumes_from_its_checkpoint() {
     let log = std::fs::read_to_string(out.path().join("log.csv")).expect("log");
     assert_eq!(log.matches("phase,step").count(), 1, "{log}");
     assert!(log.lines().any(|l| l.starts_with("1,40,")), "{log}");
+}
+
+#[test]
+fn validation_saves_the_best_network_and_a_resumed_run_keeps_it() {
+    let dir = dataset();
+    let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let t0 = sim.state.t_s;
+    let seq = Sequence::load(&dir, None, &sim).expect("load");
+    let mut sets = vec![TrainSet {
+        seq,
+        sim: Some((sim, t0)),
+    }];
+    // Held out: the sheet turned and moved.
+    let held = make_dataset(Variation {
+        garment_offset_m: [0.01, 0.0, -0.01],
+        garment_yaw_deg: 30.0,
+        ..Variation::default()
+    });
+    let vsim = coarse_simulation(&scene(), held.path(), 1).expect("coarse simulation");
+    let vseq = Sequence::load(held.path(), None, &vsim).expect("load");
+    let validation = vec![ValidationSet {
+        seq: vseq.clone(),
+        scene: scene(),
+    }];
+    let cfg = tiny_config()
+        .with_steps(20)
+        .with_rollout_iters(6)
+        .with_window(3)
+        .with_rollout_lr(3e-2)
+        .with_validate_every(Some(2))
+        .with_validation_frames(Some(3));
+    let out = tempfile::tempdir().expect("tmp");
+
+    // Validation data without validate_every, validate_every without data, and a training
+    // set as its own validation set are refused.
+    let none = cfg.clone().with_validate_every(None);
+    let e = train(&none, &mut sets, &validation, out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("no validate_every");
+    assert!(e.to_string().contains("validate_every"), "{e}");
+    let e = train(&cfg, &mut sets, &[], out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("no validation data");
+    assert!(e.to_string().contains("validation"), "{e}");
+    let own = vec![ValidationSet {
+        seq: sets[0].seq.clone(),
+        scene: scene(),
+    }];
+    let e = train(&cfg, &mut sets, &own, out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("training set as validation set");
+    assert!(
+        e.to_string()
+            .contains("both a training and a validation set"),
+        "{e}"
+    );
+
+    // Stopped in phase 2 after its first validation (window 2), then resumed.
+    let first = train(&cfg, &mut sets, &validation, out.path(), |p| {
+        if p.phase == 2 && p.step == 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("first part");
+    assert!(first.interrupted);
+    let points = |s: &clothsr::corrector::training::Summary| -> Vec<(u8, usize)> {
+        s.validations.iter().map(|v| (v.0, v.1)).collect()
+    };
+    assert_eq!(points(&first), vec![(1, 20), (2, 2)]);
+    assert!(out.path().join("checkpoint/best.bpk").exists());
+    let rest = train(&cfg, &mut sets, &validation, out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("resume");
+    assert!(!rest.interrupted);
+    // The resumed run does not repeat the end of phase 1, and validates the last window.
+    assert_eq!(points(&rest), vec![(2, 4), (2, 6)]);
+    let all: Vec<f64> = first
+        .validations
+        .iter()
+        .chain(&rest.validations)
+        .map(|v| v.2)
+        .collect();
+    assert!(all.iter().all(|mm| mm.is_finite() && *mm > 0.0), "{all:?}");
+    let (best, _, _) = rest.validation_best.expect("a best network");
+    let min = all.iter().copied().fold(f64::INFINITY, f64::min);
+    assert_eq!(best, min, "{all:?}");
+    // Phase 2's large rate makes the later networks worse here, so a run that saved its
+    // last network would fail below.
+    assert!(all[3] > best, "{all:?}");
+    // The log has a row per set and a pooled row per validation.
+    let log = std::fs::read_to_string(out.path().join(VALIDATION_LOG)).expect("log");
+    assert!(
+        log.starts_with("phase,step,set,frames,interleaved_mm"),
+        "{log}"
+    );
+    assert_eq!(log.lines().count(), 1 + 2 * 4, "{log}");
+    assert_eq!(log.matches(",pooled,3,").count(), 4, "{log}");
+    assert!(!out.path().join("checkpoint").exists());
+
+    // The saved network is the best one: rolled out again it scores the best figure.
+    let corrector = Corrector::load(out.path(), &vseq.mesh).expect("load");
+    let mut fresh = coarse_simulation(&scene(), held.path(), 1).expect("coarse simulation");
+    let vt0 = fresh.state.t_s;
+    let e = interleaved_errors(&vseq, &mut fresh, vt0, &corrector, 3)
+        .expect("rollout")
+        .expect("not diverged");
+    let mean = e.iter().sum::<f64>() / e.len() as f64;
+    assert!((mean - best).abs() < 1e-9 * best, "{mean} vs {best}");
 }

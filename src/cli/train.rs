@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clothsr::corrector::data::Sequence;
-use clothsr::corrector::training::{train, Progress, TrainSet, TrainingConfig};
+use clothsr::corrector::training::{
+    train, Progress, TrainSet, TrainingConfig, ValidationSet, VALIDATION_LOG,
+};
 use clothsr::corrector::CorrectorConfig;
 use clothsr::data::coarse_simulation;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -177,6 +179,18 @@ pub struct CorrectorArgs {
     /// most of it also takes back the cloth's restoring force, and the corrected cloth drifts).
     #[arg(long, default_value_t = 1.0)]
     take_back: f64,
+    /// Held-out data sets to select the network on (repeat for several; never a training
+    /// set): at the end of each phase and every `--validate-every` phase-2 windows the
+    /// network is rolled out interleaved with the simulator on them, and the one closest to
+    /// their ground truth is saved (`validation.csv` beside the model logs every validation).
+    #[arg(long)]
+    val_data: Vec<PathBuf>,
+    /// Validate every this many phase-2 windows (with `--val-data`).
+    #[arg(long, default_value_t = 100)]
+    validate_every: usize,
+    /// Roll out frames 1..=N of each validation set (default: all).
+    #[arg(long)]
+    val_frames: Option<usize>,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
@@ -225,21 +239,26 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     .with_rollout_stop_loss(a.rollout_stop_loss)
     .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
     .with_seed(a.seed)
-    .with_coarse_compression((a.coarse_compression != 1.0).then_some(a.coarse_compression));
+    .with_coarse_compression((a.coarse_compression != 1.0).then_some(a.coarse_compression))
+    .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
+    .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
+    anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
+    let mut validation = Vec::new();
+    for dir in &a.val_data {
+        let scene = data_scene(dir)?;
+        let m = clothsr::data::read_manifest(dir)?;
+        // One frame more than rolled out: the rollout starts at the first loaded frame.
+        let frames = a.val_frames.map(|n| 1..=(n + 1).min(m.frames_done));
+        let mut sim = coarse_simulation(&scene, dir, 1)?;
+        cfg.prepare_coarse(&mut sim)?;
+        let seq = Sequence::load(dir, frames, &sim)?;
+        validation.push(ValidationSet { seq, scene });
+    }
     let mut sets = Vec::new();
     for dir in &a.data {
         let m = clothsr::data::read_manifest(dir)?;
         let frames = a.frames.map(|n| 1..=n.min(m.frames_done));
-        let source = m.source.as_ref().with_context(|| {
-            format!(
-                "{}: the corrector needs the data set's colliders, but this data set does not \
-                 record its scene files (made by an older clothsr)",
-                dir.join("manifest.json").display()
-            )
-        })?;
-        let scene = source
-            .load()
-            .with_context(|| format!("loading the scene of {}", dir.display()))?;
+        let scene = data_scene(dir)?;
         let mut sim = coarse_simulation(&scene, dir, 1)?;
         cfg.prepare_coarse(&mut sim)?;
         let t0 = sim.state.t_s;
@@ -265,7 +284,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     );
     let mut phase = 1;
     let mut recent = Vec::new();
-    let summary = train(&cfg, &mut sets, &a.output, |p: &Progress| {
+    let summary = train(&cfg, &mut sets, &validation, &a.output, |p: &Progress| {
         if p.phase != phase {
             phase = p.phase;
             bar.set_length(p.total as u64);
@@ -301,7 +320,29 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         summary.noise_std_m * 1e3,
         summary.seconds
     );
+    if let Some((mm, phase, step)) = summary.validation_best {
+        tracing::info!(
+            "kept the network of phase {phase} step {step}: {mm:.3} mm interleaved on the \
+             validation sets (all validations in {})",
+            a.output.join(VALIDATION_LOG).display()
+        );
+    }
     Ok(())
+}
+
+/// The scene a data set was made from (the corrector needs its colliders).
+fn data_scene(dir: &std::path::Path) -> anyhow::Result<clothsr::scene::Scene> {
+    let m = clothsr::data::read_manifest(dir)?;
+    let source = m.source.as_ref().with_context(|| {
+        format!(
+            "{}: the corrector needs the data set's colliders, but this data set does not \
+             record its scene files (made by an older clothsr)",
+            dir.join("manifest.json").display()
+        )
+    })?;
+    source
+        .load()
+        .with_context(|| format!("loading the scene of {}", dir.display()))
 }
 
 fn isr(a: IsrArgs) -> anyhow::Result<()> {

@@ -197,20 +197,34 @@ impl Corrector {
     pub fn load(dir: &Path, mesh: &ClothMesh) -> Result<Corrector> {
         let device = default_device()?;
         let (net, norm, config) = load_net(dir, &device)?;
+        Ok(Corrector::new(net, norm, config, mesh, dir, &device))
+    }
+
+    /// A corrector from a network on `device` (trained with `config`, inputs and outputs
+    /// scaled by `norm`) for `mesh`; `dir` is only reported (training validates the network
+    /// it is training this way).
+    pub fn new(
+        net: CorrectorNet,
+        norm: Normalisation,
+        config: TrainingConfig,
+        mesh: &ClothMesh,
+        dir: &Path,
+        device: &Device,
+    ) -> Corrector {
         let graph = MeshGraph::new(mesh);
-        Ok(Corrector {
+        Corrector {
             times: CorrectorTimes::default(),
             net,
             norm,
-            senders: index_tensor(&graph.senders, &device),
-            receivers: index_tensor(&graph.receivers, &device),
+            senders: index_tensor(&graph.senders, device),
+            receivers: index_tensor(&graph.receivers, device),
             inv_mass: inverse_masses(&graph.mass),
             graph,
             config: config.model.clone(),
             training: config,
             dir: dir.to_path_buf(),
             proximity: Mutex::default(),
-        })
+        }
     }
 
     /// The predicted velocity correction p for M_c = (x, v), reached by a step that changed

@@ -429,6 +429,49 @@ pub fn evaluate_from(
     Ok(out)
 }
 
+/// The interleaved run alone (simulator step → corrector → the next step from the corrected
+/// mesh, §3.1.3) over `frames` frames of `seq` from its first step with `sim` (the data set's
+/// coarse simulation, fresh, whose time at the data set's frame 0 is `t0_s`): the mean
+/// distance to M_int at each frame end, mm, or `None` where the corrector diverged. What
+/// training validates its network on ([`super::training::ValidationSet`]).
+pub fn interleaved_errors(
+    seq: &Sequence,
+    sim: &mut Simulation,
+    t0_s: f64,
+    corrector: &Corrector,
+    frames: usize,
+) -> Result<Option<Vec<f64>>> {
+    let s = seq.manifest.steps_per_frame;
+    if frames * s + 1 > seq.steps.len() {
+        return Err(Error::bad_input(
+            &seq.dir,
+            format!(
+                "{frames} frames asked for, the loaded sequence has {} steps after its first \
+                 ({s} a frame)",
+                seq.steps.len().saturating_sub(1)
+            ),
+        ));
+    }
+    let first = &seq.steps[0];
+    let mut state = SimState {
+        x: vectors(&first.int_x),
+        v: vectors(&first.int_v),
+        t_s: t0_s + seq.step_time_s(0),
+    };
+    let mut errors = Vec::with_capacity(frames);
+    for i in 1..=frames * s {
+        let mut c = sim.step_from(&state)?.0;
+        if corrector.correct(&state.v, &mut c, sim).is_err() {
+            return Ok(None);
+        }
+        state = c;
+        if (i + 1).is_multiple_of(s) {
+            errors.push(mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x)));
+        }
+    }
+    Ok(Some(errors))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

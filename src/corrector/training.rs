@@ -35,13 +35,15 @@ use serde::{Deserialize, Serialize};
 use super::data::{vectors, Sequence};
 use super::graph::{body_proximity, step_change, MeshGraph};
 use super::inference::{
-    default_device, features, read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE,
+    default_device, features, read_json, Corrector, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE,
 };
 use super::model::{inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
+use super::rollout::interleaved_errors;
 use crate::data::flat32;
 use crate::error::{Error, Result};
 use crate::io::write_atomic;
+use crate::scene::Scene;
 use crate::sim::driver::Simulation;
 use crate::sim::SimState;
 
@@ -101,6 +103,15 @@ pub struct TrainingConfig {
     /// and so must run with (`None`: 1, the full Baraff-Witkin membrane). Optional so that
     /// models saved before it load.
     pub coarse_compression: Option<f64>,
+    /// Validate every this many phase-2 windows, and at the end of each phase, on the held-out
+    /// [`ValidationSet`]s given to [`train`]: the interleaved rollout's mean distance to M_int
+    /// over their frames; the network that was closest is the one saved (`None`: no
+    /// validation, the last network is saved). Training losses are one step or one window
+    /// long; a corrector is judged over hundreds of frames, where networks with the same
+    /// losses differ by 2× (the three-balls README). Optional so that older configs load.
+    pub validate_every: Option<usize>,
+    /// Frames of each validation set rolled out (`None`: all loaded).
+    pub validation_frames: Option<usize>,
 }
 
 impl TrainingConfig {
@@ -125,6 +136,34 @@ pub struct TrainSet {
     pub seq: Sequence,
     /// The coarse simulator (phase 2 only) and its time at the data set's frame 0, s.
     pub sim: Option<(Simulation, f64)>,
+}
+
+/// A held-out sequence training selects its network on ([`TrainingConfig::validate_every`]):
+/// it must not be one of the training sets.
+pub struct ValidationSet {
+    /// The sequence (loaded from its frame `first_frame`).
+    pub seq: Sequence,
+    /// The scene it was made from: every validation starts a fresh coarse simulation of it
+    /// ([`crate::data::coarse_simulation`]; a simulator carries warm starts from step to step,
+    /// and a network's score must not depend on what ran before).
+    pub scene: Scene,
+}
+
+impl ValidationSet {
+    /// Frames rolled out: all the loaded sequence holds, at most `limit`.
+    fn frames(&self, limit: Option<usize>) -> usize {
+        let s = self.seq.manifest.steps_per_frame.max(1);
+        let loaded = self.seq.steps.len().saturating_sub(1) / s;
+        limit.map_or(loaded, |l| l.min(loaded))
+    }
+
+    /// A short name for logs: the data set directory's last component.
+    pub fn name(&self) -> String {
+        self.seq.dir.file_name().map_or_else(
+            || self.seq.dir.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )
+    }
 }
 
 /// Progress, reported after each optimiser step.
@@ -155,15 +194,32 @@ pub struct Summary {
     pub noise_std_m: f64,
     /// Stopped by the progress callback before the end; resumable from the checkpoint.
     pub interrupted: bool,
+    /// With validation: the saved network's pooled interleaved error on the validation sets,
+    /// mm, and where it was taken (phase, step or window).
+    pub validation_best: Option<(f64, u8, usize)>,
+    /// With validation: every validation's pooled error, (phase, step or window, mm; infinite
+    /// where the rollout diverged).
+    pub validations: Vec<(u8, usize, f64)>,
 }
 
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 struct Position {
     phase1_done: usize,
     phase2_done: usize,
+    /// The best validation so far: pooled mm, phase, step (its weights are
+    /// `checkpoint/best.bpk`).
+    #[serde(default)]
+    best: Option<(f64, u8, usize)>,
+    /// The last validation point done (phase, step), so that a resumed run does not repeat it.
+    #[serde(default)]
+    validated: Option<(u8, usize)>,
 }
 
 const CHECKPOINT_DIR: &str = "checkpoint";
+/// The best validated network's weights in the checkpoint directory.
+const BEST_FILE: &str = "best.bpk";
+/// The validation log in a model directory.
+pub const VALIDATION_LOG: &str = "validation.csv";
 
 /// One graph sample, raw (unnormalised) inputs and targets plus a loss mask.
 struct Sample {
@@ -237,12 +293,42 @@ struct Trainer<'a> {
     t0: Instant,
     rng: StdRng,
     stopped: bool,
+    /// The network of [`Position::best`].
+    best: Option<CorrectorNet>,
+    /// Every validation of this call, for the summary.
+    validations: Vec<(u8, usize, f64)>,
 }
 
-fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
+fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) -> Result<()> {
     let bad = |m: &str| Err(Error::Invalid(format!("training configuration: {m}")));
     if sets.is_empty() || sets.iter().all(|s| s.seq.steps.is_empty()) {
         return bad("no training data");
+    }
+    match (cfg.validate_every, validation.is_empty()) {
+        (Some(0), _) => return bad("validate_every must be at least 1"),
+        (Some(_), true) => return bad("validation asked for without validation data"),
+        (None, false) => return bad("validation data given but validate_every not set"),
+        _ => {}
+    }
+    if let Some(v) = validation
+        .iter()
+        .find(|v| v.frames(cfg.validation_frames) == 0)
+    {
+        return bad(&format!(
+            "validation set {} has no whole frame to roll out",
+            v.seq.dir.display()
+        ));
+    }
+    if let Some(v) = validation.iter().find(|v| {
+        sets.iter().any(|s| {
+            s.seq.dir.canonicalize().ok().is_some()
+                && s.seq.dir.canonicalize().ok() == v.seq.dir.canonicalize().ok()
+        })
+    }) {
+        return bad(&format!(
+            "{} is both a training and a validation set",
+            v.seq.dir.display()
+        ));
     }
     if cfg.batch == 0 || cfg.window == 0 {
         return bad("batch and window must be at least 1");
@@ -280,10 +366,11 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet]) -> Result<()> {
 pub fn train(
     cfg: &TrainingConfig,
     sets: &mut [TrainSet],
+    validation: &[ValidationSet],
     out: &Path,
     mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Summary> {
-    check(cfg, sets)?;
+    check(cfg, sets, validation)?;
     std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
     let config_path = out.join(CONFIG_FILE);
     let state_path = out.join(CHECKPOINT_DIR).join("state.json");
@@ -342,6 +429,13 @@ pub fn train(
     if !resuming {
         writeln!(log, "phase,step,lr,loss,seconds").map_err(|e| Error::io(&log_path, e))?;
     }
+    let best = match position.best {
+        Some(_) if resuming => Some(crate::corrector::inference::load_weights(
+            cfg.model.init(&device),
+            &out.join(CHECKPOINT_DIR).join(BEST_FILE),
+        )?),
+        _ => None,
+    };
     let mut t = Trainer {
         cfg,
         out: out.to_path_buf(),
@@ -357,23 +451,30 @@ pub fn train(
         log,
         t0: Instant::now(),
         stopped: false,
+        best,
+        validations: Vec::new(),
     };
     let mut summary = Summary {
         noise_std_m: t.noise_std_m,
         ..Summary::default()
     };
     summary.phase1_first_last = t.phase1(sets, &mut progress)?;
+    if !t.stopped && cfg.steps > 0 && t.position.phase2_done == 0 {
+        t.validate(validation, 1, cfg.steps)?;
+    }
     if !t.stopped {
-        let (first_last, iters) = t.phase2(sets, &mut progress)?;
+        let (first_last, iters) = t.phase2(sets, validation, &mut progress)?;
         summary.phase2_first_last = first_last;
         summary.phase2_iters = iters;
     }
     summary.seconds = t.t0.elapsed().as_secs_f64();
+    summary.validations = std::mem::take(&mut t.validations);
     if t.stopped {
         summary.interrupted = true;
         return Ok(summary);
     }
-    save_model(out, cfg, &t.norm, &t.net)?;
+    summary.validation_best = t.position.best;
+    save_model(out, cfg, &t.norm, t.best.as_ref().unwrap_or(&t.net))?;
     std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
     Ok(summary)
 }
@@ -538,6 +639,84 @@ impl Trainer<'_> {
         write_json(&dir.join("state.json"), &self.position)
     }
 
+    /// Validation point (`phase`, `step`): rolls the current network out interleaved on every
+    /// validation set, logs the pooled error and keeps the network when it is the best so
+    /// far (then checkpoints, so that a resumed run keeps it). Nothing without validation
+    /// sets, or when this point was done before a resume.
+    fn validate(&mut self, validation: &[ValidationSet], phase: u8, step: usize) -> Result<()> {
+        if validation.is_empty() || self.position.validated == Some((phase, step)) {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let device = default_device()?;
+        let net = self.net.valid();
+        let (mut sum, mut frames, mut diverged) = (0.0, 0usize, false);
+        let mut rows = Vec::new();
+        for v in validation {
+            let mut sim = crate::data::coarse_simulation(&v.scene, &v.seq.dir, v.seq.first_frame)?;
+            self.cfg.prepare_coarse(&mut sim)?;
+            let t0 = sim.state.t_s;
+            let corrector = Corrector::new(
+                net.clone(),
+                self.norm.clone(),
+                self.cfg.clone(),
+                &v.seq.mesh,
+                &self.out,
+                &device,
+            );
+            let n = v.frames(self.cfg.validation_frames);
+            let mm = match interleaved_errors(&v.seq, &mut sim, t0, &corrector, n)? {
+                Some(e) => {
+                    sum += e.iter().sum::<f64>();
+                    frames += e.len();
+                    mean(&e)
+                }
+                None => {
+                    diverged = true;
+                    f64::INFINITY
+                }
+            };
+            rows.push(format!("{phase},{step},{},{n},{mm:.4}", v.name()));
+        }
+        let pooled = if diverged {
+            f64::INFINITY
+        } else {
+            sum / frames.max(1) as f64
+        };
+        rows.push(format!("{phase},{step},pooled,{frames},{pooled:.4}"));
+        let path = self.out.join(VALIDATION_LOG);
+        let new_file = !path.exists();
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .map_err(|e| Error::io(&path, e))?;
+        let header = new_file.then_some("phase,step,set,frames,interleaved_mm".to_string());
+        for line in header.into_iter().chain(rows) {
+            writeln!(f, "{line}").map_err(|e| Error::io(&path, e))?;
+        }
+        let better = self.position.best.is_none_or(|(b, _, _)| pooled < b);
+        tracing::info!(
+            "validation after phase {phase} step {step}: {pooled:.3} mm interleaved{} ({:.0} s)",
+            if better { ", the best so far" } else { "" },
+            t.elapsed().as_secs_f64()
+        );
+        if better && pooled.is_finite() {
+            let dir = self.out.join(CHECKPOINT_DIR);
+            let tmp = dir.join("best.bpk.tmp");
+            self.net
+                .clone()
+                .save_file(&tmp)
+                .map_err(|e| Error::Invalid(format!("{}: {e}", tmp.display())))?;
+            std::fs::rename(&tmp, dir.join(BEST_FILE)).map_err(|e| Error::io(&tmp, e))?;
+            self.best = Some(self.net.clone());
+            self.position.best = Some((pooled, phase, step));
+        }
+        self.validations.push((phase, step, pooled));
+        self.position.validated = Some((phase, step));
+        self.checkpoint()
+    }
+
     fn phase1(
         &mut self,
         sets: &[TrainSet],
@@ -594,6 +773,7 @@ impl Trainer<'_> {
     fn phase2(
         &mut self,
         sets: &mut [TrainSet],
+        validation: &[ValidationSet],
         progress: &mut impl FnMut(&Progress) -> ControlFlow<()>,
     ) -> Result<((f64, f64), usize)> {
         let cfg = self.cfg;
@@ -624,6 +804,12 @@ impl Trainer<'_> {
             if it.is_multiple_of(cfg.checkpoint_every.max(1).div_ceil(10)) {
                 self.checkpoint()?;
             }
+            if cfg
+                .validate_every
+                .is_some_and(|k| it.is_multiple_of(k.max(1)) || it == cfg.rollout_iters)
+            {
+                self.validate(validation, 2, it)?;
+            }
             let flow = progress(&Progress {
                 phase: 2,
                 step: it,
@@ -643,6 +829,9 @@ impl Trainer<'_> {
                     "phase 2: window loss below {} after {it} windows",
                     cfg.rollout_stop_loss
                 );
+                if cfg.validate_every.is_some() {
+                    self.validate(validation, 2, it)?;
+                }
                 break;
             }
         }
