@@ -16,12 +16,17 @@ fn shared(path: &str) -> PathBuf {
 /// A cotton GarmentCode pattern (`pattern`, under the shared data) at 20 mm with the walking
 /// avatar as collider, fast solver.
 fn on_the_walking_avatar(pattern: &str) -> Simulation {
+    on_the_walking_avatar_at(pattern, 0.02)
+}
+
+/// [`on_the_walking_avatar`] at `edge_m`.
+fn on_the_walking_avatar_at(pattern: &str, edge_m: f64) -> Simulation {
     let fabric = Fabric::preset("cotton").expect("preset");
     let mut scene = Scene::load(&shared(pattern), &fabric).expect("pattern");
     scene
         .add_collider_file(&shared("avatars/mh_walk_train_baked.usdc"))
         .expect("avatar");
-    Simulation::new(&scene, 0.02, |p| p.newton_exact = false).expect("set-up")
+    Simulation::new(&scene, edge_m, |p| p.newton_exact = false).expect("set-up")
 }
 
 /// The avatar's points at the simulation's time.
@@ -130,4 +135,48 @@ fn issue_3_circle_skirt_walks_without_passing_through_itself() {
         (walked - carried).norm() < 0.1,
         "body moved {walked}, skirt {carried}"
     );
+}
+
+/// A finer mesh dressed from the coarse mesh's dressed state, as `clothsr dataset` dresses its
+/// fine simulation (`Simulation::dress_from`): the pencil skirt at 10 mm, carried over from
+/// its 20 mm dressing, is not rolled, sews for at most 0.1 s (from the flat pattern the
+/// 20 mm mesh sewed for hundreds of steps), ends with its seams no wider than the coarse
+/// mesh left them (the hips have zero ease: the last pairs hold hoop tension) and outside
+/// the body.
+#[test]
+fn a_finer_skirt_dresses_from_the_coarse_dressing() {
+    let pencil = "patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json";
+    let mut coarse = on_the_walking_avatar(pencil);
+    let c = coarse.dress(0.8, 0.1, 1e-3).expect("coarse dressing");
+    let mut fine = on_the_walking_avatar_at(pencil, 0.01);
+    let dhat_m = fine.sim.params.collision.dhat_m;
+    let transfer = clothsr::transfer::Transfer::new(&coarse.sim.model.mesh, &fine.sim.model.mesh)
+        .expect("transfer");
+    let x = transfer.upsample_phong(&coarse.state.x, &coarse.sim.model.mesh.triangles, 0.75);
+    assert!(
+        fine.dress_from(x[1..].to_vec(), 0.1, 0.1, 1e-3).is_err(),
+        "a position per vertex"
+    );
+    let d = fine.dress_from(x, 0.1, 0.1, 1e-3).expect("fine dressing");
+    eprintln!("coarse {c:?}\nfine {d:?}");
+    assert_eq!(d.wrapped_panels, 0);
+    assert!(c.sew_steps > 100, "{c:?}");
+    assert!(d.sew_steps <= 30, "{d:?}");
+    assert!(
+        d.initial_seam_gap_m < c.seam_gap_m + 0.5e-3,
+        "the seams start where the coarse mesh left them: {d:?}"
+    );
+    assert!(
+        d.seam_gap_m <= c.seam_gap_m && d.seam_gap_m < dhat_m,
+        "widest seam gap {:.2} mm (d̂ {:.2} mm)",
+        d.seam_gap_m * 1e3,
+        dhat_m * 1e3
+    );
+    assert!(
+        d.max_penetration_m < 0.5 * dhat_m,
+        "{:.2} mm inside the body",
+        d.max_penetration_m * 1e3
+    );
+    assert_eq!(d.settle_steps, 30);
+    assert!(fine.state.v.iter().all(|v| v.norm() == 0.0));
 }

@@ -178,13 +178,7 @@ impl Simulation {
     /// colliders. The state's time goes back to the start, with zero velocity. Stops sewing
     /// once every seam pair is within `gap_m` or after `max_s` of simulated time.
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
-        let t_start = self.state.t_s;
-        let gravity = self.sim.params.gravity_m_s2;
-        let dt = self.sim.params.dt_s;
-        let mut held: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); self.colliders.len()];
-        for (c, out) in self.colliders.iter().zip(held.iter_mut()) {
-            c.positions_at(t_start, out);
-        }
+        let held = self.colliders_held();
         let frames: Vec<ColliderFrame<'_>> = self
             .colliders
             .iter()
@@ -215,16 +209,83 @@ impl Simulation {
         if !wrapped.is_empty() {
             // Seams start at rest at their new length (they shrink from there as they close):
             // rest lengths kept from the flat placement would push the rolled panels apart.
-            let gaps: Vec<f64> = self
-                .sim
-                .model
-                .mesh
-                .seam_pairs
-                .iter()
-                .map(|p| (self.state.x[p[0] as usize] - self.state.x[p[1] as usize]).norm())
-                .collect();
-            self.sim.set_seam_rest(&gaps)?;
+            self.seams_at_rest_where_they_are()?;
         }
+        self.sew_and_settle(&held, out, max_s, settle_s, gap_m)
+    }
+
+    /// Dresses the garments from positions `x` where the garment is already nearly sewn and
+    /// draped (a coarser simulation's dressed state carried onto this mesh): no rolling;
+    /// seams start at rest where they are, close to within `gap_m` (at most `max_s` of
+    /// simulated time, gravity off), then `settle_s` of draping, as in [`Self::dress`]. A fine
+    /// mesh dressed from its flat pattern spends most of its time on seams tens of
+    /// centimetres open, where the move limits hold every vertex back and steps are halved;
+    /// from a coarse dressing it only settles the detail the coarse mesh could not hold.
+    pub fn dress_from(
+        &mut self,
+        x: Vec<Vector3<f64>>,
+        max_s: f64,
+        settle_s: f64,
+        gap_m: f64,
+    ) -> Result<DressStats> {
+        if x.len() != self.state.x.len() || x.iter().any(|p| !p.iter().all(|c| c.is_finite())) {
+            return Err(Error::Invalid(format!(
+                "dressing from {} positions (finite ones needed), the garments have {} vertices",
+                x.len(),
+                self.state.x.len()
+            )));
+        }
+        self.state.x = x;
+        self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
+        self.seams_at_rest_where_they_are()?;
+        let held = self.colliders_held();
+        self.sew_and_settle(&held, DressStats::default(), max_s, settle_s, gap_m)
+    }
+
+    /// The colliders' positions at the state's time (dressing holds them there).
+    fn colliders_held(&self) -> Vec<Vec<Vector3<f64>>> {
+        let mut held: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); self.colliders.len()];
+        for (c, out) in self.colliders.iter().zip(held.iter_mut()) {
+            c.positions_at(self.state.t_s, out);
+        }
+        held
+    }
+
+    /// Sets every seam's rest length to its present gap.
+    fn seams_at_rest_where_they_are(&mut self) -> Result<()> {
+        let gaps: Vec<f64> = self
+            .sim
+            .model
+            .mesh
+            .seam_pairs
+            .iter()
+            .map(|p| (self.state.x[p[0] as usize] - self.state.x[p[1] as usize]).norm())
+            .collect();
+        self.sim.set_seam_rest(&gaps)
+    }
+
+    /// Dressing's sewing (gravity and friction off, slow moves) and settling on the colliders
+    /// held at `held`; the state's time goes back to where it was, with zero velocity.
+    fn sew_and_settle(
+        &mut self,
+        held: &[Vec<Vector3<f64>>],
+        mut out: DressStats,
+        max_s: f64,
+        settle_s: f64,
+        gap_m: f64,
+    ) -> Result<DressStats> {
+        let t_start = self.state.t_s;
+        let gravity = self.sim.params.gravity_m_s2;
+        let dt = self.sim.params.dt_s;
+        let frames: Vec<ColliderFrame<'_>> = self
+            .colliders
+            .iter()
+            .zip(held)
+            .map(|(c, p)| ColliderFrame {
+                points: p,
+                triangles: &c.triangles,
+            })
+            .collect();
         out.initial_seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
         let max_steps = (max_s / dt).ceil() as usize;
         self.sim.params.gravity_m_s2 = Vector3::zeros();
