@@ -308,7 +308,7 @@ impl Simulation {
                 let (next, st) = self.sim.step(&self.state, &frames, &frames)?;
                 self.state = next;
                 out.sew_steps += 1;
-                if out.sew_steps % 30 == 0 {
+                if out.sew_steps.is_multiple_of(30) {
                     tracing::info!(
                         "dressing: sewing step {}: widest seam gap {:.1} mm, newton {}, cg {}, contacts {}, penetration {:.2} mm",
                         out.sew_steps,
