@@ -71,12 +71,17 @@ impl Variation {
                 c.mesh.positions.iter_mut().for_each(|p| *p = r * *p);
             }
         }
+        // Garments are placed around the animated bodies as they are at the clip's start (a
+        // GarmentCode pattern around the rest pose): started later in the clip, they go where
+        // the bodies have walked to (the horizontal move of their centroid), or they are
+        // dressed around empty space and fall.
+        let mut g = Vector3::from(self.garment_offset_m);
         if self.clip_start_s != 0.0 {
+            g += root_motion(&scene.colliders, self.clip_start_s);
             for c in &mut scene.colliders {
                 c.times_s.iter_mut().for_each(|t| *t -= self.clip_start_s);
             }
         }
-        let g = Vector3::from(self.garment_offset_m);
         for garment in &mut scene.garments {
             for p in &mut garment.panels {
                 p.placement.translation_m += g;
@@ -93,6 +98,26 @@ impl Variation {
                 .collect();
         }
     }
+}
+
+/// The horizontal (x, z) move of the animated colliders' point centroid from their clip's
+/// start to `t_s` into it, m (zero without animated colliders).
+fn root_motion(colliders: &[crate::scene::Collider], t_s: f64) -> Vector3<f64> {
+    let (mut start, mut then, mut n) = (Vector3::zeros(), Vector3::zeros(), 0usize);
+    let mut buf = Vec::new();
+    for c in colliders.iter().filter(|c| c.is_animated()) {
+        let t0 = c.times_s.first().copied().unwrap_or(0.0);
+        c.positions_at(t0, &mut buf);
+        start += buf.iter().sum::<Vector3<f64>>();
+        c.positions_at(t0 + t_s, &mut buf);
+        then += buf.iter().sum::<Vector3<f64>>();
+        n += buf.len();
+    }
+    if n == 0 {
+        return Vector3::zeros();
+    }
+    let d = (then - start) / n as f64;
+    Vector3::new(d.x, 0.0, d.z)
 }
 
 /// What a data set holds (`manifest.json`).
@@ -694,5 +719,56 @@ mod tests {
             assert!((a - r * b).norm() < 1e-9, "{a:?} vs {:?}", r * b);
         }
         assert_eq!(scene.colliders[0].times_s, vec![-0.5, 0.5]);
+    }
+
+    #[test]
+    fn a_later_clip_start_carries_garments_along_with_the_walking_bodies() {
+        let g = flat_sheet(
+            "s",
+            0.2,
+            0.1,
+            Vector3::new(0.3, 1.0, 0.0),
+            Fabric::default(),
+        );
+        let mut scene = Scene {
+            garments: vec![g.clone()],
+            ..Scene::default()
+        };
+        // A body walking 1 m along x and rising 0.2 m in its 1 s clip, and a static floor
+        // (which must not hold the centroid back).
+        let mut body = crate::scene::Collider::sphere("body", Vector3::zeros(), 0.1, 1);
+        body.times_s = vec![0.0, 1.0];
+        let moved = body.frames[0]
+            .iter()
+            .map(|p| p + nalgebra::Vector3::new(1.0f32, 0.2, 0.0))
+            .collect();
+        body.frames.push(moved);
+        scene.colliders.push(body);
+        scene.colliders.push(crate::scene::Collider::fixed(
+            "floor",
+            vec![Vector3::zeros(), Vector3::x(), Vector3::z()],
+            vec![[0, 1, 2]],
+        ));
+        let v = Variation {
+            clip_start_s: 0.5,
+            garment_offset_m: [0.0, 0.0, 0.25],
+            ..Variation::default()
+        };
+        v.apply(&mut scene);
+        let before = mesh_garment(&g, &MeshOptions::with_edge(0.05)).expect("mesh");
+        let after = mesh_garment(&scene.garments[0], &MeshOptions::with_edge(0.05)).expect("mesh");
+        // Half the walk along x (not the rise), plus the offset asked for.
+        for (a, b) in after.positions.iter().zip(&before.positions) {
+            let d = a - b;
+            assert!((d - Vector3::new(0.5, 0.0, 0.25)).norm() < 1e-6, "{d:?}");
+        }
+        // From the start of the clip nothing moves.
+        let mut still = Scene {
+            garments: vec![g.clone()],
+            colliders: scene.colliders.clone(),
+            ..Scene::default()
+        };
+        Variation::default().apply(&mut still);
+        assert_eq!(still.garments[0].panels[0].placement, g.panels[0].placement);
     }
 }
