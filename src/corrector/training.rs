@@ -319,12 +319,14 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
             v.seq.dir.display()
         ));
     }
-    if let Some(v) = validation.iter().find(|v| {
-        sets.iter().any(|s| {
-            s.seq.dir.canonicalize().ok().is_some()
-                && s.seq.dir.canonicalize().ok() == v.seq.dir.canonicalize().ok()
-        })
-    }) {
+    let trained: Vec<PathBuf> = sets
+        .iter()
+        .filter_map(|s| s.seq.dir.canonicalize().ok())
+        .collect();
+    if let Some(v) = validation
+        .iter()
+        .find(|v| v.seq.dir.canonicalize().is_ok_and(|d| trained.contains(&d)))
+    {
         return bad(&format!(
             "{} is both a training and a validation set",
             v.seq.dir.display()
@@ -490,12 +492,16 @@ pub fn save_model(
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join(NORMALISATION_FILE), norm)?;
     write_json(&dir.join(CONFIG_FILE), cfg)?;
-    let weights = dir.join(WEIGHTS_FILE);
-    let tmp = dir.join("model.bpk.tmp");
+    write_weights(net, &dir.join(WEIGHTS_FILE))
+}
+
+/// Writes `net`'s weights to `path` (burnpack), whole, then renamed into place.
+fn write_weights(net: &CorrectorNet, path: &Path) -> Result<()> {
+    let tmp = path.with_extension("bpk.tmp");
     net.valid()
         .save_file(&tmp)
         .map_err(|e| Error::Invalid(format!("{}: {e}", tmp.display())))?;
-    std::fs::rename(&tmp, &weights).map_err(|e| Error::io(&weights, e))
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
 }
 
 /// Writes `value` as pretty JSON, atomically (shared by the model directories' trainers).
@@ -702,13 +708,7 @@ impl Trainer<'_> {
             t.elapsed().as_secs_f64()
         );
         if better && pooled.is_finite() {
-            let dir = self.out.join(CHECKPOINT_DIR);
-            let tmp = dir.join("best.bpk.tmp");
-            self.net
-                .clone()
-                .save_file(&tmp)
-                .map_err(|e| Error::Invalid(format!("{}: {e}", tmp.display())))?;
-            std::fs::rename(&tmp, dir.join(BEST_FILE)).map_err(|e| Error::io(&tmp, e))?;
+            write_weights(&self.net, &self.out.join(CHECKPOINT_DIR).join(BEST_FILE))?;
             self.best = Some(self.net.clone());
             self.position.best = Some((pooled, phase, step));
         }
@@ -839,9 +839,6 @@ impl Trainer<'_> {
     }
 }
 
-/// One phase-2 update: rolls out `window` interleaved steps from the ground-truth M_int at
-/// `set.seq.steps[start]` and steps the optimiser on the mean window loss.
-#[allow(clippy::too_many_arguments)]
 /// The phase-2 target p̄ = Δv + (Δx − hΔv)/τ ([`TrainingConfig::rollout_tau_steps`]) per
 /// vertex, from the ground truth (`x_gt`, `v_gt`) and the coarse step (`x_c`, `v_c`).
 pub fn pull_back_target(
@@ -862,6 +859,8 @@ pub fn pull_back_target(
         .collect()
 }
 
+/// One phase-2 update: rolls out `cfg.window` interleaved steps from the ground-truth M_int
+/// at `set.seq.steps[start]` and steps the optimiser on the mean window loss.
 fn rollout_window(
     net: &mut CorrectorNet,
     optim: &mut burn::optim::ModuleOptimizer,

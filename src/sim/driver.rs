@@ -11,6 +11,21 @@ use crate::garment::Fabric;
 use crate::mesh::{mesh_garment, ClothMesh, MeshOptions};
 use crate::scene::{Collider, Scene};
 
+/// The colliders' triangles with their points `points` (one point list per collider).
+fn collider_frames<'a>(
+    colliders: &'a [Collider],
+    points: &'a [Vec<Vector3<f64>>],
+) -> Vec<ColliderFrame<'a>> {
+    colliders
+        .iter()
+        .zip(points)
+        .map(|(c, p)| ColliderFrame {
+            points: p,
+            triangles: &c.triangles,
+        })
+        .collect()
+}
+
 /// A scene ready to simulate.
 pub struct Simulation {
     /// The simulator.
@@ -115,17 +130,8 @@ impl Simulation {
                 c.positions_at(t0 + k as f64 * dt, out);
             }
         }
-        let frames = |k: usize| -> Vec<ColliderFrame<'_>> {
-            self.colliders
-                .iter()
-                .zip(&self.buffers[k])
-                .map(|(c, p)| ColliderFrame {
-                    points: p,
-                    triangles: &c.triangles,
-                })
-                .collect()
-        };
-        let (start, end) = (frames(0), frames(1));
+        let start = collider_frames(&self.colliders, &self.buffers[0]);
+        let end = collider_frames(&self.colliders, &self.buffers[1]);
         let (mut next, stats) = self.sim.step(state, &start, &end)?;
         next.t_s = t0 + dt;
         Ok((next, stats))
@@ -179,15 +185,7 @@ impl Simulation {
     /// once every seam pair is within `gap_m` or after `max_s` of simulated time.
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
         let held = self.colliders_held();
-        let frames: Vec<ColliderFrame<'_>> = self
-            .colliders
-            .iter()
-            .zip(&held)
-            .map(|(c, p)| ColliderFrame {
-                points: p,
-                triangles: &c.triangles,
-            })
-            .collect();
+        let frames = collider_frames(&self.colliders, &held);
         let mut out = DressStats::default();
         let garments = self.sim.model.part_ranges();
         let wrapped = wrap_panels_around_body(
@@ -277,15 +275,7 @@ impl Simulation {
         let t_start = self.state.t_s;
         let gravity = self.sim.params.gravity_m_s2;
         let dt = self.sim.params.dt_s;
-        let frames: Vec<ColliderFrame<'_>> = self
-            .colliders
-            .iter()
-            .zip(held)
-            .map(|(c, p)| ColliderFrame {
-                points: p,
-                triangles: &c.triangles,
-            })
-            .collect();
+        let frames = collider_frames(&self.colliders, held);
         out.initial_seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
         let max_steps = (max_s / dt).ceil() as usize;
         self.sim.params.gravity_m_s2 = Vector3::zeros();
