@@ -17,13 +17,12 @@ DATA=${DATA:-data/skirt}
 OUT=${OUT:-samples/models/skirt}
 PATTERN=../shared/data/patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json
 AVATAR=../shared/data/avatars/mh_walk_train_baked.usdc
+COMMON=(--avatar "$AVATAR" --coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
 
-"$BIN" dataset "$PATTERN" --avatar "$AVATAR" --coarse-mm 20 --fine-mm 2.5 --fast \
-  --no-self-collision --frames 45 -o "$DATA/walk"
+"$BIN" dataset "$PATTERN" "${COMMON[@]}" --frames 45 -o "$DATA/walk"
 # A second sequence, never trained on: dressed 2 s into the walk (the garment is carried to
 # where the avatar has walked), the walk from 2 s to 3 s.
-"$BIN" dataset "$PATTERN" --avatar "$AVATAR" --coarse-mm 20 --fine-mm 2.5 --fast \
-  --no-self-collision --clip-start-s 2.0 --frames 30 -o "$DATA/walk_2s"
+"$BIN" dataset "$PATTERN" "${COMMON[@]}" --clip-start-s 2.0 --frames 30 -o "$DATA/walk_2s"
 
 mkdir -p "$OUT"
 # The three balls' ISR recipe (geometry channels, no initialisation input, 4 × 4 pixel blocks)
@@ -41,8 +40,7 @@ mkdir -p "$OUT"
   --rollout-lr 1e-4 --take-back 0.5
 # Its held-out sequence: dressed 1 s into the walk, 30 frames (about 45 min), then the
 # interleaved rollout against the simulation alone.
-"$BIN" dataset "$PATTERN" --avatar "$AVATAR" --coarse-mm 20 --fine-mm 2.5 --fast \
-  --no-self-collision --clip-start-s 1.0 --frames 30 -o "$DATA/walk_1s"
+"$BIN" dataset "$PATTERN" "${COMMON[@]}" --clip-start-s 1.0 --frames 30 -o "$DATA/walk_1s"
 "$BIN" rollout --model "$OUT/corrector" --data "$DATA/walk_1s"
 
 # The manifest names the shared data by absolute path; relative to the repository it travels.
