@@ -691,3 +691,167 @@ fn validation_saves_the_best_network_and_a_resumed_run_keeps_it() {
     let mean = e.iter().sum::<f64>() / e.len() as f64;
     assert!((mean - best).abs() < 1e-9 * best, "{mean} vs {best}");
 }
+
+/// A network's float parameters, in visit order.
+fn parameters(dir: &std::path::Path) -> Vec<Vec<f32>> {
+    use burn::module::{Module, ModuleVisitor, Param};
+    struct Collect(Vec<Vec<f32>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, param: &Param<burn::tensor::Tensor<D>>) {
+            self.0
+                .push(param.val().into_data().try_to_vec::<f32>().expect("f32"));
+        }
+    }
+    let device = default_device().expect("device");
+    let (net, _, _) = clothsr::corrector::inference::load_net(dir, &device).expect("load");
+    let mut c = Collect(Vec::new());
+    net.visit(&mut c);
+    c.0
+}
+
+fn max_difference(a: &[Vec<f32>], b: &[Vec<f32>]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .flat_map(|(a, b)| {
+            assert_eq!(a.len(), b.len());
+            a.iter().zip(b).map(|(x, y)| (x - y).abs())
+        })
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
+    let dir = dataset();
+    let sets = || {
+        let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+        let t0 = sim.state.t_s;
+        let seq = Sequence::load(&dir, None, &sim).expect("load");
+        vec![TrainSet {
+            seq,
+            sim: Some((sim, t0)),
+        }]
+    };
+    let go = |cfg: &TrainingConfig, out: &std::path::Path| {
+        train(cfg, &mut sets(), &[], out, |_| ControlFlow::Continue(())).expect("train")
+    };
+    let tmp = tempfile::tempdir().expect("tmp");
+    let gated = CorrectorConfig::new()
+        .with_latent(16)
+        .with_steps(2)
+        .with_decoder(Some(Decoder::Gated))
+        .with_take_back(Some(0.5));
+    let base = tmp.path().join("base");
+    go(
+        &TrainingConfig::new(gated.clone())
+            .with_steps(20)
+            .with_batch(2)
+            .with_lr_start(3e-3)
+            .with_lr_end(1e-3),
+        &base,
+    );
+    let tune = |iters: usize| {
+        TrainingConfig::new(gated.clone())
+            .with_steps(0)
+            .with_rollout_iters(iters)
+            .with_window(3)
+            .with_rollout_lr(3e-3)
+            .with_checkpoint_every(10)
+            .with_init_from(Some(base.clone()))
+    };
+
+    // A warm start from another network's sizes or coarse membrane is refused, naming the
+    // model it would start from.
+    let other = TrainingConfig::new(gated.clone().with_latent(32))
+        .with_steps(0)
+        .with_rollout_iters(2)
+        .with_window(3)
+        .with_init_from(Some(base.clone()));
+    let e = train(&other, &mut sets(), &[], &tmp.path().join("x"), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("other sizes");
+    assert!(e.to_string().contains("config.json") && e.to_string().contains("latent 16"));
+    let soft = tune(2).with_coarse_compression(Some(0.1));
+    let e = train(&soft, &mut sets(), &[], &tmp.path().join("y"), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("other membrane");
+    assert!(e.to_string().contains("compression"), "{e}");
+
+    // Two and three phase-2 windows from the base network: the same first two windows.
+    let (two, three, mean) = (
+        tmp.path().join("two"),
+        tmp.path().join("three"),
+        tmp.path().join("mean"),
+    );
+    let s2 = go(&tune(2), &two);
+    go(&tune(3), &three);
+    assert_eq!(s2.averaged, 0);
+    // Training starts from the base network's statistics, not ones fitted anew.
+    let norm = |d: &std::path::Path| std::fs::read(d.join("normalisation.json")).expect("norm");
+    assert_eq!(norm(&two), norm(&base));
+    let (p0, p2, p3) = (parameters(&base), parameters(&two), parameters(&three));
+    assert!(max_difference(&p0, &p2) > 1e-5, "phase 2 moved nothing");
+    assert!(max_difference(&p2, &p3) > 1e-5);
+    // One window less from a fresh network is not the same: the start was the base's.
+    let fresh = tmp.path().join("fresh");
+    go(&tune(2).with_init_from(None), &fresh);
+    assert!(max_difference(&parameters(&fresh), &p2) > 1e-3);
+
+    // Averaging from window 1 saves the mean of the networks after windows 2 and 3.
+    let s = go(&tune(3).with_average_from(Some(1)), &mean);
+    assert_eq!(s.averaged, 2);
+    let expected: Vec<Vec<f32>> = p2
+        .iter()
+        .zip(&p3)
+        .map(|(a, b)| a.iter().zip(b).map(|(a, b)| 0.5 * (a + b)).collect())
+        .collect();
+    let pm = parameters(&mean);
+    assert!(max_difference(&pm, &expected) < 1e-6);
+    assert!(max_difference(&pm, &p3) > 1e-6);
+
+    // Interrupted after window 2 (one network averaged), resumed: the mean goes on from the
+    // checkpoint's.
+    let resumed = tmp.path().join("resumed");
+    let cfg = tune(3).with_average_from(Some(1));
+    let first = train(&cfg, &mut sets(), &[], &resumed, |p| {
+        if p.phase == 2 && p.step == 2 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("first part");
+    assert!(first.interrupted);
+    // The checkpoint's mean is the one network averaged so far, window 2's.
+    let ck = tmp.path().join("checkpoint_mean");
+    std::fs::create_dir_all(&ck).expect("dir");
+    for f in ["config.json", "normalisation.json"] {
+        std::fs::copy(resumed.join(f), ck.join(f)).expect("copy");
+    }
+    std::fs::copy(
+        resumed.join("checkpoint/average.bpk"),
+        ck.join(WEIGHTS_FILE),
+    )
+    .expect("copy");
+    assert!(max_difference(&parameters(&ck), &p2) < 1e-6);
+    let rest = go(&cfg, &resumed);
+    assert_eq!(rest.averaged, 2);
+
+    // Rolled out as at inference: without a take-back scale or tension limit the gating is
+    // the raw network's, bit for bit; with the base's scale 0.5 the windows differ.
+    let raw = gated
+        .clone()
+        .with_take_back(None)
+        .with_tension_ramp(Some(0.0));
+    let run = |model: &CorrectorConfig, as_inference: bool, name: &str| {
+        let mut c = tune(2).with_rollout_as_inference(Some(as_inference));
+        c.model = model.clone();
+        let out = tmp.path().join(name);
+        go(&c, &out);
+        parameters(&out)
+    };
+    assert_eq!(run(&raw, true, "raw_inf"), run(&raw, false, "raw"));
+    assert!(max_difference(&run(&gated, true, "gated_inf"), &p2) > 1e-6);
+}

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use burn::config::Config;
 use clothsr::corrector::data::Sequence;
 use clothsr::corrector::training::{
     train, Progress, TrainSet, TrainingConfig, ValidationSet, VALIDATION_LOG,
@@ -172,13 +173,15 @@ pub struct CorrectorArgs {
     /// the step's velocity change taken back falls linearly to zero as the mean strain of a
     /// vertex's edges after the step rises from 0 to this (the fine cloth's wrinkles take up
     /// compression, not tension); 0: no limit.
-    #[arg(long, default_value_t = clothsr::corrector::model::DEFAULT_TENSION_RAMP)]
-    tension_ramp: f64,
+    /// [default: 0.01, or the `--init` model's]
+    #[arg(long)]
+    tension_ramp: Option<f64>,
     /// The gated decoder's take-back scale at inference, saved with the model: the share of
     /// the step's velocity change taken back is multiplied by this, in (0, 1] (taking back
     /// most of it also takes back the cloth's restoring force, and the corrected cloth drifts).
-    #[arg(long, default_value_t = 1.0)]
-    take_back: f64,
+    /// [default: 1, or the `--init` model's]
+    #[arg(long)]
+    take_back: Option<f64>,
     /// Held-out data sets to select the network on (repeat for several; never a training
     /// set): at the end of each phase and every `--validate-every` phase-2 windows the
     /// network is rolled out interleaved with the simulator on them, and the one closest to
@@ -197,8 +200,23 @@ pub struct CorrectorArgs {
     /// The coarse simulator's membrane stiffness under compression, as a factor (0, 1] of its
     /// stretch stiffness: below 1 the coarse mesh gives way to the shortening that the fine
     /// cloth takes up in wrinkles; saved with the model, which then runs with it.
-    #[arg(long, default_value_t = 1.0)]
-    coarse_compression: f64,
+    /// [default: 1, or the `--init` model's]
+    #[arg(long)]
+    coarse_compression: Option<f64>,
+    /// Start from this trained corrector (a model directory): its network sizes, decoder,
+    /// inference settings, coarse membrane, weights and normalisation, instead of fresh
+    /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
+    #[arg(long, value_name = "MODEL", conflicts_with_all = ["latent", "mp_steps", "attention", "decoder"])]
+    init: Option<PathBuf>,
+    /// Save the mean of the phase-2 weights after every window past this one (stochastic
+    /// weight averaging) instead of the last weights; with `--val-data`, the mean is what
+    /// is validated.
+    #[arg(long, value_name = "K")]
+    average_from: Option<usize>,
+    /// Phase 2 rolls the corrector out as it runs at inference (the gated decoder's
+    /// take-back scaled by the tension limit and `--take-back`) instead of the raw network.
+    #[arg(long)]
+    rollout_as_inference: bool,
 }
 
 /// Runs `train`.
@@ -218,30 +236,59 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         a.latent > 0 && a.mp_steps > 0,
         "--latent and --mp-steps must be at least 1"
     );
-    let cfg = TrainingConfig::new(
-        CorrectorConfig::new()
+    // With --init, the network and the coarse membrane are the model's; inference settings
+    // given here override its own.
+    let init = match &a.init {
+        Some(dir) => {
+            let path = dir.join(clothsr::corrector::inference::CONFIG_FILE);
+            Some(
+                TrainingConfig::load(&path)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+                    .with_context(|| {
+                        format!("{} is not a corrector to start from", dir.display())
+                    })?,
+            )
+        }
+        None => None,
+    };
+    let mut model = match &init {
+        Some(old) => old.model.clone(),
+        None => CorrectorConfig::new()
             .with_latent(a.latent)
             .with_steps(a.mp_steps)
             .with_attention(a.attention)
             .with_decoder(Some(a.decoder))
-            .with_tension_ramp(Some(a.tension_ramp))
-            .with_take_back((a.take_back != 1.0).then_some(a.take_back)),
-    )
-    .with_steps(a.steps)
-    .with_batch(a.batch)
-    .with_lr_start(a.lr_start)
-    .with_lr_end(a.lr_end)
-    .with_noise_ratio(a.noise_ratio)
-    .with_patch_nodes(a.patch_nodes)
-    .with_rollout_iters(a.rollout_iters)
-    .with_window(a.window)
-    .with_rollout_lr(a.rollout_lr)
-    .with_rollout_stop_loss(a.rollout_stop_loss)
-    .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
-    .with_seed(a.seed)
-    .with_coarse_compression((a.coarse_compression != 1.0).then_some(a.coarse_compression))
-    .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
-    .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
+            .with_tension_ramp(Some(clothsr::corrector::model::DEFAULT_TENSION_RAMP)),
+    };
+    if let Some(r) = a.tension_ramp {
+        model = model.with_tension_ramp(Some(r));
+    }
+    if let Some(k) = a.take_back {
+        model = model.with_take_back((k != 1.0).then_some(k));
+    }
+    let compression = a
+        .coarse_compression
+        .or_else(|| init.as_ref().map(TrainingConfig::compression_factor))
+        .unwrap_or(1.0);
+    let cfg = TrainingConfig::new(model)
+        .with_steps(a.steps)
+        .with_batch(a.batch)
+        .with_lr_start(a.lr_start)
+        .with_lr_end(a.lr_end)
+        .with_noise_ratio(a.noise_ratio)
+        .with_patch_nodes(a.patch_nodes)
+        .with_rollout_iters(a.rollout_iters)
+        .with_window(a.window)
+        .with_rollout_lr(a.rollout_lr)
+        .with_rollout_stop_loss(a.rollout_stop_loss)
+        .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
+        .with_seed(a.seed)
+        .with_coarse_compression((compression != 1.0).then_some(compression))
+        .with_init_from(a.init.clone())
+        .with_average_from(a.average_from)
+        .with_rollout_as_inference(a.rollout_as_inference.then_some(true))
+        .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
+        .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
     let mut validation = Vec::new();
     for dir in &a.val_data {
@@ -325,6 +372,12 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             "kept the network of phase {phase} step {step}: {mm:.3} mm interleaved on the \
              validation sets (all validations in {})",
             a.output.join(VALIDATION_LOG).display()
+        );
+    }
+    if summary.averaged > 0 {
+        tracing::info!(
+            "saved the mean weights of the last {} phase-2 windows",
+            summary.averaged
         );
     }
     Ok(())

@@ -192,6 +192,27 @@ pub fn load_net(
     Ok((net, norm, config))
 }
 
+/// Per-vertex weights on the gated decoder's take-back at positions `x` of `graph`'s mesh, as
+/// a network with `config` runs at inference: the tension limit
+/// ([`CorrectorConfig::tension_ramp`]) times the take-back scale
+/// ([`CorrectorConfig::take_back`]); `None` when neither applies.
+pub fn take_back_weights(
+    config: &CorrectorConfig,
+    graph: &MeshGraph,
+    x: &[Vector3<f64>],
+) -> Option<Vec<f32>> {
+    let scale = config.take_back();
+    let mut w = match config.tension_ramp() {
+        Some(r) => graph.tension_weight(x, r),
+        None if scale.is_some() => vec![1.0; x.len()],
+        None => return None,
+    };
+    if let Some(k) = scale {
+        w.iter_mut().for_each(|w| *w *= k as f32);
+    }
+    Some(w)
+}
+
 impl Corrector {
     /// Loads the model in `dir` for `mesh` (the coarse simulation mesh).
     pub fn load(dir: &Path, mesh: &ClothMesh) -> Result<Corrector> {
@@ -291,20 +312,10 @@ impl Corrector {
         Ok(p)
     }
 
-    /// Per-vertex weights on the gated decoder's take-back at positions `x`: the tension
-    /// limit ([`CorrectorConfig::tension_ramp`]) times the take-back scale
-    /// ([`CorrectorConfig::take_back`]); `None` when neither applies.
+    /// Per-vertex weights on the gated decoder's take-back at positions `x`
+    /// ([`take_back_weights`]).
     fn take_back_weights(&self, x: &[Vector3<f64>]) -> Option<Vec<f32>> {
-        let scale = self.config.take_back();
-        let mut w = match self.config.tension_ramp() {
-            Some(r) => self.graph.tension_weight(x, r),
-            None if scale.is_some() => vec![1.0; x.len()],
-            None => return None,
-        };
-        if let Some(k) = scale {
-            w.iter_mut().for_each(|w| *w *= k as f32);
-        }
-        Some(w)
+        take_back_weights(&self.config, &self.graph, x)
     }
 
     /// Corrects M_c = `state`, the result of a step of `sim` from velocities `start_v`, in

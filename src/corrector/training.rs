@@ -13,6 +13,10 @@
 //!   correction that brings the rollout back onto the ground truth. Gradients flow through the
 //!   network at every step (the simulator's output is data).
 //!
+//! * Beyond the paper: a warm start from a trained corrector ([`TrainingConfig::init_from`]),
+//!   an average of the phase-2 weights ([`TrainingConfig::average_from`]) and phase-2 windows
+//!   rolled out as at inference ([`TrainingConfig::rollout_as_inference`]).
+//!
 //! The output directory holds `config.json`, `normalisation.json`, `model.bpk`, `log.csv`
 //! (phase, step, learning rate, loss, elapsed seconds) and, while training, `checkpoint/`
 //! (weights, optimiser state, position), from which an interrupted run resumes.
@@ -23,7 +27,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::config::Config;
-use burn::module::Module;
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Vector3;
@@ -35,7 +39,8 @@ use serde::{Deserialize, Serialize};
 use super::data::{vectors, Sequence};
 use super::graph::{body_proximity, step_change, MeshGraph};
 use super::inference::{
-    default_device, features, read_json, Corrector, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE,
+    default_device, features, load_net, read_json, take_back_weights, Corrector, CONFIG_FILE,
+    NORMALISATION_FILE, WEIGHTS_FILE,
 };
 use super::model::{inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
@@ -112,6 +117,25 @@ pub struct TrainingConfig {
     pub validate_every: Option<usize>,
     /// Frames of each validation set rolled out (`None`: all loaded).
     pub validation_frames: Option<usize>,
+    /// A trained corrector (model directory) whose weights and normalisation training starts
+    /// from, instead of fresh weights and statistics fitted to the training data: fine-tuning,
+    /// typically more phase-2 windows (`steps` 0) or new sequences. Its network must have
+    /// [`Self::model`]'s sizes and decoder, and it must have been trained beside the same
+    /// coarse membrane. Optional so that older configs load.
+    pub init_from: Option<PathBuf>,
+    /// Phase-2 window after which the saved network is the running mean of the weights after
+    /// every later window (stochastic weight averaging, Izmailov et al. 2018) instead of the
+    /// last weights: networks a few windows apart differ by up to 2× in long-rollout error
+    /// (the three-balls README), and their mean is a smoother pick than any one of them. With
+    /// validation, the mean is what is validated. `None`: no averaging.
+    pub average_from: Option<usize>,
+    /// Phase 2 rolls the corrector out as it runs at inference: the gated decoder's take-back
+    /// share scaled by the tension limit and the take-back scale
+    /// ([`CorrectorConfig::tension_ramp`], [`CorrectorConfig::take_back`]), so that the window
+    /// visits the states the interleaved run will visit and the loss is on the correction it
+    /// will apply. `None` / false: the raw network (phase 1 always trains it raw: its one-step
+    /// targets hold the coarse mesh's spring-back out of M_int, which the limit would hide).
+    pub rollout_as_inference: Option<bool>,
 }
 
 impl TrainingConfig {
@@ -200,6 +224,9 @@ pub struct Summary {
     /// With validation: every validation's pooled error, (phase, step or window, mm; infinite
     /// where the rollout diverged).
     pub validations: Vec<(u8, usize, f64)>,
+    /// Phase-2 networks whose mean weights were saved ([`TrainingConfig::average_from`]; 0:
+    /// the last network's, or the best validated one's).
+    pub averaged: usize,
 }
 
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
@@ -213,11 +240,17 @@ struct Position {
     /// The last validation point done (phase, step), so that a resumed run does not repeat it.
     #[serde(default)]
     validated: Option<(u8, usize)>,
+    /// Phase-2 networks in the weight average ([`TrainingConfig::average_from`]; their mean
+    /// is `checkpoint/average.bpk`).
+    #[serde(default)]
+    averaged: usize,
 }
 
 const CHECKPOINT_DIR: &str = "checkpoint";
 /// The best validated network's weights in the checkpoint directory.
 const BEST_FILE: &str = "best.bpk";
+/// The running mean of the phase-2 weights in the checkpoint directory.
+const AVERAGE_FILE: &str = "average.bpk";
 /// The validation log in a model directory.
 pub const VALIDATION_LOG: &str = "validation.csv";
 
@@ -297,6 +330,8 @@ struct Trainer<'a> {
     best: Option<CorrectorNet>,
     /// Every validation of this call, for the summary.
     validations: Vec<(u8, usize, f64)>,
+    /// The running mean of the phase-2 weights ([`TrainingConfig::average_from`]), once begun.
+    average: Option<WeightAverage>,
 }
 
 fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) -> Result<()> {
@@ -358,7 +393,146 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
     {
         return bad("phase 2 needs a coarse simulator and a sequence longer than the window");
     }
+    if cfg.average_from.is_some_and(|k| k >= cfg.rollout_iters) {
+        return bad("average_from must be below rollout_iters (weights are averaged in phase 2)");
+    }
     Ok(())
+}
+
+/// The network, statistics and configuration of the trained corrector `cfg` starts from
+/// ([`TrainingConfig::init_from`]), checked against `cfg`; `None` without one.
+fn warm_start(
+    cfg: &TrainingConfig,
+    device: &Device,
+) -> Result<Option<(CorrectorNet, Normalisation)>> {
+    let Some(dir) = cfg.init_from.as_deref() else {
+        return Ok(None);
+    };
+    let (net, norm, old) = load_net(dir, device)?;
+    let config_path = dir.join(CONFIG_FILE);
+    let (a, b) = (&old.model, &cfg.model);
+    if (
+        a.latent,
+        a.hidden_layers,
+        a.steps,
+        a.attention,
+        a.decoder_kind(),
+    ) != (
+        b.latent,
+        b.hidden_layers,
+        b.steps,
+        b.attention,
+        b.decoder_kind(),
+    ) {
+        return Err(Error::bad_input(
+            &config_path,
+            format!(
+                "the network to start from has latent {}, {} hidden layers, {} blocks, \
+                 attention {}, decoder {:?}; the training asks for {}, {}, {}, {}, {:?}",
+                a.latent,
+                a.hidden_layers,
+                a.steps,
+                a.attention,
+                a.decoder_kind(),
+                b.latent,
+                b.hidden_layers,
+                b.steps,
+                b.attention,
+                b.decoder_kind()
+            ),
+        ));
+    }
+    if old.compression_factor() != cfg.compression_factor() {
+        return Err(Error::bad_input(
+            &config_path,
+            format!(
+                "the network to start from was trained beside a coarse membrane with \
+                 compression factor {}, the training asks for {}",
+                old.compression_factor(),
+                cfg.compression_factor()
+            ),
+        ));
+    }
+    Ok(Some((net, norm)))
+}
+
+/// A running mean of a network's float parameters (stochastic weight averaging), in the
+/// order [`Module::visit`] gives them; each kept in f32, so that a mean saved to a checkpoint
+/// and loaded again continues bit for bit.
+#[derive(Default)]
+struct WeightAverage {
+    /// Networks averaged.
+    count: usize,
+    mean: Vec<Vec<f32>>,
+}
+
+/// Collects a module's float parameters ([`WeightAverage`]).
+struct CollectFloats(Vec<Vec<f32>>);
+
+impl ModuleVisitor for CollectFloats {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        self.0.push(param.val().into_data().iter::<f32>().collect());
+    }
+}
+
+/// Replaces a module's float parameters by given values ([`WeightAverage`]).
+struct ReplaceFloats<'a> {
+    values: &'a [Vec<f32>],
+    next: usize,
+}
+
+impl ModuleMapper for ReplaceFloats<'_> {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let Some(values) = self.values.get(self.next) else {
+            return param;
+        };
+        self.next += 1;
+        param.map(|t| {
+            let (shape, device) = (t.shape(), t.device());
+            Tensor::from_data(TensorData::new(values.clone(), shape), &device)
+        })
+    }
+}
+
+impl WeightAverage {
+    /// The parameters of `net`.
+    fn floats(net: &CorrectorNet) -> Vec<Vec<f32>> {
+        let mut c = CollectFloats(Vec::new());
+        net.visit(&mut c);
+        c.0
+    }
+
+    /// A mean of the one network `net` (resuming: `count` networks whose mean it holds).
+    fn of(net: &CorrectorNet, count: usize) -> Self {
+        WeightAverage {
+            count,
+            mean: Self::floats(net),
+        }
+    }
+
+    /// Adds `net` to the mean.
+    fn add(&mut self, net: &CorrectorNet) {
+        let w = Self::floats(net);
+        self.count += 1;
+        if self.count == 1 || self.mean.len() != w.len() {
+            self.mean = w;
+            return;
+        }
+        let k = self.count as f64;
+        for (m, w) in self.mean.iter_mut().zip(&w) {
+            for (m, w) in m.iter_mut().zip(w) {
+                *m = (f64::from(*m) + (f64::from(*w) - f64::from(*m)) / k) as f32;
+            }
+        }
+    }
+
+    /// `net` with the mean's parameters.
+    fn apply(&self, net: CorrectorNet) -> CorrectorNet {
+        net.map(&mut ReplaceFloats {
+            values: &self.mean,
+            next: 0,
+        })
+    }
 }
 
 /// Trains a corrector on `sets` into `out` (resuming from `out/checkpoint` when the
@@ -395,25 +569,44 @@ pub fn train(
         ));
     }
     let norm_path = out.join(NORMALISATION_FILE);
+    let device = default_device()?.autodiff();
+    device.seed(cfg.seed);
+    let start = if resuming {
+        None
+    } else {
+        warm_start(cfg, &device)?
+    };
     let norm = if resuming {
         read_json(&norm_path)?
     } else {
-        let norm = fit_normalisation(sets);
+        let norm = match &start {
+            Some((_, norm)) => norm.clone(),
+            None => fit_normalisation(sets),
+        };
         write_json(&norm_path, &norm)?;
         write_json(&config_path, cfg)?;
         norm
     };
     let rms: f64 = sets.iter().map(|s| s.seq.rms_correction_m()).sum::<f64>() / sets.len() as f64;
-    let device = default_device()?.autodiff();
-    device.seed(cfg.seed);
-    let mut net = cfg.model.init(&device);
+    let mut net = match start {
+        Some((net, _)) => net,
+        None => cfg.model.init(&device),
+    };
     let mut optim = AdamConfig::new().init();
+    let mut average = None;
     if resuming {
         let dir = out.join(CHECKPOINT_DIR);
         net = crate::corrector::inference::load_weights(net, &dir.join(WEIGHTS_FILE))?;
         optim = optim
             .load(dir.join("optim.bpk"))
             .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+        if position.averaged > 0 {
+            let avg = crate::corrector::inference::load_weights(
+                cfg.model.init(&device),
+                &dir.join(AVERAGE_FILE),
+            )?;
+            average = Some(WeightAverage::of(&avg, position.averaged));
+        }
         tracing::info!(
             "resuming: phase 1 at step {}, phase 2 at window {}",
             position.phase1_done,
@@ -455,6 +648,7 @@ pub fn train(
         stopped: false,
         best,
         validations: Vec::new(),
+        average,
     };
     let mut summary = Summary {
         noise_std_m: t.noise_std_m,
@@ -476,7 +670,9 @@ pub fn train(
         return Ok(summary);
     }
     summary.validation_best = t.position.best;
-    save_model(out, cfg, &t.norm, t.best.as_ref().unwrap_or(&t.net))?;
+    summary.averaged = t.average.as_ref().map_or(0, |a| a.count);
+    let last = t.kept_net();
+    save_model(out, cfg, &t.norm, t.best.as_ref().unwrap_or(&last))?;
     std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
     Ok(summary)
 }
@@ -642,7 +838,18 @@ impl Trainer<'_> {
             .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))?;
         std::fs::rename(&w, dir.join(WEIGHTS_FILE)).map_err(|e| Error::io(&w, e))?;
         std::fs::rename(&o, dir.join("optim.bpk")).map_err(|e| Error::io(&o, e))?;
+        if let Some(avg) = &self.average {
+            write_weights(&avg.apply(self.net.clone()), &dir.join(AVERAGE_FILE))?;
+        }
         write_json(&dir.join("state.json"), &self.position)
+    }
+
+    /// The network training would save now: the weight average once begun, else the last.
+    fn kept_net(&self) -> CorrectorNet {
+        match &self.average {
+            Some(avg) => avg.apply(self.net.clone()),
+            None => self.net.clone(),
+        }
     }
 
     /// Validation point (`phase`, `step`): rolls the current network out interleaved on every
@@ -655,7 +862,8 @@ impl Trainer<'_> {
         }
         let t = Instant::now();
         let device = default_device()?;
-        let net = self.net.valid();
+        let kept = self.kept_net();
+        let net = kept.valid();
         let (mut sum, mut frames, mut diverged) = (0.0, 0usize, false);
         let mut rows = Vec::new();
         for v in validation {
@@ -708,8 +916,8 @@ impl Trainer<'_> {
             t.elapsed().as_secs_f64()
         );
         if better && pooled.is_finite() {
-            write_weights(&self.net, &self.out.join(CHECKPOINT_DIR).join(BEST_FILE))?;
-            self.best = Some(self.net.clone());
+            write_weights(&kept, &self.out.join(CHECKPOINT_DIR).join(BEST_FILE))?;
+            self.best = Some(kept);
             self.position.best = Some((pooled, phase, step));
         }
         self.validations.push((phase, step, pooled));
@@ -797,6 +1005,12 @@ impl Trainer<'_> {
             self.position.phase2_done += 1;
             losses.push(value);
             let it = self.position.phase2_done;
+            if cfg.average_from.is_some_and(|k| it > k) {
+                self.average
+                    .get_or_insert_with(WeightAverage::default)
+                    .add(&self.net);
+                self.position.averaged += 1;
+            }
             if it.is_multiple_of(10) || it == cfg.rollout_iters {
                 let recent = mean(&losses[losses.len().saturating_sub(10)..]);
                 self.log(2, it, cfg.rollout_lr, recent)?;
@@ -901,7 +1115,12 @@ fn rollout_window(
         let (nodes, edges) = features(&seq.graph, &c.x, &c.v, &dv, &body, norm);
         let mut step_change = flat32(&dv);
         norm.targets.apply(&mut step_change);
-        let g = GraphTensors::of(&seq.graph, nodes, edges, step_change, device);
+        let gate = cfg
+            .rollout_as_inference
+            .unwrap_or(false)
+            .then(|| take_back_weights(&cfg.model, &seq.graph, &c.x))
+            .flatten();
+        let g = GraphTensors::of(&seq.graph, nodes, edges, step_change, device).with_tension(gate);
         let pred = net.forward(&g); // [n, 3], normalised
         let mut p: Vec<f32> = pred
             .clone()
