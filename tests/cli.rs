@@ -192,6 +192,46 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "2".into(),
     ]);
     assert!(model.join("model.bpk").exists());
+    // Fine-tuned from it: one more phase-2 window, its mean kept; the network's sizes come
+    // from the model, and asking for others is refused.
+    let tuned = dir.path().join("tuned");
+    let tune = |extra: &[&str]| {
+        let mut args: Vec<OsString> = vec![
+            "train".into(),
+            "corrector".into(),
+            "--data".into(),
+            data.clone().into(),
+            "-o".into(),
+            tuned.clone().into(),
+            "--init".into(),
+            model.clone().into(),
+            "--steps".into(),
+            "0".into(),
+            "--rollout-iters".into(),
+            "2".into(),
+            "--window".into(),
+            "2".into(),
+            "--average-from".into(),
+            "0".into(),
+        ];
+        args.extend(extra.iter().map(OsString::from));
+        clothsr().args(&args).output().expect("run")
+    };
+    let refused = tune(&["--latent", "16"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(!tuned.exists());
+    let out = tune(&[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let config = std::fs::read_to_string(tuned.join("config.json")).expect("config");
+    assert!(
+        config.contains("\"latent\": 8") && config.contains("\"init_from\""),
+        "{config}"
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("mean weights of the last 2"));
     let report = run(vec![
         "rollout".into(),
         "--model".into(),
