@@ -58,6 +58,19 @@ fn load(frames: Option<std::ops::RangeInclusive<usize>>) -> Sequence {
     Sequence::load(&dataset(), frames, &sim).expect("load")
 }
 
+/// A progress callback that stops training after phase-2 window `window`.
+fn stop_in_phase_2_at(
+    window: usize,
+) -> impl FnMut(&clothsr::corrector::training::Progress) -> ControlFlow<()> {
+    move |p| {
+        if p.phase == 2 && p.step == window {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    }
+}
+
 fn tiny_config() -> TrainingConfig {
     TrainingConfig::new(CorrectorConfig::new().with_latent(16).with_steps(2))
         .with_steps(60)
@@ -637,13 +650,13 @@ fn validation_saves_the_best_network_and_a_resumed_run_keeps_it() {
     );
 
     // Stopped in phase 2 after its first validation (window 2), then resumed.
-    let first = train(&cfg, &mut sets, &validation, out.path(), |p| {
-        if p.phase == 2 && p.step == 3 {
-            ControlFlow::Break(())
-        } else {
-            ControlFlow::Continue(())
-        }
-    })
+    let first = train(
+        &cfg,
+        &mut sets,
+        &validation,
+        out.path(),
+        stop_in_phase_2_at(3),
+    )
     .expect("first part");
     assert!(first.interrupted);
     let points = |s: &clothsr::corrector::training::Summary| -> Vec<(u8, usize)> {
@@ -815,14 +828,7 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
     // checkpoint's.
     let resumed = tmp.path().join("resumed");
     let cfg = tune(3).with_average_from(Some(1));
-    let first = train(&cfg, &mut sets(), &[], &resumed, |p| {
-        if p.phase == 2 && p.step == 2 {
-            ControlFlow::Break(())
-        } else {
-            ControlFlow::Continue(())
-        }
-    })
-    .expect("first part");
+    let first = train(&cfg, &mut sets(), &[], &resumed, stop_in_phase_2_at(2)).expect("first part");
     assert!(first.interrupted);
     // The checkpoint's mean is the one network averaged so far, window 2's.
     let ck = tmp.path().join("checkpoint_mean");

@@ -240,8 +240,8 @@ struct Position {
     /// The last validation point done (phase, step), so that a resumed run does not repeat it.
     #[serde(default)]
     validated: Option<(u8, usize)>,
-    /// Phase-2 networks in the weight average ([`TrainingConfig::average_from`]; their mean
-    /// is `checkpoint/average.bpk`).
+    /// Phase-2 networks in the weight average when checkpointed ([`WeightAverage::count`];
+    /// their mean is `checkpoint/average.bpk`).
     #[serde(default)]
     averaged: usize,
 }
@@ -514,7 +514,7 @@ impl WeightAverage {
     fn add(&mut self, net: &CorrectorNet) {
         let w = Self::floats(net);
         self.count += 1;
-        if self.count == 1 || self.mean.len() != w.len() {
+        if self.count == 1 {
             self.mean = w;
             return;
         }
@@ -671,8 +671,11 @@ pub fn train(
     }
     summary.validation_best = t.position.best;
     summary.averaged = t.average.as_ref().map_or(0, |a| a.count);
-    let last = t.kept_net();
-    save_model(out, cfg, &t.norm, t.best.as_ref().unwrap_or(&last))?;
+    let kept = match &t.best {
+        Some(best) => best.clone(),
+        None => t.kept_net(),
+    };
+    save_model(out, cfg, &t.norm, &kept)?;
     std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
     Ok(summary)
 }
@@ -841,7 +844,11 @@ impl Trainer<'_> {
         if let Some(avg) = &self.average {
             write_weights(&avg.apply(self.net.clone()), &dir.join(AVERAGE_FILE))?;
         }
-        write_json(&dir.join("state.json"), &self.position)
+        let position = Position {
+            averaged: self.average.as_ref().map_or(0, |a| a.count),
+            ..self.position
+        };
+        write_json(&dir.join("state.json"), &position)
     }
 
     /// The network training would save now: the weight average once begun, else the last.
@@ -1009,7 +1016,6 @@ impl Trainer<'_> {
                 self.average
                     .get_or_insert_with(WeightAverage::default)
                     .add(&self.net);
-                self.position.averaged += 1;
             }
             if it.is_multiple_of(10) || it == cfg.rollout_iters {
                 let recent = mean(&losses[losses.len().saturating_sub(10)..]);
