@@ -231,7 +231,9 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         config.contains("\"latent\": 8") && config.contains("\"init_from\""),
         "{config}"
     );
-    assert!(String::from_utf8_lossy(&out.stderr).contains("mean weights of the last 2"));
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(log.contains("mean weights of the last 2"), "{log}");
+    assert!(log.contains("no phase 1 (started from"), "{log}");
     let report = run(vec![
         "rollout".into(),
         "--model".into(),

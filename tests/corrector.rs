@@ -703,6 +703,31 @@ fn validation_saves_the_best_network_and_a_resumed_run_keeps_it() {
         .expect("not diverged");
     let mean = e.iter().sum::<f64>() / e.len() as f64;
     assert!((mean - best).abs() < 1e-9 * best, "{mean} vs {best}");
+
+    // Fine-tuned from that network (phase 2 only): the start is validated first, with the
+    // same figure, and the saved network is whichever validated best, the start included.
+    let tuned = tempfile::tempdir().expect("tmp");
+    let tune = cfg
+        .clone()
+        .with_steps(0)
+        .with_rollout_iters(4)
+        .with_init_from(Some(out.path().to_path_buf()));
+    let s = train(&tune, &mut sets, &validation, tuned.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("fine-tune");
+    assert_eq!(points(&s), vec![(1, 0), (2, 2), (2, 4)]);
+    let start = s.validations[0].2;
+    assert!((start - best).abs() < 1e-9 * best, "{start} vs {best}");
+    let (kept, phase, _) = s.validation_best.expect("a best network");
+    let min = s
+        .validations
+        .iter()
+        .map(|v| v.2)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(kept, min);
+    let unchanged = max_difference(&parameters(out.path()), &parameters(tuned.path())) == 0.0;
+    assert_eq!(unchanged, phase == 1, "{:?}", s.validations);
 }
 
 /// A network's float parameters, in visit order.

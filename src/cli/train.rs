@@ -183,9 +183,10 @@ pub struct CorrectorArgs {
     #[arg(long)]
     take_back: Option<f64>,
     /// Held-out data sets to select the network on (repeat for several; never a training
-    /// set): at the end of each phase and every `--validate-every` phase-2 windows the
-    /// network is rolled out interleaved with the simulator on them, and the one closest to
-    /// their ground truth is saved (`validation.csv` beside the model logs every validation).
+    /// set): at the end of each phase (with `--init`, the starting model too) and every
+    /// `--validate-every` phase-2 windows the network is rolled out interleaved with the
+    /// simulator on them, and the one closest to their ground truth is saved
+    /// (`validation.csv` beside the model logs every validation).
     #[arg(long)]
     val_data: Vec<PathBuf>,
     /// Validate every this many phase-2 windows (with `--val-data`).
@@ -356,21 +357,33 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         std::ops::ControlFlow::Continue(())
     })?;
     bar.finish_and_clear();
+    let phase1 = match (&cfg.init_from, cfg.steps) {
+        (Some(init), 0) => format!("no phase 1 (started from {})", init.display()),
+        _ => format!(
+            "phase 1 loss {:.4} → {:.4}; noise σ {:.4} mm",
+            summary.phase1_first_last.0,
+            summary.phase1_first_last.1,
+            summary.noise_std_m * 1e3
+        ),
+    };
     tracing::info!(
-        "wrote {}: phase 1 loss {:.4} → {:.4}; phase 2 ({} windows) {:.4} → {:.4}; noise σ {:.4} mm; {:.0} s",
+        "wrote {}: {phase1}; phase 2 ({} windows) {:.4} → {:.4}; {:.0} s",
         a.output.display(),
-        summary.phase1_first_last.0,
-        summary.phase1_first_last.1,
         summary.phase2_iters,
         summary.phase2_first_last.0,
         summary.phase2_first_last.1,
-        summary.noise_std_m * 1e3,
         summary.seconds
     );
     if let Some((mm, phase, step)) = summary.validation_best {
+        let which = match (&cfg.init_from, phase, step) {
+            (Some(init), 1, 0) => format!(
+                "the starting model {} (no phase-2 network validated better)",
+                init.display()
+            ),
+            _ => format!("the network of phase {phase} step {step}"),
+        };
         tracing::info!(
-            "kept the network of phase {phase} step {step}: {mm:.3} mm interleaved on the \
-             validation sets (all validations in {})",
+            "kept {which}: {mm:.3} mm interleaved on the validation sets (all validations in {})",
             a.output.join(VALIDATION_LOG).display()
         );
     }

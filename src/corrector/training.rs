@@ -108,7 +108,8 @@ pub struct TrainingConfig {
     /// and so must run with (`None`: 1, the full Baraff-Witkin membrane). Optional so that
     /// models saved before it load.
     pub coarse_compression: Option<f64>,
-    /// Validate every this many phase-2 windows, and at the end of each phase, on the held-out
+    /// Validate every this many phase-2 windows, and at the end of each phase (a warm start's
+    /// model before phase 2 too: [`Self::init_from`]), on the held-out
     /// [`ValidationSet`]s given to [`train`]: the interleaved rollout's mean distance to M_int
     /// over their frames; the network that was closest is the one saved (`None`: no
     /// validation, the last network is saved). Training losses are one step or one window
@@ -655,7 +656,10 @@ pub fn train(
         ..Summary::default()
     };
     summary.phase1_first_last = t.phase1(sets, &mut progress)?;
-    if !t.stopped && cfg.steps > 0 && t.position.phase2_done == 0 {
+    // After phase 1, or before phase 2 of a warm start: a fine-tuned network is then kept
+    // only where it validates better than the model it started from.
+    let trained = cfg.steps > 0 || cfg.init_from.is_some();
+    if !t.stopped && trained && t.position.phase2_done == 0 {
         t.validate(validation, 1, cfg.steps)?;
     }
     if !t.stopped {

@@ -414,6 +414,14 @@ pub fn generate(
                 &coarse.sim.model.mesh.triangles,
                 DRESS_PHONG_ALPHA,
             );
+            tracing::info!(
+                "dressed the coarse mesh ({} sewing, {} settling steps, seams {:.1} mm); dressing \
+                 the fine mesh ({} vertices) from it",
+                c.sew_steps,
+                c.settle_steps,
+                c.seam_gap_m * 1e3,
+                x.len()
+            );
             let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
             tracing::info!(
                 "dressed coarse ({} sewing, {} settling steps, seams {:.1} mm), then fine from it \

@@ -321,6 +321,20 @@ impl Simulation {
                 self.state = next;
                 out.settle_steps += 1;
                 out.max_penetration_m = stats.max_penetration_m;
+                // A fine mesh settles for minutes (its moves are capped at half its thin
+                // contact margin an iteration): say where it is, as sewing does.
+                if out.settle_steps.is_multiple_of(30) {
+                    let speed = self.state.v.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                    tracing::info!(
+                        "dressing: settling step {}/{settle_steps}: fastest vertex {:.0} mm/s, newton {}, cg {}, contacts {}, penetration {:.2} mm",
+                        out.settle_steps,
+                        speed * 1e3,
+                        stats.newton_iters,
+                        stats.cg_iters,
+                        stats.contacts,
+                        stats.max_penetration_m * 1e3
+                    );
+                }
             }
             Ok(())
         });
