@@ -42,9 +42,14 @@ mkdir -p "$OUT"
 # interleaved rollout against the simulation alone.
 "$BIN" dataset "$PATTERN" "${COMMON[@]}" --clip-start-s 1.0 --frames 30 -o "$DATA/walk_1s"
 "$BIN" rollout --model "$OUT/corrector" --data "$DATA/walk_1s"
+# Session 18: a third unseen sequence (dressed 3 s into the walk), and the corrector on the
+# other two it never saw (walk_2s validates fine-tuning runs: see README.md).
+"$BIN" dataset "$PATTERN" "${COMMON[@]}" --clip-start-s 3.0 --frames 30 -o "$DATA/walk_3s"
+"$BIN" rollout --model "$OUT/corrector" --data "$DATA/walk_2s"
+"$BIN" rollout --model "$OUT/corrector" --data "$DATA/walk_3s"
 
 # The manifest names the shared data by absolute path; relative to the repository it travels.
-for d in walk walk_1s; do
+for d in walk walk_1s walk_2s walk_3s; do
   sed "s|$(pwd)/\.\./shared|../shared|g" "$DATA/$d/manifest.json" > "$OUT/data_$d.manifest.json"
 done
 rm -rf "$OUT/isr/checkpoint" "$OUT/corrector/checkpoint"
