@@ -424,11 +424,7 @@ pub fn generate(
             );
             let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
             tracing::info!(
-                "dressed coarse ({} sewing, {} settling steps, seams {:.1} mm), then fine from it \
-                 ({} sewing, {} settling steps, seams {:.1} mm)",
-                c.sew_steps,
-                c.settle_steps,
-                c.seam_gap_m * 1e3,
+                "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
                 f.sew_steps,
                 f.settle_steps,
                 f.seam_gap_m * 1e3
