@@ -886,3 +886,89 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
     assert_eq!(run(&raw, true, "raw_inf"), run(&raw, false, "raw"));
     assert!(max_difference(&run(&gated, true, "gated_inf"), &p2) > 1e-6);
 }
+
+#[test]
+fn drift_windows_start_from_the_interleaved_runs_own_states() {
+    let dir = dataset();
+    let sets = || {
+        let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+        let t0 = sim.state.t_s;
+        let seq = Sequence::load(&dir, None, &sim).expect("load");
+        vec![TrainSet {
+            seq,
+            sim: Some((sim, t0)),
+        }]
+    };
+    let base = tiny_config()
+        .with_steps(10)
+        .with_rollout_iters(5)
+        .with_window(3)
+        .with_rollout_lr(1e-3);
+    // Every window a drift window, the run redone every 2 windows: at windows 0, 2 and 4.
+    let cfg = base
+        .clone()
+        .with_drift_share(Some(1.0))
+        .with_drift_refresh(Some(2));
+    let out = tempfile::tempdir().expect("tmp");
+    let s = train(&cfg, &mut sets(), &[], out.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("train");
+    assert_eq!(s.phase2_iters, 5);
+    let at: Vec<usize> = s.drift_runs.iter().map(|r| r.0).collect();
+    assert_eq!(at, vec![0, 2, 4]);
+    // The interleaved run leaves the ground truth (resolutions differ), by millimetres at most
+    // on this 4-frame drop.
+    for (_, mm) in &s.drift_runs {
+        assert!(mm.is_finite() && *mm > 0.0 && *mm < 20.0, "{mm}");
+    }
+    // Without drift windows (the same seed and data), no interleaved runs, and other windows:
+    // the first window's loss differs.
+    let plain = tempfile::tempdir().expect("tmp");
+    let p = train(&base, &mut sets(), &[], plain.path(), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("train");
+    assert!(p.drift_runs.is_empty());
+    assert!(
+        (p.phase2_first_last.0 - s.phase2_first_last.0).abs() > 1e-6,
+        "{:?} {:?}",
+        p.phase2_first_last,
+        s.phase2_first_last
+    );
+    // The same windows (same draws) with another drift pull-back time: other targets, so
+    // the drift windows' own states and τ reach the loss.
+    let slow = tempfile::tempdir().expect("tmp");
+    let q = train(
+        &cfg.clone().with_drift_tau_steps(Some(50.0)),
+        &mut sets(),
+        &[],
+        slow.path(),
+        |_| ControlFlow::Continue(()),
+    )
+    .expect("train");
+    assert_eq!(q.drift_runs[0], s.drift_runs[0]);
+    assert!(
+        (q.phase2_first_last.0 - s.phase2_first_last.0).abs() > 1e-6,
+        "{:?} {:?}",
+        q.phase2_first_last,
+        s.phase2_first_last
+    );
+    // Out-of-range settings are refused before anything is written.
+    for bad in [
+        base.clone().with_drift_share(Some(1.5)),
+        base.clone()
+            .with_drift_share(Some(0.5))
+            .with_drift_refresh(Some(0)),
+        base.clone()
+            .with_drift_share(Some(0.5))
+            .with_drift_tau_steps(Some(0.5)),
+    ] {
+        let o = tempfile::tempdir().expect("tmp");
+        let e = train(&bad, &mut sets(), &[], o.path(), |_| {
+            ControlFlow::Continue(())
+        });
+        assert!(e.is_err());
+        assert!(!o.path().join("config.json").exists());
+    }
+}

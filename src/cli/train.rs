@@ -7,7 +7,8 @@ use anyhow::Context;
 use burn::config::Config;
 use clothsr::corrector::data::Sequence;
 use clothsr::corrector::training::{
-    train, Progress, TrainSet, TrainingConfig, ValidationSet, VALIDATION_LOG,
+    train, Progress, TrainSet, TrainingConfig, ValidationSet, DEFAULT_DRIFT_REFRESH,
+    DEFAULT_DRIFT_TAU_STEPS, VALIDATION_LOG,
 };
 use clothsr::corrector::CorrectorConfig;
 use clothsr::data::coarse_simulation;
@@ -218,6 +219,18 @@ pub struct CorrectorArgs {
     /// take-back scaled by the tension limit and `--take-back`) instead of the raw network.
     #[arg(long)]
     rollout_as_inference: bool,
+    /// Share of phase-2 windows that start from the interleaved run's own states (DAgger): every
+    /// `--drift-refresh` windows the network is rolled out as at inference over each training
+    /// sequence, and such a window starts from that run at a random step, pulled back to the
+    /// ground truth over `--drift-tau` steps (0: every window starts from the ground truth).
+    #[arg(long, default_value_t = 0.0)]
+    drift_share: f64,
+    /// Phase-2 windows between two interleaved runs for drift windows.
+    #[arg(long, default_value_t = clothsr::corrector::training::DEFAULT_DRIFT_REFRESH)]
+    drift_refresh: usize,
+    /// Pull-back time of drift windows' targets, steps.
+    #[arg(long, default_value_t = clothsr::corrector::training::DEFAULT_DRIFT_TAU_STEPS)]
+    drift_tau: f64,
 }
 
 /// Runs `train`.
@@ -288,6 +301,14 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)
         .with_rollout_as_inference(a.rollout_as_inference.then_some(true))
+        .with_drift_share((a.drift_share > 0.0).then_some(a.drift_share))
+        .with_drift_refresh(
+            (a.drift_share > 0.0 && a.drift_refresh != DEFAULT_DRIFT_REFRESH)
+                .then_some(a.drift_refresh),
+        )
+        .with_drift_tau_steps(
+            (a.drift_share > 0.0 && a.drift_tau != DEFAULT_DRIFT_TAU_STEPS).then_some(a.drift_tau),
+        )
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
@@ -385,6 +406,17 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         tracing::info!(
             "kept {which}: {mm:.3} mm interleaved on the validation sets (all validations in {})",
             a.output.join(VALIDATION_LOG).display()
+        );
+    }
+    if let (Some(first), Some(last)) = (summary.drift_runs.first(), summary.drift_runs.last()) {
+        tracing::info!(
+            "drift windows: {} interleaved runs on the training sets, {:.2} mm from M_int at \
+             window {} → {:.2} mm at window {}",
+            summary.drift_runs.len(),
+            first.1,
+            first.0,
+            last.1,
+            last.0
         );
     }
     if summary.averaged > 0 {

@@ -85,7 +85,8 @@ impl PooledErrors {
     }
 }
 
-fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+/// Mean distance between two vertex sets of the same mesh, mm.
+pub fn mean_distance_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     1e3 * a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len().max(1) as f64
 }
 
@@ -452,24 +453,44 @@ pub fn interleaved_errors(
             ),
         ));
     }
-    let first = &seq.steps[0];
+    let mut errors = Vec::with_capacity(frames);
+    let done = interleaved_run(seq, sim, t0_s, corrector, frames * s, |i, state| {
+        if (i + 1).is_multiple_of(s) {
+            errors.push(mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x)));
+        }
+    })?;
+    Ok(done.then_some(errors))
+}
+
+/// Runs the interleaved simulation (as [`interleaved_errors`]) for `steps` steps of `seq`
+/// from its first step's M_int and hands `visit` each corrected state with the index of the
+/// sequence step it stands for (1, 2, …). False where the corrector diverged first (the
+/// states before it were visited).
+pub fn interleaved_run(
+    seq: &Sequence,
+    sim: &mut Simulation,
+    t0_s: f64,
+    corrector: &Corrector,
+    steps: usize,
+    mut visit: impl FnMut(usize, &SimState),
+) -> Result<bool> {
+    let Some(first) = seq.steps.first() else {
+        return Ok(true);
+    };
     let mut state = SimState {
         x: vectors(&first.int_x),
         v: vectors(&first.int_v),
         t_s: t0_s + seq.step_time_s(0),
     };
-    let mut errors = Vec::with_capacity(frames);
-    for i in 1..=frames * s {
+    for i in 1..=steps.min(seq.steps.len().saturating_sub(1)) {
         let mut c = sim.step_from(&state)?.0;
         if corrector.correct(&state.v, &mut c, sim).is_err() {
-            return Ok(None);
+            return Ok(false);
         }
         state = c;
-        if (i + 1).is_multiple_of(s) {
-            errors.push(mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x)));
-        }
+        visit(i, &state);
     }
-    Ok(Some(errors))
+    Ok(true)
 }
 
 #[cfg(test)]

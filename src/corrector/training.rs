@@ -44,7 +44,7 @@ use super::inference::{
 };
 use super::model::{inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::{Normalisation, NormalisationBuilder};
-use super::rollout::interleaved_errors;
+use super::rollout::{interleaved_errors, interleaved_run, mean_distance_mm};
 use crate::data::flat32;
 use crate::error::{Error, Result};
 use crate::io::write_atomic;
@@ -137,7 +137,27 @@ pub struct TrainingConfig {
     /// will apply. `None` / false: the raw network (phase 1 always trains it raw: its one-step
     /// targets hold the coarse mesh's spring-back out of M_int, which the limit would hide).
     pub rollout_as_inference: Option<bool>,
+    /// Share of phase-2 windows that start from the interleaved run's own states instead of a
+    /// ground-truth M_int (DAgger, Ross et al. 2011): the current network is rolled out as at
+    /// inference over every training sequence from its first step, every
+    /// [`Self::drift_refresh`] windows, and such a window starts from that run's state at a
+    /// random step, its targets pulling back to the ground truth over
+    /// [`Self::drift_tau_steps`]. Windows from M_int only visit states 12 steps from the
+    /// ground truth, while the interleaved run at inference is 10–20 mm from it after a few
+    /// frames. `None`: every window starts from M_int. Optional so that older configs load.
+    pub drift_share: Option<f64>,
+    /// Phase-2 windows between two interleaved runs of [`Self::drift_share`] (`None`: 50).
+    pub drift_refresh: Option<usize>,
+    /// Pull-back time τ, steps, of the windows that start from the interleaved run's states
+    /// (`None`: 10): their gap to the ground truth is many steps' worth, and a one-step pull
+    /// back would teach corrections of metres a second.
+    pub drift_tau_steps: Option<f64>,
 }
+
+/// Phase-2 windows between two interleaved runs when [`TrainingConfig::drift_refresh`] is unset.
+pub const DEFAULT_DRIFT_REFRESH: usize = 50;
+/// Pull-back time of drift windows when [`TrainingConfig::drift_tau_steps`] is unset, steps.
+pub const DEFAULT_DRIFT_TAU_STEPS: f64 = 10.0;
 
 impl TrainingConfig {
     /// The coarse membrane's compression factor the corrector was trained beside
@@ -228,6 +248,10 @@ pub struct Summary {
     /// Phase-2 networks whose mean weights were saved ([`TrainingConfig::average_from`]; 0:
     /// the last network's, or the best validated one's).
     pub averaged: usize,
+    /// The interleaved runs made for drift windows ([`TrainingConfig::drift_share`]): the
+    /// phase-2 window each was made at and its mean distance to M_int over the training
+    /// sets' steps, mm.
+    pub drift_runs: Vec<(usize, f64)>,
 }
 
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
@@ -333,6 +357,13 @@ struct Trainer<'a> {
     validations: Vec<(u8, usize, f64)>,
     /// The running mean of the phase-2 weights ([`TrainingConfig::average_from`]), once begun.
     average: Option<WeightAverage>,
+    /// Per training set, the last interleaved run's corrected states by sequence step (index
+    /// 0: the first step's M_int) and the phase-2 window it was made at
+    /// ([`TrainingConfig::drift_share`]); empty until the first drift window.
+    drift: Vec<Vec<SimState>>,
+    drift_made_at: Option<usize>,
+    /// [`Summary::drift_runs`].
+    drift_runs: Vec<(usize, f64)>,
 }
 
 fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) -> Result<()> {
@@ -393,6 +424,21 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
             .any(|s| s.sim.is_some() && s.seq.steps.len() > cfg.window)
     {
         return bad("phase 2 needs a coarse simulator and a sequence longer than the window");
+    }
+    if cfg
+        .drift_share
+        .is_some_and(|d| !(d.is_finite() && d > 0.0 && d <= 1.0))
+    {
+        return bad("drift_share must be in (0, 1]");
+    }
+    if cfg.drift_refresh == Some(0) {
+        return bad("drift_refresh must be at least 1");
+    }
+    if cfg
+        .drift_tau_steps
+        .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
+    {
+        return bad("drift_tau_steps must be at least 1");
     }
     if cfg.average_from.is_some_and(|k| k >= cfg.rollout_iters) {
         return bad("average_from must be below rollout_iters (weights are averaged in phase 2)");
@@ -650,6 +696,9 @@ pub fn train(
         best,
         validations: Vec::new(),
         average,
+        drift: Vec::new(),
+        drift_made_at: None,
+        drift_runs: Vec::new(),
     };
     let mut summary = Summary {
         noise_std_m: t.noise_std_m,
@@ -669,6 +718,7 @@ pub fn train(
     }
     summary.seconds = t.t0.elapsed().as_secs_f64();
     summary.validations = std::mem::take(&mut t.validations);
+    summary.drift_runs = std::mem::take(&mut t.drift_runs);
     if t.stopped {
         summary.interrupted = true;
         return Ok(summary);
@@ -989,6 +1039,74 @@ impl Trainer<'_> {
         Ok(first_last(&losses, 50))
     }
 
+    /// Rolls the current network out as at inference over every training set with a coarse
+    /// simulator ([`interleaved_run`]), keeping its corrected states for drift windows
+    /// ([`TrainingConfig::drift_share`]); only when none were made yet or the last are
+    /// [`TrainingConfig::drift_refresh`] windows old.
+    fn refresh_drift(&mut self, sets: &mut [TrainSet]) -> Result<()> {
+        let done = self.position.phase2_done;
+        let every = self.cfg.drift_refresh.unwrap_or(DEFAULT_DRIFT_REFRESH);
+        if self.drift_made_at.is_some_and(|at| done < at + every) {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let device = default_device()?;
+        let net = self.net.valid();
+        let mut drift = Vec::with_capacity(sets.len());
+        let (mut figures, mut total_gap) = (Vec::new(), 0.0);
+        for set in sets.iter_mut() {
+            let Some((sim, t0)) = set.sim.as_mut() else {
+                drift.push(Vec::new());
+                continue;
+            };
+            let corrector = Corrector::new(
+                net.clone(),
+                self.norm.clone(),
+                self.cfg.clone(),
+                &set.seq.mesh,
+                &self.out,
+                &device,
+            );
+            let seq = &set.seq;
+            let Some(first) = seq.steps.first() else {
+                drift.push(Vec::new());
+                continue;
+            };
+            let mut states = vec![SimState {
+                x: vectors(&first.int_x),
+                v: vectors(&first.int_v),
+                t_s: *t0 + seq.step_time_s(0),
+            }];
+            let mut gap = 0.0;
+            let whole = interleaved_run(seq, sim, *t0, &corrector, usize::MAX, |i, state| {
+                gap += mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x));
+                states.push(state.clone());
+            })?;
+            figures.push(format!(
+                "{} steps{}, {:.2} mm from M_int on average",
+                states.len() - 1,
+                if whole { "" } else { " (diverged there)" },
+                gap / (states.len() - 1).max(1) as f64
+            ));
+            total_gap += gap;
+            drift.push(states);
+        }
+        let steps: usize = drift
+            .iter()
+            .map(|d: &Vec<SimState>| d.len().saturating_sub(1))
+            .sum();
+        self.drift_runs
+            .push((done, total_gap / steps.max(1) as f64));
+        tracing::info!(
+            "phase 2 window {done}: interleaved runs for drift windows: {} ({:.0} s)",
+            figures.join("; "),
+            t.elapsed().as_secs_f64()
+        );
+        self.drift = drift;
+        self.drift_made_at = Some(done);
+        Ok(())
+    }
+
     fn phase2(
         &mut self,
         sets: &mut [TrainSet],
@@ -1002,14 +1120,35 @@ impl Trainer<'_> {
         let mut losses = Vec::new();
         while self.position.phase2_done < cfg.rollout_iters && !usable.is_empty() {
             let k = usable[self.rng.random_range(0..usable.len())];
+            // Only a drift run draws this number: runs without it keep their windows.
+            let drift = cfg
+                .drift_share
+                .is_some_and(|share| self.rng.random::<f64>() < share);
+            if drift {
+                self.refresh_drift(sets)?;
+            }
             let set = &mut sets[k];
-            let start = self.rng.random_range(0..set.seq.steps.len() - cfg.window);
+            let states = self.drift.get(k).map_or(0, Vec::len);
+            let (start, from) = match drift {
+                // Step 0 is the ground truth itself; a diverged run offers the steps before it.
+                true if states > 1 => {
+                    let last = (states - 1).min(set.seq.steps.len() - 1 - cfg.window);
+                    let start = self.rng.random_range(1..=last.max(1));
+                    let tau = cfg.drift_tau_steps.unwrap_or(DEFAULT_DRIFT_TAU_STEPS);
+                    (start, Some((&self.drift[k][start], tau)))
+                }
+                _ => (
+                    self.rng.random_range(0..set.seq.steps.len() - cfg.window),
+                    None,
+                ),
+            };
             let value = rollout_window(
                 &mut self.net,
                 &mut self.optim,
                 &self.norm,
                 set,
                 start,
+                from,
                 cfg,
                 &self.device,
             )?;
@@ -1084,28 +1223,37 @@ pub fn pull_back_target(
 }
 
 /// One phase-2 update: rolls out `cfg.window` interleaved steps from the ground-truth M_int
-/// at `set.seq.steps[start]` and steps the optimiser on the mean window loss.
+/// at `set.seq.steps[start]`, or from `from`'s state at that step with its pull-back time
+/// (a drift window: [`TrainingConfig::drift_share`]), and steps the optimiser on the mean
+/// window loss.
+#[allow(clippy::too_many_arguments)]
 fn rollout_window(
     net: &mut CorrectorNet,
     optim: &mut burn::optim::ModuleOptimizer,
     norm: &Normalisation,
     set: &mut TrainSet,
     start: usize,
+    from: Option<(&SimState, f64)>,
     cfg: &TrainingConfig,
     device: &Device,
 ) -> Result<f64> {
     let (window, lr) = (cfg.window, cfg.rollout_lr);
-    let tau_steps = cfg.rollout_tau_steps.unwrap_or(1.0);
     let seq = &set.seq;
     let Some((sim, t0)) = set.sim.as_mut() else {
         return Err(Error::Invalid("phase 2 needs a coarse simulator".into()));
     };
     let h = seq.manifest.dt_s;
-    let st = &seq.steps[start];
-    let mut state = SimState {
-        x: vectors(&st.int_x),
-        v: vectors(&st.int_v),
-        t_s: *t0 + seq.step_time_s(start),
+    let (mut state, tau_steps) = match from {
+        Some((state, tau)) => (state.clone(), tau),
+        None => {
+            let st = &seq.steps[start];
+            let state = SimState {
+                x: vectors(&st.int_x),
+                v: vectors(&st.int_v),
+                t_s: *t0 + seq.step_time_s(start),
+            };
+            (state, cfg.rollout_tau_steps.unwrap_or(1.0))
+        }
     };
     let mut total: Option<Tensor<1>> = None;
     let n = seq.graph.num_nodes;
