@@ -954,6 +954,19 @@ fn drift_windows_start_from_the_interleaved_runs_own_states() {
         q.phase2_first_last,
         s.phase2_first_last
     );
+    // A window as long as the data leaves no drift start: such windows start from the
+    // ground truth.
+    let steps = sets()[0].seq.steps.len();
+    let whole = tempfile::tempdir().expect("tmp");
+    let w = train(
+        &cfg.clone().with_window(steps - 1).with_rollout_iters(1),
+        &mut sets(),
+        &[],
+        whole.path(),
+        |_| ControlFlow::Continue(()),
+    )
+    .expect("train");
+    assert_eq!((w.phase2_iters, w.drift_runs.len()), (1, 1));
     // Out-of-range settings are refused before anything is written.
     for bad in [
         base.clone().with_drift_share(Some(1.5)),

@@ -1128,12 +1128,13 @@ impl Trainer<'_> {
                 self.refresh_drift(sets)?;
             }
             let set = &mut sets[k];
-            let states = self.drift.get(k).map_or(0, Vec::len);
+            // The last step a drift window can start at: step 0 is the ground truth itself, a
+            // diverged run offers the steps before it, and the window must end in the data.
+            let last = (self.drift.get(k).map_or(0, Vec::len).saturating_sub(1))
+                .min(set.seq.steps.len() - 1 - cfg.window);
             let (start, from) = match drift {
-                // Step 0 is the ground truth itself; a diverged run offers the steps before it.
-                true if states > 1 => {
-                    let last = (states - 1).min(set.seq.steps.len() - 1 - cfg.window);
-                    let start = self.rng.random_range(1..=last.max(1));
+                true if last >= 1 => {
+                    let start = self.rng.random_range(1..=last);
                     let tau = cfg.drift_tau_steps.unwrap_or(DEFAULT_DRIFT_TAU_STEPS);
                     (start, Some((&self.drift[k][start], tau)))
                 }
