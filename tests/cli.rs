@@ -220,7 +220,13 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let refused = tune(&["--latent", "16"]);
     assert_eq!(refused.status.code(), Some(2));
     assert!(!tuned.exists());
-    let out = tune(&[]);
+    // Drift-window settings without drift windows are refused, before anything is written.
+    let refused = tune(&["--drift-tau", "5"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("need --drift-share"));
+    assert!(!tuned.exists());
+    // Every window a drift window (DAgger).
+    let out = tune(&["--drift-share", "1"]);
     assert!(
         out.status.success(),
         "{}",
@@ -234,6 +240,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let log = String::from_utf8_lossy(&out.stderr);
     assert!(log.contains("mean weights of the last 2"), "{log}");
     assert!(log.contains("no phase 1 (started from"), "{log}");
+    assert!(log.contains("drift windows: 1 interleaved runs"), "{log}");
     let report = run(vec![
         "rollout".into(),
         "--model".into(),

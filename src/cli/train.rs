@@ -225,12 +225,12 @@ pub struct CorrectorArgs {
     /// ground truth over `--drift-tau` steps (0: every window starts from the ground truth).
     #[arg(long, default_value_t = 0.0)]
     drift_share: f64,
-    /// Phase-2 windows between two interleaved runs for drift windows.
-    #[arg(long, default_value_t = clothsr::corrector::training::DEFAULT_DRIFT_REFRESH)]
-    drift_refresh: usize,
-    /// Pull-back time of drift windows' targets, steps.
-    #[arg(long, default_value_t = clothsr::corrector::training::DEFAULT_DRIFT_TAU_STEPS)]
-    drift_tau: f64,
+    /// Drift windows between two interleaved runs (with `--drift-share`). [default: 50]
+    #[arg(long)]
+    drift_refresh: Option<usize>,
+    /// Pull-back time of drift windows' targets, steps (with `--drift-share`). [default: 10]
+    #[arg(long)]
+    drift_tau: Option<f64>,
 }
 
 /// Runs `train`.
@@ -301,17 +301,16 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)
         .with_rollout_as_inference(a.rollout_as_inference.then_some(true))
-        .with_drift_share((a.drift_share > 0.0).then_some(a.drift_share))
-        .with_drift_refresh(
-            (a.drift_share > 0.0 && a.drift_refresh != DEFAULT_DRIFT_REFRESH)
-                .then_some(a.drift_refresh),
-        )
-        .with_drift_tau_steps(
-            (a.drift_share > 0.0 && a.drift_tau != DEFAULT_DRIFT_TAU_STEPS).then_some(a.drift_tau),
-        )
+        .with_drift_share((a.drift_share != 0.0).then_some(a.drift_share))
+        .with_drift_refresh(a.drift_refresh.filter(|&r| r != DEFAULT_DRIFT_REFRESH))
+        .with_drift_tau_steps(a.drift_tau.filter(|&t| t != DEFAULT_DRIFT_TAU_STEPS))
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
+    anyhow::ensure!(
+        a.drift_share != 0.0 || (a.drift_refresh.is_none() && a.drift_tau.is_none()),
+        "--drift-refresh and --drift-tau set drift windows up: they need --drift-share"
+    );
     let mut validation = Vec::new();
     for dir in &a.val_data {
         let scene = data_scene(dir)?;

@@ -462,10 +462,11 @@ pub fn interleaved_errors(
     Ok(done.then_some(errors))
 }
 
-/// Runs the interleaved simulation (as [`interleaved_errors`]) for `steps` steps of `seq`
-/// from its first step's M_int and hands `visit` each corrected state with the index of the
-/// sequence step it stands for (1, 2, …). False where the corrector diverged first (the
-/// states before it were visited).
+/// Runs the interleaved simulation (as [`interleaved_errors`]) for at most `steps` steps of
+/// `seq` from its first step's M_int, stopping at the sequence's last step, and hands `visit`
+/// each corrected state with the index of the sequence step it stands for (1, 2, …). False
+/// where the corrector diverged first, or drove the simulator to fail (the states before
+/// were visited); true for a sequence without steps.
 pub fn interleaved_run(
     seq: &Sequence,
     sim: &mut Simulation,
@@ -483,7 +484,12 @@ pub fn interleaved_run(
         t_s: t0_s + seq.step_time_s(0),
     };
     for i in 1..=steps.min(seq.steps.len().saturating_sub(1)) {
-        let mut c = sim.step_from(&state)?.0;
+        let mut c = match sim.step_from(&state) {
+            Ok((c, _)) => c,
+            // The simulator gave up on a state the corrector made: the corrector's failure.
+            Err(Error::Simulation(_)) => return Ok(false),
+            Err(e) => return Err(e),
+        };
         if corrector.correct(&state.v, &mut c, sim).is_err() {
             return Ok(false);
         }

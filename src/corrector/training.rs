@@ -139,14 +139,15 @@ pub struct TrainingConfig {
     pub rollout_as_inference: Option<bool>,
     /// Share of phase-2 windows that start from the interleaved run's own states instead of a
     /// ground-truth M_int (DAgger, Ross et al. 2011): the current network is rolled out as at
-    /// inference over every training sequence from its first step, every
-    /// [`Self::drift_refresh`] windows, and such a window starts from that run's state at a
-    /// random step, its targets pulling back to the ground truth over
-    /// [`Self::drift_tau_steps`]. Windows from M_int only visit states 12 steps from the
-    /// ground truth, while the interleaved run at inference is 10–20 mm from it after a few
-    /// frames. `None`: every window starts from M_int. Optional so that older configs load.
+    /// inference over every training sequence from its first step (on a fresh copy of its
+    /// coarse simulation), again after every [`Self::drift_refresh`] drift windows, and such
+    /// a window starts from that run's state at a random step, its targets pulling back to
+    /// the ground truth over [`Self::drift_tau_steps`]. Windows from M_int only visit states
+    /// `window` steps from the ground truth, while the interleaved run at inference is
+    /// 10–20 mm from it after a few frames on the skirt. `None`: every window starts from
+    /// M_int. Optional so that older configs load.
     pub drift_share: Option<f64>,
-    /// Phase-2 windows between two interleaved runs of [`Self::drift_share`] (`None`: 50).
+    /// Drift windows between two interleaved runs of [`Self::drift_share`] (`None`: 50).
     pub drift_refresh: Option<usize>,
     /// Pull-back time τ, steps, of the windows that start from the interleaved run's states
     /// (`None`: 10): their gap to the ground truth is many steps' worth, and a one-step pull
@@ -154,7 +155,7 @@ pub struct TrainingConfig {
     pub drift_tau_steps: Option<f64>,
 }
 
-/// Phase-2 windows between two interleaved runs when [`TrainingConfig::drift_refresh`] is unset.
+/// Drift windows between two interleaved runs when [`TrainingConfig::drift_refresh`] is unset.
 pub const DEFAULT_DRIFT_REFRESH: usize = 50;
 /// Pull-back time of drift windows when [`TrainingConfig::drift_tau_steps`] is unset, steps.
 pub const DEFAULT_DRIFT_TAU_STEPS: f64 = 10.0;
@@ -358,10 +359,14 @@ struct Trainer<'a> {
     /// The running mean of the phase-2 weights ([`TrainingConfig::average_from`]), once begun.
     average: Option<WeightAverage>,
     /// Per training set, the last interleaved run's corrected states by sequence step (index
-    /// 0: the first step's M_int) and the phase-2 window it was made at
-    /// ([`TrainingConfig::drift_share`]); empty until the first drift window.
+    /// 0: the first step's M_int; [`TrainingConfig::drift_share`]); empty until the first
+    /// drift window.
     drift: Vec<Vec<SimState>>,
-    drift_made_at: Option<usize>,
+    /// Drift windows run since [`Self::drift`] was made.
+    drift_used: usize,
+    /// Per training set, its coarse simulation as it was before phase 2's first window: each
+    /// interleaved run for drift windows starts from a copy, as a run at inference would.
+    pristine: Vec<Option<Simulation>>,
     /// [`Summary::drift_runs`].
     drift_runs: Vec<(usize, f64)>,
 }
@@ -697,7 +702,8 @@ pub fn train(
         validations: Vec::new(),
         average,
         drift: Vec::new(),
-        drift_made_at: None,
+        drift_used: 0,
+        pristine: Vec::new(),
         drift_runs: Vec::new(),
     };
     let mut summary = Summary {
@@ -1040,61 +1046,62 @@ impl Trainer<'_> {
     }
 
     /// Rolls the current network out as at inference over every training set with a coarse
-    /// simulator ([`interleaved_run`]), keeping its corrected states for drift windows
-    /// ([`TrainingConfig::drift_share`]); only when none were made yet or the last are
-    /// [`TrainingConfig::drift_refresh`] windows old.
-    fn refresh_drift(&mut self, sets: &mut [TrainSet]) -> Result<()> {
-        let done = self.position.phase2_done;
+    /// simulator ([`interleaved_run`], on a copy of its pristine simulation), keeping its
+    /// corrected states for drift windows ([`TrainingConfig::drift_share`]); only when none
+    /// were made yet or [`TrainingConfig::drift_refresh`] drift windows ran since. A run that
+    /// diverged keeps its states up to a window before the divergence.
+    fn refresh_drift(&mut self, sets: &[TrainSet]) -> Result<()> {
         let every = self.cfg.drift_refresh.unwrap_or(DEFAULT_DRIFT_REFRESH);
-        if self.drift_made_at.is_some_and(|at| done < at + every) {
+        if !self.drift.is_empty() && self.drift_used < every {
             return Ok(());
         }
+        let done = self.position.phase2_done;
         let t = Instant::now();
         let device = default_device()?;
         let net = self.net.valid();
         let mut drift = Vec::with_capacity(sets.len());
-        let (mut figures, mut total_gap) = (Vec::new(), 0.0);
-        for set in sets.iter_mut() {
-            let Some((sim, t0)) = set.sim.as_mut() else {
+        let (mut figures, mut total_gap, mut steps) = (Vec::new(), 0.0, 0usize);
+        for (set, pristine) in sets.iter().zip(&self.pristine) {
+            let seq = &set.seq;
+            let (Some((_, t0)), Some(pristine), Some(first)) =
+                (&set.sim, pristine, seq.steps.first())
+            else {
                 drift.push(Vec::new());
                 continue;
             };
+            let mut sim = pristine.clone();
             let corrector = Corrector::new(
                 net.clone(),
                 self.norm.clone(),
                 self.cfg.clone(),
-                &set.seq.mesh,
+                &seq.mesh,
                 &self.out,
                 &device,
             );
-            let seq = &set.seq;
-            let Some(first) = seq.steps.first() else {
-                drift.push(Vec::new());
-                continue;
-            };
             let mut states = vec![SimState {
                 x: vectors(&first.int_x),
                 v: vectors(&first.int_v),
                 t_s: *t0 + seq.step_time_s(0),
             }];
             let mut gap = 0.0;
-            let whole = interleaved_run(seq, sim, *t0, &corrector, usize::MAX, |i, state| {
+            let whole = interleaved_run(seq, &mut sim, *t0, &corrector, usize::MAX, |i, state| {
                 gap += mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x));
                 states.push(state.clone());
             })?;
+            let run = states.len() - 1;
             figures.push(format!(
-                "{} steps{}, {:.2} mm from M_int on average",
-                states.len() - 1,
+                "{run} steps{}, {:.2} mm from M_int on average",
                 if whole { "" } else { " (diverged there)" },
-                gap / (states.len() - 1).max(1) as f64
+                gap / run.max(1) as f64
             ));
             total_gap += gap;
+            steps += run;
+            if !whole {
+                // The states just before a divergence would start windows that diverge.
+                states.truncate(states.len().saturating_sub(self.cfg.window).max(1));
+            }
             drift.push(states);
         }
-        let steps: usize = drift
-            .iter()
-            .map(|d: &Vec<SimState>| d.len().saturating_sub(1))
-            .sum();
         self.drift_runs
             .push((done, total_gap / steps.max(1) as f64));
         tracing::info!(
@@ -1103,7 +1110,7 @@ impl Trainer<'_> {
             t.elapsed().as_secs_f64()
         );
         self.drift = drift;
-        self.drift_made_at = Some(done);
+        self.drift_used = 0;
         Ok(())
     }
 
@@ -1117,6 +1124,12 @@ impl Trainer<'_> {
         let usable: Vec<usize> = (0..sets.len())
             .filter(|&k| sets[k].sim.is_some() && sets[k].seq.steps.len() > cfg.window)
             .collect();
+        if cfg.drift_share.is_some() {
+            self.pristine = sets
+                .iter()
+                .map(|s| s.sim.as_ref().map(|(sim, _)| sim.clone()))
+                .collect();
+        }
         let mut losses = Vec::new();
         while self.position.phase2_done < cfg.rollout_iters && !usable.is_empty() {
             let k = usable[self.rng.random_range(0..usable.len())];
@@ -1134,6 +1147,7 @@ impl Trainer<'_> {
                 .min(set.seq.steps.len() - 1 - cfg.window);
             let (start, from) = match drift {
                 true if last >= 1 => {
+                    self.drift_used += 1;
                     let start = self.rng.random_range(1..=last);
                     let tau = cfg.drift_tau_steps.unwrap_or(DEFAULT_DRIFT_TAU_STEPS);
                     (start, Some((&self.drift[k][start], tau)))
@@ -1320,6 +1334,100 @@ fn rollout_window(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::corrector::inference::default_device;
+    use crate::data::{coarse_simulation, generate, Options, Variation};
+    use crate::garment::Fabric;
+    use crate::scene::samples::flat_sheet;
+    use crate::scene::Collider;
+
+    /// A one-frame data set of a silk sheet dropped on a ball (40 mm / 15 mm) and its
+    /// training set with a fresh coarse simulation.
+    fn tiny_set(dir: &Path) -> TrainSet {
+        let mut scene = Scene {
+            garments: vec![flat_sheet(
+                "sheet",
+                0.3,
+                0.3,
+                Vector3::new(0.0, 0.17, 0.0),
+                Fabric::preset("silk").expect("preset"),
+            )],
+            ..Scene::default()
+        };
+        scene
+            .colliders
+            .push(Collider::sphere("ball", Vector3::zeros(), 0.15, 3));
+        if !dir.join("manifest.json").exists() {
+            let opts = Options {
+                coarse_edge_m: 0.04,
+                fine_edge_m: 0.015,
+                frames: 1,
+                dress: false,
+                self_collision: false,
+                variation: Variation::default(),
+                fast: true,
+                match_contact_thickness: true,
+                source: None,
+            };
+            generate(&scene, "test", &opts, dir, |_| {}).expect("generate");
+        }
+        let sim = coarse_simulation(&scene, dir, 1).expect("coarse simulation");
+        let t0 = sim.state.t_s;
+        let seq = Sequence::load(dir, None, &sim).expect("load");
+        TrainSet {
+            seq,
+            sim: Some((sim, t0)),
+        }
+    }
+
+    #[test]
+    fn a_drift_window_from_the_ground_truth_is_a_ground_truth_window_and_its_state_counts() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let cfg = TrainingConfig::new(CorrectorConfig::new().with_latent(8).with_steps(1))
+            .with_window(3)
+            .with_rollout_lr(1e-3);
+        let norm = fit_normalisation(&[tiny_set(dir.path())]);
+        let device = default_device().expect("device").autodiff();
+        device.seed(3);
+        let net = cfg.model.init(&device);
+        let start = 2;
+        // One window from a fresh simulation and optimiser, with the same initial network.
+        let window = |from: Option<(&SimState, f64)>| -> f64 {
+            let mut set = tiny_set(dir.path());
+            let mut optim = AdamConfig::new().init();
+            rollout_window(
+                &mut net.clone(),
+                &mut optim,
+                &norm,
+                &mut set,
+                start,
+                from,
+                &cfg,
+                &device,
+            )
+            .expect("window")
+        };
+        let set = tiny_set(dir.path());
+        let st = &set.seq.steps[start];
+        let t0 = set.sim.as_ref().map_or(0.0, |s| s.1);
+        let gt = SimState {
+            x: vectors(&st.int_x),
+            v: vectors(&st.int_v),
+            t_s: t0 + set.seq.step_time_s(start),
+        };
+        let plain = window(None);
+        assert!(plain.is_finite() && plain > 0.0, "{plain}");
+        // The ground truth's own state with τ = 1 is the ground-truth window.
+        assert_eq!(window(Some((&gt, 1.0))), plain);
+        // A state 1 mm off it starts another window, and τ reaches the targets.
+        let mut off = gt.clone();
+        for x in &mut off.x {
+            x.x += 1e-3;
+        }
+        let drifted = window(Some((&off, 1.0)));
+        assert!((drifted - plain).abs() > 1e-3 * plain, "{drifted} {plain}");
+        let slow = window(Some((&off, 10.0)));
+        assert!((slow - drifted).abs() > 1e-3 * drifted, "{slow} {drifted}");
+    }
 
     #[test]
     fn pull_back_target_lands_in_one_step_at_tau_one_and_shrinks_the_gap_by_one_over_tau() {

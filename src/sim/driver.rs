@@ -26,7 +26,9 @@ fn collider_frames<'a>(
         .collect()
 }
 
-/// A scene ready to simulate.
+/// A scene ready to simulate (a clone carries the simulator's warm starts and caches, so a
+/// clone made before any step runs as a fresh simulation would).
+#[derive(Clone)]
 pub struct Simulation {
     /// The simulator.
     pub sim: Simulator,
