@@ -58,6 +58,18 @@ fn load(frames: Option<std::ops::RangeInclusive<usize>>) -> Sequence {
     Sequence::load(&dataset(), frames, &sim).expect("load")
 }
 
+/// The tests' data set as the one training set, with a fresh coarse simulator for phase 2.
+fn sets() -> Vec<TrainSet> {
+    let dir = dataset();
+    let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let t0 = sim.state.t_s;
+    let seq = Sequence::load(&dir, None, &sim).expect("load");
+    vec![TrainSet {
+        seq,
+        sim: Some((sim, t0)),
+    }]
+}
+
 /// A progress callback that stops training after phase-2 window `window`.
 fn stop_in_phase_2_at(
     window: usize,
@@ -760,16 +772,6 @@ fn max_difference(a: &[Vec<f32>], b: &[Vec<f32>]) -> f32 {
 
 #[test]
 fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
-    let dir = dataset();
-    let sets = || {
-        let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
-        let t0 = sim.state.t_s;
-        let seq = Sequence::load(&dir, None, &sim).expect("load");
-        vec![TrainSet {
-            seq,
-            sim: Some((sim, t0)),
-        }]
-    };
     let go = |cfg: &TrainingConfig, out: &std::path::Path| {
         train(cfg, &mut sets(), &[], out, |_| ControlFlow::Continue(())).expect("train")
     };
@@ -889,16 +891,6 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
 
 #[test]
 fn drift_windows_start_from_the_interleaved_runs_own_states() {
-    let dir = dataset();
-    let sets = || {
-        let sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
-        let t0 = sim.state.t_s;
-        let seq = Sequence::load(&dir, None, &sim).expect("load");
-        vec![TrainSet {
-            seq,
-            sim: Some((sim, t0)),
-        }]
-    };
     let base = tiny_config()
         .with_steps(10)
         .with_rollout_iters(5)

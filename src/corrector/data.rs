@@ -141,12 +141,7 @@ impl Sequence {
     /// not stored) stays as stored.
     pub fn recompute_coarse(&mut self, sim: &mut Simulation, t0_s: f64) -> Result<()> {
         for i in 1..self.steps.len() {
-            let prev = &self.steps[i - 1];
-            let state = SimState {
-                x: vectors(&prev.int_x),
-                v: vectors(&prev.int_v),
-                t_s: t0_s + self.step_time_s(i - 1),
-            };
+            let state = self.int_state(i - 1, t0_s);
             let c = sim.step_from(&state)?.0;
             let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
             let dv = flat32(&step_change(&c.v, &state.v, gravity_dt));
@@ -157,6 +152,17 @@ impl Sequence {
             st.dv = Some(dv);
         }
         Ok(())
+    }
+
+    /// The ground truth M_int at the end of `steps[i]` as a simulator state, with the coarse
+    /// simulation's time there (`t0_s`: its time at the data set's frame 0).
+    pub fn int_state(&self, i: usize, t0_s: f64) -> SimState {
+        let st = &self.steps[i];
+        SimState {
+            x: vectors(&st.int_x),
+            v: vectors(&st.int_v),
+            t_s: t0_s + self.step_time_s(i),
+        }
     }
 
     /// Simulated time at the end of `steps[i]`, s, relative to the data set's first frame.

@@ -354,12 +354,7 @@ pub fn evaluate_from(
         ));
     }
     let steps_at = |i: usize| &seq.steps[start_step + i];
-    let first = steps_at(0);
-    let start = SimState {
-        x: vectors(&first.int_x),
-        v: vectors(&first.int_v),
-        t_s: t0_s + seq.step_time_s(start_step),
-    };
+    let start = seq.int_state(start_step, t0_s);
     let (mut alone, mut inter) = (start.clone(), start);
     let mut out = RolloutErrors::default();
     let (mut sim_s, mut corr_s) = (0.0, 0.0);
@@ -475,14 +470,10 @@ pub fn interleaved_run(
     steps: usize,
     mut visit: impl FnMut(usize, &SimState),
 ) -> Result<bool> {
-    let Some(first) = seq.steps.first() else {
+    if seq.steps.is_empty() {
         return Ok(true);
-    };
-    let mut state = SimState {
-        x: vectors(&first.int_x),
-        v: vectors(&first.int_v),
-        t_s: t0_s + seq.step_time_s(0),
-    };
+    }
+    let mut state = seq.int_state(0, t0_s);
     for i in 1..=steps.min(seq.steps.len().saturating_sub(1)) {
         let mut c = match sim.step_from(&state) {
             Ok((c, _)) => c,

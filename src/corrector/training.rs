@@ -1063,9 +1063,8 @@ impl Trainer<'_> {
         let (mut figures, mut total_gap, mut steps) = (Vec::new(), 0.0, 0usize);
         for (set, pristine) in sets.iter().zip(&self.pristine) {
             let seq = &set.seq;
-            let (Some((_, t0)), Some(pristine), Some(first)) =
-                (&set.sim, pristine, seq.steps.first())
-            else {
+            let usable = pristine.as_ref().filter(|_| !seq.steps.is_empty());
+            let (Some((_, t0)), Some(pristine)) = (&set.sim, usable) else {
                 drift.push(Vec::new());
                 continue;
             };
@@ -1078,11 +1077,7 @@ impl Trainer<'_> {
                 &self.out,
                 &device,
             );
-            let mut states = vec![SimState {
-                x: vectors(&first.int_x),
-                v: vectors(&first.int_v),
-                t_s: *t0 + seq.step_time_s(0),
-            }];
+            let mut states = vec![seq.int_state(0, *t0)];
             let mut gap = 0.0;
             let whole = interleaved_run(seq, &mut sim, *t0, &corrector, usize::MAX, |i, state| {
                 gap += mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x));
@@ -1260,15 +1255,10 @@ fn rollout_window(
     let h = seq.manifest.dt_s;
     let (mut state, tau_steps) = match from {
         Some((state, tau)) => (state.clone(), tau),
-        None => {
-            let st = &seq.steps[start];
-            let state = SimState {
-                x: vectors(&st.int_x),
-                v: vectors(&st.int_v),
-                t_s: *t0 + seq.step_time_s(start),
-            };
-            (state, cfg.rollout_tau_steps.unwrap_or(1.0))
-        }
+        None => (
+            seq.int_state(start, *t0),
+            cfg.rollout_tau_steps.unwrap_or(1.0),
+        ),
     };
     let mut total: Option<Tensor<1>> = None;
     let n = seq.graph.num_nodes;
@@ -1407,13 +1397,8 @@ mod tests {
             .expect("window")
         };
         let set = tiny_set(dir.path());
-        let st = &set.seq.steps[start];
         let t0 = set.sim.as_ref().map_or(0.0, |s| s.1);
-        let gt = SimState {
-            x: vectors(&st.int_x),
-            v: vectors(&st.int_v),
-            t_s: t0 + set.seq.step_time_s(start),
-        };
+        let gt = set.seq.int_state(start, t0);
         let plain = window(None);
         assert!(plain.is_finite() && plain > 0.0, "{plain}");
         // The ground truth's own state with τ = 1 is the ground-truth window.
