@@ -928,17 +928,27 @@ fn drift_windows_start_from_the_interleaved_runs_own_states() {
         p.phase2_first_last,
         s.phase2_first_last
     );
-    // The same windows (same draws) with another drift pull-back time: other targets, so
-    // the drift windows' own states and τ reach the loss.
-    let slow = tempfile::tempdir().expect("tmp");
-    let q = train(
-        &cfg.clone().with_drift_tau_steps(Some(50.0)),
-        &mut sets(),
-        &[],
-        slow.path(),
-        |_| ControlFlow::Continue(()),
-    )
-    .expect("train");
+    // The same windows (same draws) from the same network with another drift pull-back time:
+    // other targets, so the drift windows' own states and τ reach the loss. Both start from
+    // the model just trained: fresh weights come from burn's process-wide generator, which
+    // the tests running beside this one draw from too.
+    let tuned = |tau: f64| {
+        let o = tempfile::tempdir().expect("tmp");
+        let c = cfg
+            .clone()
+            .with_steps(0)
+            .with_init_from(Some(out.path().to_path_buf()))
+            .with_drift_tau_steps(Some(tau));
+        train(
+            &c,
+            &mut sets(),
+            &[],
+            o.path(),
+            |_| ControlFlow::Continue(()),
+        )
+        .expect("train")
+    };
+    let (s, q) = (tuned(10.0), tuned(50.0));
     assert_eq!(q.drift_runs[0], s.drift_runs[0]);
     assert!(
         (q.phase2_first_last.0 - s.phase2_first_last.0).abs() > 1e-6,
