@@ -258,6 +258,37 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         2
     );
 
+    // The data set forked at frame 1 with the sheet moved 1 mm, and the distance between the
+    // two ground truths reported beside the rollout as its predictability floor.
+    let forked = dir.path().join("forked");
+    run(vec![
+        "fork".into(),
+        data.clone().into(),
+        "--frame".into(),
+        "1".into(),
+        "--offset".into(),
+        "0,0.001,0".into(),
+        "-o".into(),
+        forked.clone().into(),
+    ]);
+    let manifest = std::fs::read_to_string(forked.join("manifest.json")).expect("manifest");
+    assert!(
+        manifest.contains("\"fork\"") && manifest.contains("\"frames_done\": 3"),
+        "{manifest}"
+    );
+    let report = run(vec![
+        "rollout".into(),
+        "--model".into(),
+        model.clone().into(),
+        "--data".into(),
+        data.clone().into(),
+        "--frames".into(),
+        "2".into(),
+        "--floor".into(),
+        forked.clone().into(),
+    ]);
+    assert!(report.contains("predictability floor"), "{report}");
+
     // The ISR network on the same data, evaluated by `sr`.
     let isr = dir.path().join("models").join("isr");
     run(vec![

@@ -3,9 +3,10 @@
 
 mod common;
 
-use clothsr::data::{generate, read_frame_positions, read_manifest, Options, Variation};
+use clothsr::data::{fork, generate, read_frame_positions, read_manifest, Options, Variation};
 use clothsr::io::tensors::TensorReader;
 use clothsr::scene::Scene;
+use nalgebra::Vector3;
 
 fn scene() -> Scene {
     common::sheet_over_ball("cotton", 0.18)
@@ -87,4 +88,78 @@ fn dataset_holds_int_and_coarse_steps_and_resumes_after_a_kill() {
         .expect_err("different data set")
         .to_string();
     assert!(e.contains("manifest.json"), "{e}");
+}
+
+#[test]
+fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let whole = dir.path().join("whole");
+    generate(&scene(), "test", &opts(3), &whole, |_| {}).expect("generate");
+
+    // Unmoved, a fork is the same simulation resumed: it lands where the original did.
+    let same = dir.path().join("same");
+    let m = fork(&whole, 1, Vector3::zeros(), &same).expect("fork");
+    assert_eq!(m.frames_done, 1);
+    assert_eq!(m.fork.as_ref().map(|f| f.frame), Some(1));
+    generate(&scene(), &m.scene, &m.options(3), &same, |_| {}).expect("continue");
+    let fine = |d: &std::path::Path, k| read_frame_positions(d, k).expect("frame").fine_x.1;
+    let gap = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f32::max)
+    };
+    assert!(gap(&fine(&same, 3), &fine(&whole, 3)) < 1e-4);
+    let manifest = read_manifest(&same).expect("manifest");
+    assert_eq!(manifest.frames_done, 3);
+    assert_eq!(
+        manifest.fork, m.fork,
+        "the continued data set still names its fork"
+    );
+
+    // Moved 3 mm sideways at the end of frame 1, frame 1 is shared and frame 3 is not.
+    let moved = dir.path().join("moved");
+    let m = fork(&whole, 1, Vector3::new(0.003, 0.0, 0.0), &moved).expect("fork");
+    let r = TensorReader::open(&moved.join("frames/frame_00001.safetensors")).expect("frame 1");
+    let o = TensorReader::open(&whole.join("frames/frame_00001.safetensors")).expect("frame 1");
+    let (x, x0) = (
+        r.f64("resume_fine_x").expect("x").1,
+        o.f64("resume_fine_x").expect("x").1,
+    );
+    for (k, (a, b)) in x.iter().zip(&x0).enumerate() {
+        let want = if k % 3 == 0 { 0.003 } else { 0.0 };
+        assert!(
+            (a - b - want).abs() < 1e-12,
+            "component {k}: moved by {}",
+            a - b
+        );
+    }
+    assert_eq!(fine(&moved, 1), fine(&whole, 1));
+    generate(&scene(), &m.scene, &m.options(3), &moved, |_| {}).expect("continue");
+    let g = gap(&fine(&moved, 3), &fine(&whole, 3));
+    assert!(g > 1e-3, "3 mm at frame 1 left frame 3 {g} m away");
+
+    // The same fork again is its data set (to resume); another fork there, or a frame not
+    // yet simulated, is refused with the file named.
+    assert_eq!(
+        fork(&whole, 1, Vector3::new(0.003, 0.0, 0.0), &moved)
+            .expect("again")
+            .frames_done,
+        3
+    );
+    let e = fork(&whole, 2, Vector3::zeros(), &moved)
+        .expect_err("other fork")
+        .to_string();
+    assert!(
+        e.contains("manifest.json") && e.contains("another data set"),
+        "{e}"
+    );
+    let e = fork(&whole, 4, Vector3::zeros(), &dir.path().join("late"))
+        .expect_err("frame 4")
+        .to_string();
+    assert!(e.contains("manifest.json") && e.contains("frame 4"), "{e}");
+    assert!(
+        !dir.path().join("late").exists(),
+        "a refused fork left a directory"
+    );
 }

@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clothsr::data::{generate, Options, SceneSource};
+use std::path::Path;
+
+use clothsr::data::{generate, Manifest, Options, SceneSource};
 use clothsr::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -93,47 +95,57 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             fabric: args.fabric.clone(),
         }),
     };
-    let bar = ProgressBar::new(args.frames as u64);
+    generate_with_progress(
+        &scene,
+        &args.scene.display().to_string(),
+        &opts,
+        &args.output,
+    )?;
+    Ok(())
+}
+
+/// [`generate`] with a progress bar (log lines when the bar is hidden) and a closing summary.
+pub(super) fn generate_with_progress(
+    scene: &Scene,
+    scene_name: &str,
+    opts: &Options,
+    output: &Path,
+) -> anyhow::Result<Manifest> {
+    let bar = ProgressBar::new(opts.frames as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} frames {per_sec} eta {eta} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let t0 = Instant::now();
     let mut resumed_at = None;
-    let m = generate(
-        &scene,
-        &args.scene.display().to_string(),
-        &opts,
-        &args.output,
-        |p| {
-            if resumed_at.is_none() {
-                resumed_at = Some(p.frames_done);
-                bar.set_position(p.frames_done as u64);
-                bar.reset_eta();
-                if p.frames_done > 0 {
-                    tracing::info!("resuming after frame {}", p.frames_done);
-                }
-            } else {
-                bar.set_position(p.frames_done as u64);
+    let m = generate(scene, scene_name, opts, output, |p| {
+        if resumed_at.is_none() {
+            resumed_at = Some(p.frames_done);
+            bar.set_position(p.frames_done as u64);
+            bar.reset_eta();
+            if p.frames_done > 0 {
+                tracing::info!("resuming after frame {}", p.frames_done);
             }
-            if bar.is_hidden() {
-                tracing::info!(
-                    "frame {}/{} ({:.1} s elapsed)",
-                    p.frames_done,
-                    p.frames,
-                    t0.elapsed().as_secs_f64()
-                );
-            }
-        },
-    )?;
+        } else {
+            bar.set_position(p.frames_done as u64);
+        }
+        if bar.is_hidden() {
+            tracing::info!(
+                "frame {}/{} ({:.1} s elapsed)",
+                p.frames_done,
+                p.frames,
+                t0.elapsed().as_secs_f64()
+            );
+        }
+    })?;
     bar.finish_and_clear();
     tracing::info!(
         "wrote {}: {} frames, coarse {} / fine {} vertices, {:.1} s",
-        args.output.display(),
+        output.display(),
         m.frames_done,
         m.coarse_vertices,
         m.fine_vertices,
         t0.elapsed().as_secs_f64()
     );
-    Ok(())
+    Ok(m)
 }

@@ -4,6 +4,7 @@ mod bench;
 mod convert;
 mod dataset;
 mod eval;
+mod fork;
 mod inspect;
 mod mesh;
 mod rollout;
@@ -47,6 +48,9 @@ enum Command {
     /// Training data: a fine simulation, its coarse downsampling (M_int) and one coarse step
     /// from each (M_c).
     Dataset(dataset::Args),
+    /// Continue a data set from one of its frames with the fine garment moved a little: the
+    /// ground truth's predictability floor (`rollout --floor`).
+    Fork(fork::Args),
     /// Train a network (the corrector or the ISR network) on data sets.
     Train(train::Args),
     /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
@@ -87,6 +91,7 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Simulate(a) => simulate::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Dataset(a) => dataset::run(a),
+        Command::Fork(a) => fork::run(a),
         Command::Train(a) => train::run(a),
         Command::Rollout(a) => rollout::run(a),
         Command::Sr(a) => sr::run(a),

@@ -179,6 +179,38 @@ pub struct Manifest {
     /// ([`Options::match_contact_thickness`]), m; `None`: the coarse mesh's own default.
     #[serde(default)]
     pub coarse_dhat_m: Option<f64>,
+    /// Set when this data set continues another from one of its frames ([`fork`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fork: Option<Fork>,
+}
+
+/// Where a forked data set branched off ([`fork`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fork {
+    /// The data set it continues, as given.
+    pub from: PathBuf,
+    /// Its last frame shared with `from`: frames 1..=frame are copies.
+    pub frame: usize,
+    /// The fine garment state at the end of `frame` moved by this before the simulation went on, m.
+    pub offset_m: [f64; 3],
+}
+
+impl Manifest {
+    /// The [`generate`] options that made this data set, for `frames` frames: resuming it
+    /// (or a [`fork`] of it) with these continues the same simulation.
+    pub fn options(&self, frames: usize) -> Options {
+        Options {
+            coarse_edge_m: self.coarse_edge_m,
+            fine_edge_m: self.fine_edge_m,
+            frames,
+            dress: self.dressed,
+            self_collision: self.self_collision,
+            variation: self.variation,
+            fast: self.fast,
+            source: self.source.clone(),
+            match_contact_thickness: self.coarse_dhat_m.is_some(),
+        }
+    }
 }
 
 fn yes() -> bool {
@@ -355,6 +387,7 @@ pub fn generate(
         self_collision,
         source: opts.source.clone(),
         coarse_dhat_m,
+        fork: None,
     };
     let manifest_path = dir.join("manifest.json");
     std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
@@ -367,6 +400,7 @@ pub fn generate(
             frames_done: old.frames_done,
             frames_requested: old.frames_requested,
             git_revision: old.git_revision.clone(),
+            fork: old.fork.clone(),
             ..manifest.clone()
         };
         if same != old {
@@ -377,6 +411,7 @@ pub fn generate(
             ));
         }
         start_frame = old.frames_done;
+        manifest.fork = old.fork;
     }
     let int_of = |s: &SimState| SimState {
         x: transfer.downsample(&s.x),
@@ -496,6 +531,119 @@ pub fn generate(
             frames: opts.frames,
         });
     }
+    Ok(manifest)
+}
+
+/// Forks the data set in `src` at its frame `frame`: writes `dst` holding copies of frames
+/// 1..=`frame`, with the fine garment's state at the end of `frame` (the one a resume starts
+/// from) moved by `offset_m`, and a manifest that records the fork. [`generate`] with
+/// [`Manifest::options`] then continues it from that moved state: the distance between the
+/// two data sets' later frames is how far a change of `offset_m` carries, the ground truth's
+/// own predictability floor (`clothsr rollout --floor`).
+///
+/// The copy is made beside `dst` and renamed into place, so a killed fork leaves no data set.
+/// Forking again into a `dst` that already holds the same fork returns its manifest (its
+/// frames beyond `frame` are kept, for resuming).
+pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Result<Manifest> {
+    let source = read_manifest(src)?;
+    let src_manifest = src.join("manifest.json");
+    if frame == 0 || frame > source.frames_done {
+        return Err(Error::bad_input(
+            &src_manifest,
+            format!(
+                "cannot fork at frame {frame}: frames 1..={} are done",
+                source.frames_done
+            ),
+        ));
+    }
+    if !offset_m.iter().all(|v| v.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "the fork offset {offset_m:?} is not finite"
+        )));
+    }
+    let record = Fork {
+        from: src.to_path_buf(),
+        frame,
+        offset_m: offset_m.into(),
+    };
+    let dst_manifest = dst.join("manifest.json");
+    if dst_manifest.exists() {
+        let old = read_manifest(dst)?;
+        if old.fork.as_ref() == Some(&record) {
+            return Ok(old);
+        }
+        return Err(Error::bad_input(
+            &dst_manifest,
+            format!(
+                "another data set is already here, not {} forked at frame {frame} by {:?} m; \
+                 choose another directory",
+                src.display(),
+                record.offset_m
+            ),
+        ));
+    }
+    if std::fs::read_dir(dst).is_ok_and(|mut d| d.next().is_some()) {
+        return Err(Error::bad_input(
+            dst,
+            "exists and is not a data set; choose another directory",
+        ));
+    }
+    let name = dst
+        .file_name()
+        .ok_or_else(|| Error::bad_input(dst, "not a directory name"))?;
+    let parent = match dst.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let tmp = parent.join(format!(".{}.fork-partial", name.to_string_lossy()));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
+    }
+    std::fs::create_dir_all(tmp.join("frames")).map_err(|e| Error::io(&tmp, e))?;
+    let copy = |from: PathBuf, to: PathBuf| -> Result<()> {
+        std::fs::copy(&from, &to).map_err(|e| Error::io(&from, e))?;
+        Ok(())
+    };
+    copy(
+        src.join("meshes.safetensors"),
+        tmp.join("meshes.safetensors"),
+    )?;
+    for k in 1..frame {
+        copy(frame_path(src, k), frame_path(&tmp, k))?;
+    }
+    let last = frame_path(src, frame);
+    let r = TensorReader::open(&last)?;
+    let mut w = TensorWriter::new();
+    for name in ["int_x", "int_v", "coarse_x", "coarse_v", "fine_x", "fine_v"] {
+        let (shape, data) = r.f32(name)?;
+        w.f32(name, &shape, &data);
+    }
+    for name in [
+        "resume_fine_x",
+        "resume_fine_v",
+        "resume_fine_seam_rest",
+        "resume_coarse_seam_rest",
+    ] {
+        let (shape, mut data) = r.f64(name)?;
+        if name == "resume_fine_x" {
+            for p in data.chunks_exact_mut(3) {
+                p.iter_mut().zip(offset_m.iter()).for_each(|(a, o)| *a += o);
+            }
+        }
+        w.f64(name, &shape, &data);
+    }
+    w.write(&frame_path(&tmp, frame))?;
+    let manifest = Manifest {
+        frames_done: frame,
+        frames_requested: frame,
+        fork: Some(record),
+        ..source
+    };
+    crate::io::write_atomic(&tmp.join("manifest.json"), &manifest_json(&manifest)?)?;
+    if dst.exists() {
+        std::fs::remove_dir(dst).map_err(|e| Error::io(dst, e))?;
+    }
+    std::fs::rename(&tmp, dst).map_err(|e| Error::io(dst, e))?;
     Ok(manifest)
 }
 
