@@ -13,7 +13,8 @@
 //!   `int_x`, `int_v`, `coarse_x`, `coarse_v` (s, Nc, 3) f32 — M_int and M_c per step;
 //!   `fine_x`, `fine_v` (Nf, 3) f32 — M_f at the frame's end; and, to resume exactly,
 //!   `resume_fine_x`, `resume_fine_v` (Nf, 3) f64, `resume_fine_seam_rest`,
-//!   `resume_coarse_seam_rest` f64.
+//!   `resume_coarse_seam_rest` f64, `resume_fine_margin`, `resume_coarse_margin` (1) f64 (the
+//!   simulators' detection margins; absent in data sets made before they were kept).
 //!
 //! A killed run continues from its last complete frame (frame files are written whole, then
 //! the manifest). All files are readable with `safetensors.numpy.load_file`.
@@ -436,6 +437,23 @@ pub fn generate(
         coarse
             .sim
             .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
+        // The detection margins follow the last step's largest move, and a step's Newton
+        // displacement is bounded by them: a run resumed without them takes a different first
+        // step (millimetres on a walking skirt).
+        match (
+            r.f64("resume_fine_margin").ok(),
+            r.f64("resume_coarse_margin").ok(),
+        ) {
+            (Some((_, f)), Some((_, c))) if !f.is_empty() && !c.is_empty() => {
+                fine.sim.set_obstacle_margin_m(f[0]);
+                coarse.sim.set_obstacle_margin_m(c[0]);
+            }
+            _ => tracing::warn!(
+                "{}: no detection margins (written by an older clothsr); the run continues \
+                 from its state but not exactly as it would have",
+                path.display()
+            ),
+        }
     } else {
         if dressed {
             // Dressed at the coarse resolution (rolled, sewn, draped), then carried onto the
@@ -522,6 +540,12 @@ pub fn generate(
                 "resume_coarse_seam_rest",
                 &[coarse.sim.seam_rest().len()],
                 coarse.sim.seam_rest(),
+            )
+            .f64("resume_fine_margin", &[1], &[fine.sim.obstacle_margin_m()])
+            .f64(
+                "resume_coarse_margin",
+                &[1],
+                &[coarse.sim.obstacle_margin_m()],
             );
         w.write(&frame_path(dir, k))?;
         manifest.frames_done = k;
@@ -613,25 +637,12 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
     }
     let last = frame_path(src, frame);
     let r = TensorReader::open(&last)?;
-    let mut w = TensorWriter::new();
-    for name in ["int_x", "int_v", "coarse_x", "coarse_v", "fine_x", "fine_v"] {
-        let (shape, data) = r.f32(name)?;
-        w.f32(name, &shape, &data);
+    let mut w = TensorWriter::from_reader(&r)?;
+    let (shape, mut x) = r.f64("resume_fine_x")?;
+    for p in x.chunks_exact_mut(3) {
+        p.iter_mut().zip(offset_m.iter()).for_each(|(a, o)| *a += o);
     }
-    for name in [
-        "resume_fine_x",
-        "resume_fine_v",
-        "resume_fine_seam_rest",
-        "resume_coarse_seam_rest",
-    ] {
-        let (shape, mut data) = r.f64(name)?;
-        if name == "resume_fine_x" {
-            for p in data.chunks_exact_mut(3) {
-                p.iter_mut().zip(offset_m.iter()).for_each(|(a, o)| *a += o);
-            }
-        }
-        w.f64(name, &shape, &data);
-    }
+    w.f64("resume_fine_x", &shape, &x);
     w.write(&frame_path(&tmp, frame))?;
     let manifest = Manifest {
         frames_done: frame,

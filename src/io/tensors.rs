@@ -50,6 +50,23 @@ impl TensorWriter {
         self.add(name, Dtype::U32, shape, bytes)
     }
 
+    /// Every array and metadata entry of `r`, to change some (an array written again under
+    /// its name replaces it) and write the file anew.
+    pub fn from_reader(r: &TensorReader) -> Result<TensorWriter> {
+        let st = SafeTensors::deserialize(&r.bytes)
+            .map_err(|e| Error::bad_input(&r.path, e.to_string()))?;
+        let mut w = TensorWriter::new();
+        for (name, v) in st.tensors() {
+            w.add(&name, v.dtype(), v.shape(), v.data().to_vec());
+        }
+        if let Ok((_, m)) = SafeTensors::read_metadata(&r.bytes) {
+            if let Some(m) = m.metadata() {
+                w.metadata = m.clone();
+            }
+        }
+        Ok(w)
+    }
+
     /// A string in the file's metadata.
     pub fn meta(&mut self, key: &str, value: &str) -> &mut Self {
         self.metadata.insert(key.to_string(), value.to_string());
