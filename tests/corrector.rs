@@ -692,7 +692,12 @@ fn validation_saves_the_best_network_and_a_resumed_run_keeps_it() {
     assert!(all.iter().all(|mm| mm.is_finite() && *mm > 0.0), "{all:?}");
     let (best, _, _) = rest.validation_best.expect("a best network");
     let min = all.iter().copied().fold(f64::INFINITY, f64::min);
-    assert_eq!(best, min, "{all:?}");
+    // Read back from the checkpoint's JSON, whose parser (serde_json without its
+    // float_roundtrip feature) may land one unit in the last place away.
+    assert!(
+        (best - min).abs() <= 4.0 * f64::EPSILON * min,
+        "{best} {all:?}"
+    );
     // Phase 2's large rate makes the later networks worse here, so a run that saved its
     // last network would fail below.
     assert!(all[3] > best, "{all:?}");
