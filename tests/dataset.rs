@@ -131,7 +131,6 @@ fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
             a - b
         );
     }
-    assert_eq!(fine(&moved, 1), fine(&whole, 1));
     generate(&scene(), &m.scene, &m.options(3), &moved, |_| {}).expect("continue");
     let g = gap(&fine(&moved, 3), &fine(&whole, 3));
     assert!(g > 1e-3, "3 mm at frame 1 left frame 3 {g} m away");
@@ -159,6 +158,32 @@ fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
         !dir.path().join("late").exists(),
         "a refused fork left a directory"
     );
+    // Into a directory holding something else, or a file, it is refused; into an empty one
+    // it goes.
+    let other = dir.path().join("other");
+    std::fs::create_dir_all(&other).expect("mkdir");
+    std::fs::write(other.join("notes.txt"), "mine").expect("write");
+    let e = fork(&whole, 1, Vector3::zeros(), &other)
+        .expect_err("occupied")
+        .to_string();
+    assert!(e.contains("other") && e.contains("not a data set"), "{e}");
+    let file = dir.path().join("file");
+    std::fs::write(&file, "mine").expect("write");
+    let e = fork(&whole, 1, Vector3::zeros(), &file)
+        .expect_err("a file")
+        .to_string();
+    assert!(e.contains("file"), "{e}");
+    assert_eq!(std::fs::read_to_string(&file).expect("read"), "mine");
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).expect("mkdir");
+    fork(&whole, 2, Vector3::zeros(), &empty).expect("into an empty directory");
+    assert_eq!(read_manifest(&empty).expect("manifest").frames_done, 2);
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("list")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("fork-partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "a fork left its temporary copy");
 }
 
 #[test]

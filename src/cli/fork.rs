@@ -37,8 +37,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let source = clothsr::data::read_manifest(&args.data)?;
     let frames = args.frames.unwrap_or(source.frames_done);
     anyhow::ensure!(
-        frames >= args.frame,
-        "--frames ({frames}) must be at least --frame ({})",
+        frames > args.frame,
+        "--frames ({frames}) must be more than --frame ({}): the fork simulates the frames after it",
         args.frame
     );
     let Some(files) = &source.source else {

@@ -35,10 +35,11 @@ pub struct Args {
     #[arg(long)]
     csv: Option<PathBuf>,
     /// A second data set of the same scene and coarse mesh, started next to the first (a
-    /// `clothsr dataset` run whose `--garment-offset` differs by a fraction of a millimetre):
-    /// the distance between the two ground truths is reported beside the errors as the
-    /// predictability floor, which no predictor of the first from its start can be expected
-    /// to beat where the scene is chaotic (folds, contact and friction are).
+    /// `clothsr dataset` run whose `--garment-offset` differs by a fraction of a millimetre,
+    /// or a `clothsr fork` of the first: its shared frames count as zero, so start at the
+    /// fork's frame): the distance between the two ground truths is reported beside the errors
+    /// as the predictability floor, which no predictor of the first from its start can be
+    /// expected to beat where the scene is chaotic (folds, contact and friction are).
     #[arg(long)]
     floor: Option<PathBuf>,
     /// Short-horizon mode: instead of one long rollout, roll out this many frames from the

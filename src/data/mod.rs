@@ -11,7 +11,9 @@
 //!   the manifest. Coordinate maps are made from these on the fly ([`crate::msr`]).
 //! * `frames/frame_NNNNN.safetensors`, one per output frame k = 1.. (steps (k−1)·s+1 ..= k·s):
 //!   `int_x`, `int_v`, `coarse_x`, `coarse_v` (s, Nc, 3) f32 — M_int and M_c per step;
-//!   `fine_x`, `fine_v` (Nf, 3) f32 — M_f at the frame's end; and, to resume exactly,
+//!   `fine_x`, `fine_v` (Nf, 3) f32 — M_f at the frame's end; and, to resume (bit for bit
+//!   on the test scenes; on a garment touching many body faces the contact detector's
+//!   rebuilt trees change the order of sums in the last bits),
 //!   `resume_fine_x`, `resume_fine_v` (Nf, 3) f64, `resume_fine_seam_rest`,
 //!   `resume_coarse_seam_rest` f64, `resume_fine_margin`, `resume_coarse_margin` (1) f64 (the
 //!   simulators' detection margins; absent in data sets made before they were kept).
@@ -565,9 +567,10 @@ pub fn generate(
 /// two data sets' later frames is how far a change of `offset_m` carries, the ground truth's
 /// own predictability floor (`clothsr rollout --floor`).
 ///
-/// The copy is made beside `dst` and renamed into place, so a killed fork leaves no data set.
-/// Forking again into a `dst` that already holds the same fork returns its manifest (its
-/// frames beyond `frame` are kept, for resuming).
+/// The copy is made beside `dst` and renamed into place, so a killed or failed fork leaves no
+/// data set. Forking again into a `dst` that already holds the same fork returns its manifest
+/// (its frames beyond `frame` are kept, for resuming). The record names `src` as an absolute
+/// path; a fork of a fork records only the last fork.
 pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Result<Manifest> {
     let source = read_manifest(src)?;
     let src_manifest = src.join("manifest.json");
@@ -586,7 +589,7 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
         )));
     }
     let record = Fork {
-        from: src.to_path_buf(),
+        from: std::fs::canonicalize(src).map_err(|e| Error::io(src, e))?,
         frame,
         offset_m: offset_m.into(),
     };
@@ -606,11 +609,17 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
             ),
         ));
     }
-    if std::fs::read_dir(dst).is_ok_and(|mut d| d.next().is_some()) {
-        return Err(Error::bad_input(
-            dst,
-            "exists and is not a data set; choose another directory",
-        ));
+    if dst.exists() {
+        let empty = std::fs::read_dir(dst)
+            .map_err(|e| Error::io(dst, e))?
+            .next()
+            .is_none();
+        if !empty {
+            return Err(Error::bad_input(
+                dst,
+                "exists and is not a data set; choose another directory",
+            ));
+        }
     }
     let name = dst
         .file_name()
@@ -623,9 +632,38 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
     }
-    std::fs::create_dir_all(tmp.join("frames")).map_err(|e| Error::io(&tmp, e))?;
+    let made = fork_into(src, frame, offset_m, source, record, &tmp).and_then(|m| {
+        if dst.exists() {
+            std::fs::remove_dir(dst).map_err(|e| Error::io(dst, e))?;
+        }
+        std::fs::rename(&tmp, dst).map_err(|e| Error::io(dst, e))?;
+        Ok(m)
+    });
+    if made.is_err() {
+        // Best effort: the error that matters is the one returned.
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    made
+}
+
+/// [`fork`]'s copy into `tmp`.
+fn fork_into(
+    src: &Path,
+    frame: usize,
+    offset_m: Vector3<f64>,
+    source: Manifest,
+    record: Fork,
+    tmp: &Path,
+) -> Result<Manifest> {
+    std::fs::create_dir_all(tmp.join("frames")).map_err(|e| Error::io(tmp, e))?;
     let copy = |from: PathBuf, to: PathBuf| -> Result<()> {
-        std::fs::copy(&from, &to).map_err(|e| Error::io(&from, e))?;
+        std::fs::copy(&from, &to).map_err(|e| {
+            Error::Invalid(format!(
+                "copying {} to {}: {e}",
+                from.display(),
+                to.display()
+            ))
+        })?;
         Ok(())
     };
     copy(
@@ -633,7 +671,7 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
         tmp.join("meshes.safetensors"),
     )?;
     for k in 1..frame {
-        copy(frame_path(src, k), frame_path(&tmp, k))?;
+        copy(frame_path(src, k), frame_path(tmp, k))?;
     }
     let last = frame_path(src, frame);
     let r = TensorReader::open(&last)?;
@@ -643,7 +681,7 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
         p.iter_mut().zip(offset_m.iter()).for_each(|(a, o)| *a += o);
     }
     w.f64("resume_fine_x", &shape, &x);
-    w.write(&frame_path(&tmp, frame))?;
+    w.write(&frame_path(tmp, frame))?;
     let manifest = Manifest {
         frames_done: frame,
         frames_requested: frame,
@@ -651,10 +689,6 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
         ..source
     };
     crate::io::write_atomic(&tmp.join("manifest.json"), &manifest_json(&manifest)?)?;
-    if dst.exists() {
-        std::fs::remove_dir(dst).map_err(|e| Error::io(dst, e))?;
-    }
-    std::fs::rename(&tmp, dst).map_err(|e| Error::io(dst, e))?;
     Ok(manifest)
 }
 
