@@ -12,8 +12,8 @@
 //! * `frames/frame_NNNNN.safetensors`, one per output frame k = 1.. (steps (k−1)·s+1 ..= k·s):
 //!   `int_x`, `int_v`, `coarse_x`, `coarse_v` (s, Nc, 3) f32 — M_int and M_c per step;
 //!   `fine_x`, `fine_v` (Nf, 3) f32 — M_f at the frame's end; and, to resume (bit for bit
-//!   on the test scenes; on a garment touching many body faces the contact detector's
-//!   rebuilt trees change the order of sums in the last bits),
+//!   on the test scenes; a garment touching many body faces resumes within round-off, most
+//!   likely because the contact detector's rebuilt trees change the order of sums),
 //!   `resume_fine_x`, `resume_fine_v` (Nf, 3) f64, `resume_fine_seam_rest`,
 //!   `resume_coarse_seam_rest` f64, `resume_fine_margin`, `resume_coarse_margin` (1) f64 (the
 //!   simulators' detection margins; absent in data sets made before they were kept).
