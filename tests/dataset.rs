@@ -184,6 +184,23 @@ fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
         .filter(|e| e.file_name().to_string_lossy().contains("fork-partial"))
         .collect();
     assert!(leftovers.is_empty(), "a fork left its temporary copy");
+
+    // A resume state whose detection margin is not what the format says is refused, naming
+    // the frame file, rather than taken for an older data set's missing one.
+    let bad = dir.path().join("bad");
+    let m = fork(&whole, 1, Vector3::zeros(), &bad).expect("fork");
+    let frame1 = bad.join("frames/frame_00001.safetensors");
+    let r = TensorReader::open(&frame1).expect("frame 1");
+    let mut w = clothsr::io::tensors::TensorWriter::from_reader(&r).expect("copy");
+    w.f32("resume_fine_margin", &[1], &[0.01]);
+    w.write(&frame1).expect("write");
+    let e = generate(&scene(), &m.scene, &m.options(3), &bad, |_| {})
+        .expect_err("f32 margin")
+        .to_string();
+    assert!(
+        e.contains("frame_00001") && e.contains("resume_fine_margin"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -442,19 +442,25 @@ pub fn generate(
         // The detection margins follow the last step's largest move, and a step's Newton
         // displacement is bounded by them: a run resumed without them takes a different first
         // step (millimetres on a walking skirt).
-        match (
-            r.f64("resume_fine_margin").ok(),
-            r.f64("resume_coarse_margin").ok(),
-        ) {
-            (Some((_, f)), Some((_, c))) if !f.is_empty() && !c.is_empty() => {
-                fine.sim.set_obstacle_margin_m(f[0]);
-                coarse.sim.set_obstacle_margin_m(c[0]);
-            }
-            _ => tracing::warn!(
+        if r.has("resume_fine_margin") || r.has("resume_coarse_margin") {
+            let margin = |name: &str| -> Result<f64> {
+                r.f64(name)?
+                    .1
+                    .first()
+                    .copied()
+                    .ok_or_else(|| Error::bad_input(&path, format!("tensor '{name}' is empty")))
+            };
+            fine.sim
+                .set_obstacle_margin_m(margin("resume_fine_margin")?);
+            coarse
+                .sim
+                .set_obstacle_margin_m(margin("resume_coarse_margin")?);
+        } else {
+            tracing::warn!(
                 "{}: no detection margins (written by an older clothsr); the run continues \
                  from its state but not exactly as it would have",
                 path.display()
-            ),
+            );
         }
     } else {
         if dressed {

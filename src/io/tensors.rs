@@ -125,6 +125,11 @@ impl TensorReader {
         Ok((v.shape().to_vec(), v.data()))
     }
 
+    /// Whether the file holds an array named `name` (of any type).
+    pub fn has(&self, name: &str) -> bool {
+        SafeTensors::deserialize(&self.bytes).is_ok_and(|st| st.tensor(name).is_ok())
+    }
+
     /// A metadata entry of the header.
     pub fn meta(&self, key: &str) -> Option<String> {
         let (_, m) = SafeTensors::read_metadata(&self.bytes).ok()?;
