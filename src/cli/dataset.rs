@@ -1,10 +1,8 @@
 //! `clothsr dataset SCENE --coarse-mm 20 --fine-mm 2.5 --frames N -o DIR`: training data
 //! (the paper's §3.3.1) from a fine simulation; see [`clothsr::data`] for the format.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-use std::path::Path;
 
 use clothsr::data::{generate, Manifest, Options, SceneSource};
 use clothsr::scene::Scene;

@@ -33,7 +33,7 @@ pub struct Args {
 
 /// Runs `fork`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let offset = super::triple(&Some(args.offset.clone()))?;
+    let offset = super::triple(&Some(args.offset))?;
     let source = clothsr::data::read_manifest(&args.data)?;
     let frames = args.frames.unwrap_or(source.frames_done);
     anyhow::ensure!(

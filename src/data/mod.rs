@@ -190,7 +190,7 @@ pub struct Manifest {
 /// Where a forked data set branched off ([`fork`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fork {
-    /// The data set it continues, as given.
+    /// The data set it continues, as an absolute path.
     pub from: PathBuf,
     /// Its last frame shared with `from`: frames 1..=frame are copies.
     pub frame: usize,
