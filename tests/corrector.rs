@@ -169,7 +169,12 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         sim: None,
     }];
     let norm = fit_normalisation(&sets);
-    let kinds = [Decoder::Node, Decoder::Momentum, Decoder::Gated];
+    let kinds = [
+        Decoder::Node,
+        Decoder::Momentum,
+        Decoder::Gated,
+        Decoder::GatedEdges,
+    ];
     for (attention, decoder) in [false, true]
         .into_iter()
         .flat_map(|a| kinds.map(|d| (a, d)))
@@ -186,7 +191,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         let default = cfg.model.clone().with_tension_ramp(None);
         assert_eq!(
             default.tension_ramp(),
-            (decoder == Decoder::Gated).then_some(DEFAULT_TENSION_RAMP)
+            decoder.is_gated().then_some(DEFAULT_TENSION_RAMP)
         );
         let device = default_device().expect("device");
         let net = cfg.model.init(&device);
@@ -292,6 +297,50 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             _ => assert!(free > 1e-3, "{decoder:?}: momentum {free}"),
         }
         assert!(near > 1e-3, "relative momentum {near} near colliders");
+        // The gated decoder with edge impulses corrects in free fall too (the impulses are
+        // internal forces of the corrector's own), but adds no momentum there.
+        if decoder == Decoder::GatedEdges {
+            let zero = vec![Vector3::zeros(); x.len()];
+            let p = loaded
+                .predict(&x, &v, &zero, &vec![0.0; x.len()])
+                .expect("predict");
+            let (mut sum, mut scale) = (Vector3::zeros(), 0.0);
+            for (p, m) in p.iter().zip(&seq.graph.mass) {
+                sum += p * f64::from(*m);
+                scale += p.norm() * f64::from(*m);
+            }
+            assert!(scale > 0.0 && sum.norm() < 1e-5 * scale, "{sum} of {scale}");
+        }
+        // Smoothing at inference applies the mesh graph's low-pass filter to the correction.
+        let mut smoothed_cfg = cfg.clone();
+        smoothed_cfg.model.smoothing = Some(3);
+        let smooth_dir = tempfile::tempdir().expect("tmp");
+        save_model(smooth_dir.path(), &smoothed_cfg, &norm, &net).expect("save");
+        let smoothed = Corrector::load(smooth_dir.path(), &seq.mesh).expect("load");
+        let start_v = vec![Vector3::zeros(); x.len()];
+        let state = clothsr::sim::SimState {
+            x: x.clone(),
+            v: v.clone(),
+            t_s: 0.0,
+        };
+        let (mut raw, mut low) = (state.clone(), state.clone());
+        loaded.correct(&start_v, &mut raw, &sim).expect("correct");
+        smoothed.correct(&start_v, &mut low, &sim).expect("correct");
+        let mut p: Vec<Vector3<f64>> = raw.v.iter().zip(&v).map(|(a, b)| a - b).collect();
+        let before = p.clone();
+        seq.graph.smooth(&mut p, 3);
+        assert!(
+            dist(&p, &before) > 1e-5 * dist(&before, &start_v),
+            "{decoder:?}: smoothing changed nothing: {} of {}",
+            dist(&p, &before),
+            dist(&before, &start_v)
+        );
+        for ((a, b), v) in low.v.iter().zip(&p).zip(&v) {
+            assert!(
+                (a - v - b).norm() <= 1e-9 * (1.0 + b.norm()),
+                "{decoder:?}: {a} {b}"
+            );
+        }
         // Away from colliders, the gated decoder takes back a share in (0, 1) of each
         // component of the step's velocity change beyond gravity, and nothing in free fall.
         if decoder == Decoder::Gated {

@@ -11,6 +11,7 @@ use clothsr::corrector::rollout::{
 };
 use clothsr::corrector::Corrector;
 use clothsr::data::{coarse_simulation, read_manifest};
+use clothsr::mesh::ClothMesh;
 use clothsr::scene::Scene;
 
 /// Arguments of `rollout`.
@@ -50,6 +51,31 @@ pub struct Args {
     /// The spacing of the short-horizon starts, frames.
     #[arg(long, default_value_t = 10)]
     every: usize,
+    /// Run the corrector with this take-back scale instead of its model's (the gated
+    /// decoder's share of each step's velocity change taken back is multiplied by it; in
+    /// (0, 1]): to choose the value `train corrector --take-back` saves.
+    #[arg(long)]
+    take_back: Option<f64>,
+    /// Run the corrector with this many rounds of smoothing of its correction instead of its
+    /// model's (0: none): to choose the value `train corrector --smoothing` saves.
+    #[arg(long)]
+    smoothing: Option<usize>,
+}
+
+/// Loads `--model` for `mesh` with the inference settings given on the command line.
+fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
+    let mut corrector = Corrector::load(&args.model, mesh)?;
+    if let Some(k) = args.take_back {
+        anyhow::ensure!(
+            k.is_finite() && k > 0.0 && k <= 1.0,
+            "--take-back must be in (0, 1], not {k}"
+        );
+        corrector.config.take_back = (k != 1.0).then_some(k);
+    }
+    if let Some(n) = args.smoothing {
+        corrector.config.smoothing = (n > 0).then_some(n);
+    }
+    Ok(corrector)
 }
 
 /// Runs `rollout`.
@@ -152,7 +178,7 @@ fn long_rollout(
         Some(args.start_frame..=args.start_frame + frames),
         &sim,
     )?;
-    let corrector = Corrector::load(&args.model, &seq.mesh)?;
+    let corrector = load_corrector(args, &seq.mesh)?;
     let mut alone = coarse_simulation(scene, data, args.start_frame)?;
     let mut check = coarse_simulation(scene, data, args.start_frame)?;
     for s in [&mut sim, &mut alone, &mut check] {
@@ -258,7 +284,7 @@ fn short_horizons(
     let make = |f: usize| coarse_simulation(scene, data, f);
     let probe = make(args.start_frame)?;
     let seq = Sequence::load(data, Some(args.start_frame..=last), &probe)?;
-    let corrector = Corrector::load(&args.model, &seq.mesh)?;
+    let corrector = load_corrector(args, &seq.mesh)?;
     let s = seq.manifest.steps_per_frame;
     let mut runs = Vec::new();
     for &start in &starts {

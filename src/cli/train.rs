@@ -167,7 +167,9 @@ pub struct CorrectorArgs {
     /// The decoder: `node` (the paper's: a free correction per vertex), `momentum`
     /// (antisymmetric edge impulses, per-vertex terms only near colliders) or `gated` (a
     /// learned share of the simulator step's velocity change taken back, per-vertex terms
-    /// only near colliders).
+    /// only near colliders) or `gated-edges` (the gated decoder plus antisymmetric edge
+    /// impulses everywhere: internal forces that can hold a drape the coarse forces would not
+    /// rest in).
     #[arg(long, value_enum, default_value = "gated")]
     decoder: clothsr::corrector::model::Decoder,
     /// The gated decoder's tension limit at inference, saved with the model: the share of
@@ -183,6 +185,12 @@ pub struct CorrectorArgs {
     /// [default: 1, or the `--init` model's]
     #[arg(long)]
     take_back: Option<f64>,
+    /// Low-pass filter on the correction at inference, saved with the model: this many rounds
+    /// of mass-weighted averaging over each vertex and its mesh neighbours before it is applied
+    /// (0: none; the one-step targets' local part is the coarse mesh's spring-back out of
+    /// M_int, which the interleaved run does not have). [default: 0, or the `--init` model's]
+    #[arg(long)]
+    smoothing: Option<usize>,
     /// Held-out data sets to select the network on (repeat for several; never a training
     /// set): at the end of each phase (with `--init`, the starting model too) and every
     /// `--validate-every` phase-2 windows the network is rolled out interleaved with the
@@ -279,6 +287,9 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     }
     if let Some(k) = a.take_back {
         model = model.with_take_back((k != 1.0).then_some(k));
+    }
+    if let Some(n) = a.smoothing {
+        model = model.with_smoothing((n > 0).then_some(n));
     }
     let compression = a
         .coarse_compression

@@ -238,6 +238,34 @@ impl MeshGraph {
         }
     }
 
+    /// Low-pass filters per-vertex vectors `p` in place: `iters` rounds of replacing each
+    /// vertex's vector by the mass-weighted mean over itself and its graph neighbours (mesh
+    /// edges and seam pairs). Each round keeps Σ m·p on meshes whose vertices have equal
+    /// weighted degrees and damps a wave of k edges' length by about cos(π/k).
+    pub fn smooth(&self, p: &mut [Vector3<f64>], iters: usize) {
+        let n = self.num_nodes.min(p.len());
+        let mut sum = vec![Vector3::zeros(); n];
+        let mut weight = vec![0.0f64; n];
+        for _ in 0..iters {
+            for i in 0..n {
+                let m = f64::from(self.mass[i]);
+                sum[i] = p[i] * m;
+                weight[i] = m;
+            }
+            for (&s, &r) in self.senders.iter().zip(&self.receivers) {
+                let (s, r) = (s as usize, r as usize);
+                let m = f64::from(self.mass[s]);
+                sum[r] += p[s] * m;
+                weight[r] += m;
+            }
+            for i in 0..n {
+                if weight[i] > 0.0 {
+                    p[i] = sum[i] / weight[i];
+                }
+            }
+        }
+    }
+
     /// Number of directed edges.
     pub fn num_edges(&self) -> usize {
         self.senders.len()
@@ -407,6 +435,53 @@ mod tests {
     fn sheet() -> ClothMesh {
         let g = flat_sheet("s", 0.2, 0.1, Vector3::zeros(), Fabric::default());
         mesh_garment(&g, &MeshOptions::with_edge(0.05)).expect("mesh")
+    }
+
+    #[test]
+    fn smoothing_keeps_uniform_and_long_waves_and_damps_vertex_noise() {
+        let g = sheet_with(0.01);
+        let mesh_material = &g.material;
+        let n = g.num_nodes;
+        let rms = |p: &[Vector3<f64>]| {
+            (p.iter().map(|v| v.norm_squared()).sum::<f64>() / p.len() as f64).sqrt()
+        };
+        // A uniform field is a fixed point.
+        let mut p = vec![Vector3::new(0.3, -1.0, 2.0); n];
+        g.smooth(&mut p, 5);
+        for v in &p {
+            assert!((v - Vector3::new(0.3, -1.0, 2.0)).norm() < 1e-12, "{v}");
+        }
+        // A wave 20 edges long keeps most of itself after 4 rounds ...
+        let wave: Vec<Vector3<f64>> = mesh_material
+            .iter()
+            .map(|u| Vector3::new((u.x * std::f64::consts::TAU / 0.2).sin(), 0.0, 0.0))
+            .collect();
+        let mut p = wave.clone();
+        g.smooth(&mut p, 4);
+        let kept = rms(&p) / rms(&wave);
+        assert!(kept > 0.9, "long wave kept {kept}");
+        // ... and per-vertex noise very little of itself; zero rounds change nothing.
+        let mut seed = 12345u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let noise: Vec<Vector3<f64>> = (0..n)
+            .map(|_| Vector3::new(next(), next(), next()))
+            .collect();
+        let mut p = noise.clone();
+        g.smooth(&mut p, 0);
+        assert_eq!(p, noise);
+        g.smooth(&mut p, 4);
+        let kept = rms(&p) / rms(&noise);
+        assert!(kept < 0.3, "noise kept {kept}");
+    }
+
+    fn sheet_with(edge_m: f64) -> MeshGraph {
+        let g = flat_sheet("s", 0.2, 0.1, Vector3::zeros(), Fabric::default());
+        MeshGraph::new(&mesh_garment(&g, &MeshOptions::with_edge(edge_m)).expect("mesh"))
     }
 
     #[test]

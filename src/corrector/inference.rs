@@ -319,7 +319,8 @@ impl Corrector {
     }
 
     /// Corrects M_c = `state`, the result of a step of `sim` from velocities `start_v`, in
-    /// place into M_int: q′ = q + p, x′ = x + h·p (the time step, gravity and colliders are
+    /// place into M_int: q′ = q + p, x′ = x + h·p, p low-pass filtered by the model's
+    /// [`CorrectorConfig::smoothing`] (the time step, gravity and colliders are
     /// `sim`'s, the colliders taken at `state.t_s`). A diverged correction (too large, or too
     /// fast a result) is an error and leaves `state` as it was.
     pub fn correct(
@@ -338,7 +339,9 @@ impl Corrector {
         let dt_s = sim.sim.params.dt_s;
         let dv = step_change(&state.v, start_v, sim.sim.params.gravity_m_s2 * dt_s);
         CorrectorTimes::add(&self.times.proximity_ns, t);
-        let p = self.predict(&state.x, &state.v, &dv, &body)?;
+        let mut p = self.predict(&state.x, &state.v, &dv, &body)?;
+        self.graph
+            .smooth(&mut p, self.config.smoothing.unwrap_or(0));
         if let Some((i, q)) = state
             .v
             .iter()

@@ -29,6 +29,11 @@
 //!   further scaled per vertex by w = clamp(1 − ε̄/ramp, 0, 1), ε̄ the mean strain of its
 //!   edges after the step ([`CorrectorConfig::tension_ramp`]): the fine cloth's wrinkles take
 //!   up compression, not tension.
+//! * Or, with the `GatedEdges` decoder, the gated decoder's p_i plus the momentum decoder's
+//!   edge impulses (Σ_j f_ji)/m_i: internal forces of the corrector's own, which can hold a
+//!   shape the coarse forces would not rest in, where taking back a share of those forces
+//!   can only slow the cloth's way to the coarse equilibrium (or, taking back all, leave it
+//!   with none).
 //!
 //! Every MLP is ReLU with `hidden_layers` hidden layers of `latent` units; all but the decoder
 //! end in a LayerNorm. Inputs and outputs are normalised outside the network
@@ -82,6 +87,14 @@ pub struct CorrectorConfig {
     /// back (measured: the shipped three-balls corrector started on the settled ground truth
     /// drifts to 7.9 mm at scale 1, 4.0 mm at 0.5, the simulation alone 3.1 mm).
     pub take_back: Option<f64>,
+    /// Low-pass filter on the correction at inference (beyond the paper, any decoder): this
+    /// many rounds of mass-weighted averaging over each vertex and its graph neighbours
+    /// ([`super::graph::MeshGraph::smooth`]) before the correction is applied (`None` or 0:
+    /// none, also for models saved before it existed). The one-step targets are dominated by
+    /// the coarse mesh springing back out of M_int's compressed edges, a local (edge-scale)
+    /// motion the interleaved run does not have; its learned cancellation is then a local
+    /// bias, while the fine cloth's drift from the coarse one is smooth over the garment.
+    pub smoothing: Option<usize>,
 }
 
 /// How the network's node latents become velocity corrections.
@@ -96,6 +109,23 @@ pub enum Decoder {
     /// A per-vertex, per-axis share γ ∈ (0, 1)³ of the step's velocity change beyond gravity
     /// taken back, node terms only near colliders.
     Gated,
+    /// The gated decoder plus the momentum decoder's antisymmetric edge impulses everywhere:
+    /// the take-back scales down the simulator's forces, the impulses add internal forces of
+    /// their own, which can hold a shape the coarse membrane and bending would not rest in
+    /// (the fine cloth's drape) without accelerating the cloth as a whole.
+    GatedEdges,
+}
+
+impl Decoder {
+    /// Whether the decoder takes back a share of the step's velocity change.
+    pub fn is_gated(self) -> bool {
+        matches!(self, Decoder::Gated | Decoder::GatedEdges)
+    }
+
+    /// Whether the decoder adds antisymmetric edge impulses.
+    pub fn has_edge_impulses(self) -> bool {
+        matches!(self, Decoder::Momentum | Decoder::GatedEdges)
+    }
 }
 
 /// The gated decoder's tension ramp when the model names none: 1 % strain (the data's
@@ -125,14 +155,14 @@ impl CorrectorConfig {
     /// another decoder).
     pub fn take_back(&self) -> Option<f64> {
         let k = self.take_back.unwrap_or(1.0);
-        (self.decoder_kind() == Decoder::Gated && k != 1.0).then_some(k)
+        (self.decoder_kind().is_gated() && k != 1.0).then_some(k)
     }
 
     /// The gated decoder's tension ramp at inference ([`Self::tension_ramp`]); `None`: no
     /// limit (other decoders, or a ramp of 0).
     pub fn tension_ramp(&self) -> Option<f64> {
         let r = self.tension_ramp.unwrap_or(DEFAULT_TENSION_RAMP);
-        (self.decoder_kind() == Decoder::Gated && r > 0.0).then_some(r)
+        (self.decoder_kind().is_gated() && r > 0.0).then_some(r)
     }
 
     /// The decoder.
@@ -402,9 +432,13 @@ impl CorrectorConfig {
                 })
                 .collect(),
             decode: Mlp::new(l, l, h, 3, false, device),
-            decode_edges: (self.decoder_kind() == Decoder::Momentum)
+            decode_edges: self
+                .decoder_kind()
+                .has_edge_impulses()
                 .then(|| Mlp::new(l, l, h, 3, false, device)),
-            gate: (self.decoder_kind() == Decoder::Gated)
+            gate: self
+                .decoder_kind()
+                .is_gated()
                 .then(|| Mlp::new(l, l, h, 3, false, device)),
         }
     }
@@ -420,32 +454,36 @@ impl CorrectorNet {
         }
         let [n, _] = nodes.dims();
         let body = g.nodes.clone().slice([0..n, BODY_COLUMN..BODY_COLUMN + 1]); // [N, 1]
-        if let Some(gate) = &self.gate {
-            // d = (1 − b)·BODY_RADIUS_M, c = max(0, 1 − d/CONTACT_RADIUS_M).
-            let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
-            let contact = ((body - 1.0) * ratio + 1.0).clamp(0.0, 1.0); // [N, 1]
-            let share = sigmoid(gate.forward(nodes.clone())); // [N, 3]
-            let mut taken = share * g.step_change.clone() * (contact.clone().neg() + 1.0); // [N, 3]
-            if let Some(w) = &g.tension {
-                taken = taken * w.clone(); // [N, 3]
+        let local = match &self.gate {
+            Some(gate) => {
+                // d = (1 − b)·BODY_RADIUS_M, c = max(0, 1 − d/CONTACT_RADIUS_M).
+                let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
+                let contact = ((body - 1.0) * ratio + 1.0).clamp(0.0, 1.0); // [N, 1]
+                let share = sigmoid(gate.forward(nodes.clone())); // [N, 3]
+                let mut taken = share * g.step_change.clone() * (contact.clone().neg() + 1.0); // [N, 3]
+                if let Some(w) = &g.tension {
+                    taken = taken * w.clone(); // [N, 3]
+                }
+                self.decode.forward(nodes) * contact - taken // [N, 3]
             }
-            return self.decode.forward(nodes) * contact - taken; // [N, 3]
-        }
+            None if self.decode_edges.is_some() => self.decode.forward(nodes) * body, // [N, 3]
+            None => return self.decode.forward(nodes),                                // [N, 3]
+        };
         let Some(decode_edges) = &self.decode_edges else {
-            return self.decode.forward(nodes); // [N, 3]
+            return local; // [N, 3]
         };
         let g_e = decode_edges.forward(edges); // [E, 3]
         let [e, _] = g_e.dims();
+        let device = g_e.device();
         let pairs = g_e.reshape([e / 2, 6]); // [E/2, 6]: g of edge 2k, then of 2k + 1
         let f = pairs.clone().slice([0..e / 2, 0..3]) - pairs.slice([0..e / 2, 3..6]); // [E/2, 3]
         let f = Tensor::cat(vec![f.clone(), f.neg()], 1).reshape([e, 3]); // [E, 3], f_ji = −f_ij
-        let device = nodes.device();
         let impulse = Tensor::<2>::zeros([n, 3], &device).select_assign(
             0,
             g.receivers.clone(),
             f,
             IndexingUpdateOp::Add,
         ); // [N, 3], sums to zero
-        impulse * g.inv_mass.clone() + self.decode.forward(nodes) * body // [N, 3]
+        impulse * g.inv_mass.clone() + local // [N, 3]
     }
 }

@@ -134,7 +134,9 @@ pub struct TrainingConfig {
     /// share scaled by the tension limit and the take-back scale
     /// ([`CorrectorConfig::tension_ramp`], [`CorrectorConfig::take_back`]), so that the window
     /// visits the states the interleaved run will visit and the loss is on the correction it
-    /// will apply. `None` / false: the raw network (phase 1 always trains it raw: its one-step
+    /// will apply; the window advances with the correction smoothed as at inference
+    /// ([`CorrectorConfig::smoothing`]; the loss stays on the network's own output, whose
+    /// targets are not smooth). `None` / false: the raw network (phase 1 always trains it raw: its one-step
     /// targets hold the coarse mesh's spring-back out of M_int, which the limit would hide).
     pub rollout_as_inference: Option<bool>,
     /// Share of phase-2 windows that start from the interleaved run's own states instead of a
@@ -1299,8 +1301,11 @@ fn rollout_window(
             None => loss,
             Some(acc) => acc + loss,
         });
-        for ((x, v), p) in c.x.iter_mut().zip(c.v.iter_mut()).zip(p.chunks_exact(3)) {
-            let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+        let mut p = vectors(&p);
+        if cfg.rollout_as_inference.unwrap_or(false) {
+            seq.graph.smooth(&mut p, cfg.model.smoothing.unwrap_or(0));
+        }
+        for ((x, v), p) in c.x.iter_mut().zip(c.v.iter_mut()).zip(&p) {
             *v += p;
             *x += p * h;
         }
