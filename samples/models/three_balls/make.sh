@@ -32,16 +32,17 @@ mkdir -p "$OUT"
 # (within 7 % of the error on 2 × 2 blocks at a third of the time; see README.md).
 "$BIN" train isr --data "$DATA/train_a" --data "$DATA/train_b" --frames 150 -o "$OUT/isr" \
   --steps 8000 --no-init --unshuffle 4 --depths 2,2,2 &
-# The shipped corrector is session 10's (with session 13's take-back scale of 0.5 added to its
-# config.json), trained by this recipe on the drops of the fast solver
-# before session 12's fix; retrained by it on today's drops it measured 1.88× the simulation
-# alone over the held-out 299 frames against the shipped one's 1.39× (see README.md).
+# The shipped corrector is session 10's (with session 13's take-back scale of 0.5 and session
+# 21's smoothing of 2 rounds added to its config.json), trained by this recipe on the drops of
+# the fast solver before session 12's fix; retrained by it on today's drops it measured 1.88×
+# the simulation alone over the held-out 299 frames against the shipped one's 1.39× (see
+# README.md).
 # The gated decoder, no training noise (the defaults), then window rollouts, on the first 60
 # frames (two correctors trained on all 150 diverged in the 300-frame rollout, at frames 254
 # and 283; this one runs it through).
 "$BIN" train corrector --data "$DATA/train_a" --data "$DATA/train_b" --frames 60 -o "$OUT/corrector" \
   --steps 2000 --batch 2 --lr-start 1e-3 --lr-end 1e-5 --mp-steps 4 \
-  --rollout-iters 800 --window 12 --rollout-lr 1e-4 --take-back 0.5 &
+  --rollout-iters 800 --window 12 --rollout-lr 1e-4 --take-back 0.5 --smoothing 2 &
 wait
 
 # What the models came from, and no training leftovers in the repository.
