@@ -67,10 +67,16 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     let mut corrector = Corrector::load(&args.model, mesh)?;
     if let Some(k) = args.take_back {
         anyhow::ensure!(
-            k.is_finite() && k > 0.0 && k <= 1.0,
-            "--take-back must be in (0, 1], not {k}"
+            corrector.config.decoder_kind().is_gated(),
+            "--take-back: {} has a {:?} decoder, which takes nothing back",
+            args.model.display(),
+            corrector.config.decoder_kind()
         );
         corrector.config.take_back = (k != 1.0).then_some(k);
+        corrector
+            .config
+            .check()
+            .map_err(|e| anyhow::anyhow!("--take-back {k}: {e}"))?;
     }
     if let Some(n) = args.smoothing {
         corrector.config.smoothing = (n > 0).then_some(n);

@@ -224,7 +224,8 @@ pub struct CorrectorArgs {
     #[arg(long, value_name = "K")]
     average_from: Option<usize>,
     /// Phase 2 rolls the corrector out as it runs at inference (the gated decoder's
-    /// take-back scaled by the tension limit and `--take-back`) instead of the raw network.
+    /// take-back scaled by the tension limit and `--take-back`, the correction smoothed by
+    /// `--smoothing`) instead of the raw network. Without it, phase-2 windows ignore both.
     #[arg(long)]
     rollout_as_inference: bool,
     /// Share of phase-2 windows that start from the interleaved run's own states (DAgger): every

