@@ -250,24 +250,22 @@ impl MeshGraph {
         if iters == 0 {
             return;
         }
-        let n = self.num_nodes;
-        let mut sum = vec![Vector3::zeros(); n];
-        let mut weight = vec![0.0f64; n];
+        // Each vertex's mass plus its neighbours': the same every round.
+        let mut weight: Vec<f64> = self.mass.iter().map(|&m| f64::from(m)).collect();
+        for (&s, &r) in self.senders.iter().zip(&self.receivers) {
+            weight[r as usize] += f64::from(self.mass[s as usize]);
+        }
+        let mut sum = vec![Vector3::zeros(); self.num_nodes];
         for _ in 0..iters {
-            for i in 0..n {
-                let m = f64::from(self.mass[i]);
-                sum[i] = p[i] * m;
-                weight[i] = m;
+            for ((sum, p), m) in sum.iter_mut().zip(p.iter()).zip(&self.mass) {
+                *sum = p * f64::from(*m);
             }
             for (&s, &r) in self.senders.iter().zip(&self.receivers) {
-                let (s, r) = (s as usize, r as usize);
-                let m = f64::from(self.mass[s]);
-                sum[r] += p[s] * m;
-                weight[r] += m;
+                sum[r as usize] += p[s as usize] * f64::from(self.mass[s as usize]);
             }
-            for i in 0..n {
-                if weight[i] > 0.0 {
-                    p[i] = sum[i] / weight[i];
+            for ((p, sum), w) in p.iter_mut().zip(&sum).zip(&weight) {
+                if *w > 0.0 {
+                    *p = sum / *w;
                 }
             }
         }
@@ -440,13 +438,17 @@ mod tests {
     use crate::scene::samples::flat_sheet;
 
     fn sheet() -> ClothMesh {
+        sheet_with(0.05)
+    }
+
+    fn sheet_with(edge_m: f64) -> ClothMesh {
         let g = flat_sheet("s", 0.2, 0.1, Vector3::zeros(), Fabric::default());
-        mesh_garment(&g, &MeshOptions::with_edge(0.05)).expect("mesh")
+        mesh_garment(&g, &MeshOptions::with_edge(edge_m)).expect("mesh")
     }
 
     #[test]
     fn smoothing_keeps_uniform_and_long_waves_and_damps_vertex_noise() {
-        let g = sheet_with(0.01);
+        let g = MeshGraph::new(&sheet_with(0.01));
         let mesh_material = &g.material;
         let n = g.num_nodes;
         let rms = |p: &[Vector3<f64>]| {
@@ -484,11 +486,6 @@ mod tests {
         g.smooth(&mut p, 4);
         let kept = rms(&p) / rms(&noise);
         assert!(kept < 0.3, "noise kept {kept}");
-    }
-
-    fn sheet_with(edge_m: f64) -> MeshGraph {
-        let g = flat_sheet("s", 0.2, 0.1, Vector3::zeros(), Fabric::default());
-        MeshGraph::new(&mesh_garment(&g, &MeshOptions::with_edge(edge_m)).expect("mesh"))
     }
 
     #[test]

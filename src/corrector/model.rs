@@ -87,13 +87,12 @@ pub struct CorrectorConfig {
     /// back (measured: the shipped three-balls corrector started on the settled ground truth
     /// drifts to 7.9 mm at scale 1, 4.0 mm at 0.5, the simulation alone 3.1 mm).
     pub take_back: Option<f64>,
-    /// Low-pass filter on the correction at inference (beyond the paper, any decoder; it keeps
-    /// a uniform correction but not exactly the momentum decoders' zero momentum, nor the
-    /// gated decoder's zero where the tension limit holds a vertex: neighbours' take-back
-    /// spreads there): this
+    /// Low-pass filter on the correction at inference (beyond the paper, any decoder): this
     /// many rounds of mass-weighted averaging over each vertex and its graph neighbours
     /// ([`super::graph::MeshGraph::smooth`]) before the correction is applied (`None` or 0:
-    /// none, also for models saved before it existed). The one-step targets are dominated by
+    /// none, also for models saved before it existed). It keeps a uniform correction, but
+    /// not exactly the momentum decoders' zero momentum, nor the gated decoder's zero where
+    /// the tension limit holds a vertex (neighbours' take-back spreads there). The one-step targets are dominated by
     /// the coarse mesh springing back out of M_int's compressed edges, a local (edge-scale)
     /// motion the interleaved run does not have; its learned cancellation is then a local
     /// bias, while the fine cloth's drift from the coarse one is smooth over the garment.

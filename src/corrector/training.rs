@@ -136,8 +136,9 @@ pub struct TrainingConfig {
     /// visits the states the interleaved run will visit and the loss is on the correction it
     /// will apply; the window advances with the correction smoothed as at inference
     /// ([`CorrectorConfig::smoothing`]; the loss stays on the network's own output, whose
-    /// targets are not smooth). `None` / false: the raw network (phase 1 always trains it raw: its one-step
-    /// targets hold the coarse mesh's spring-back out of M_int, which the limit would hide).
+    /// targets are not smooth). `None` / false: the raw network (phase 1 always trains it
+    /// raw: its one-step targets hold the coarse mesh's spring-back out of M_int, which the
+    /// limit would hide).
     pub rollout_as_inference: Option<bool>,
     /// Share of phase-2 windows that start from the interleaved run's own states instead of a
     /// ground-truth M_int (DAgger, Ross et al. 2011): the current network is rolled out as at
