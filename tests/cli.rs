@@ -257,6 +257,44 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         std::fs::read_to_string(&csv).expect("csv").lines().count(),
         2
     );
+    assert!(
+        report.contains("coarse membrane compression 1 "),
+        "{report}"
+    );
+    // The corrector beside another coarse membrane than its training's, and a factor out of
+    // range refused with the flag named.
+    let report = run(vec![
+        "rollout".into(),
+        "--model".into(),
+        model.clone().into(),
+        "--data".into(),
+        data.clone().into(),
+        "--frames".into(),
+        "1".into(),
+        "--coarse-compression".into(),
+        "0.25".into(),
+    ]);
+    assert!(
+        report.contains("coarse membrane compression 0.25 "),
+        "{report}"
+    );
+    let out = clothsr()
+        .args([
+            "rollout",
+            "--frames",
+            "1",
+            "--coarse-compression",
+            "0",
+            "--model",
+        ])
+        .arg(&model)
+        .arg("--data")
+        .arg(&data)
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--coarse-compression 0"), "{err}");
 
     // The data set forked at frame 1 with the sheet moved 1 mm, and the distance between the
     // two ground truths reported beside the rollout as its predictability floor.

@@ -60,6 +60,11 @@ pub struct Args {
     /// model's (0: none): to choose the value `train corrector --smoothing` saves.
     #[arg(long)]
     smoothing: Option<usize>,
+    /// Run the coarse simulator (all three variants) with this membrane compression factor,
+    /// in (0, 1], instead of the one the corrector was trained beside: to measure a corrector
+    /// beside a compression-soft coarse membrane without retraining it.
+    #[arg(long)]
+    coarse_compression: Option<f64>,
 }
 
 /// Loads `--model` for `mesh` with the inference settings given on the command line.
@@ -80,6 +85,13 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     }
     if let Some(n) = args.smoothing {
         corrector.config.smoothing = (n > 0).then_some(n);
+    }
+    if let Some(c) = args.coarse_compression {
+        anyhow::ensure!(
+            c > 0.0 && c <= 1.0,
+            "--coarse-compression {c}: the factor must be in (0, 1]"
+        );
+        corrector.training.coarse_compression = (c != 1.0).then_some(c);
     }
     Ok(corrector)
 }
@@ -219,6 +231,10 @@ fn long_rollout(
 fn report(e: &RolloutErrors, corrector: &Corrector) {
     let (a, b, c) = e.means();
     println!("frames                      {}", e.frame.len());
+    println!(
+        "coarse membrane compression {} (all three variants)",
+        corrector.training.compression_factor()
+    );
     if let Some(f) = e.diverged_at_frame {
         println!("interleaved rollout DIVERGED in frame {f}: the corrector's output left its training range");
     }
