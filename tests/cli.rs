@@ -248,19 +248,30 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "--data".into(),
         data.clone().into(),
         "--frames".into(),
-        "1".into(),
+        "2".into(),
         "--csv".into(),
         csv.clone().into(),
     ]);
     assert!(report.contains("mean error, interleaved"), "{report}");
     assert_eq!(
         std::fs::read_to_string(&csv).expect("csv").lines().count(),
-        2
+        3
     );
     assert!(
         report.contains("coarse membrane compression 1 "),
         "{report}"
     );
+    // The simulation alone's mean edge strain in frame 2 (the sheet on the sphere), from a
+    // rollout's CSV, %.
+    let strain = |csv: &Path| -> f64 {
+        let text = std::fs::read_to_string(csv).expect("csv");
+        text.lines()
+            .nth(2)
+            .and_then(|l| l.split(',').nth(7))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no sim-alone strain in {text}"))
+    };
+    let stiff = strain(&csv);
     // The corrector beside another coarse membrane than its training's, and a factor out of
     // range refused with the flag named.
     let report = run(vec![
@@ -270,13 +281,22 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "--data".into(),
         data.clone().into(),
         "--frames".into(),
-        "1".into(),
+        "2".into(),
         "--coarse-compression".into(),
         "0.25".into(),
+        "--csv".into(),
+        csv.clone().into(),
     ]);
     assert!(
         report.contains("coarse membrane compression 0.25 "),
         "{report}"
+    );
+    // The factor reaches the simulator: the simulation alone's edges shorten more under the
+    // softer membrane.
+    let soft = strain(&csv);
+    assert!(
+        soft < stiff - 0.005,
+        "sim alone mean strain {stiff} % at factor 1 and {soft} % at 0.25"
     );
     let out = clothsr()
         .args([
@@ -295,6 +315,50 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--coarse-compression 0"), "{err}");
+    // Short horizons: two one-frame rollouts from the ground truth (frames 1 and 2), averaged
+    // per frame after the start, beside the factor in use.
+    let hcsv = dir.path().join("horizon.csv");
+    let report = run(vec![
+        "rollout".into(),
+        "--model".into(),
+        model.clone().into(),
+        "--data".into(),
+        data.clone().into(),
+        "--frames".into(),
+        "2".into(),
+        "--horizon".into(),
+        "1".into(),
+        "--every".into(),
+        "1".into(),
+        "--coarse-compression".into(),
+        "0.5".into(),
+        "--csv".into(),
+        hcsv.clone().into(),
+    ]);
+    assert!(
+        report.contains("2 rollouts of 1 frames, from frames 1..=2")
+            && report.contains("coarse membrane compression 0.5 "),
+        "{report}"
+    );
+    assert!(
+        report
+            .lines()
+            .any(|l| l.trim_start().starts_with("1 ") && l.ends_with('×')),
+        "no row for frame 1 in {report}"
+    );
+    let hcsv = std::fs::read_to_string(&hcsv).expect("csv");
+    let rows: Vec<Vec<f64>> = hcsv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').filter_map(|w| w.parse().ok()).collect())
+        .collect();
+    assert!(
+        rows.len() == 1
+            && rows[0].len() == 4
+            && rows[0][1] > 0.0
+            && (rows[0][2] / rows[0][1] - rows[0][3]).abs() < 1e-3,
+        "{hcsv}"
+    );
 
     // The data set forked at frame 1 with the sheet moved 1 mm, and the distance between the
     // two ground truths reported beside the rollout as its predictability floor.

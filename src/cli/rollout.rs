@@ -340,6 +340,10 @@ fn short_horizons(
         starts[starts.len() - 1],
         args.every
     );
+    println!(
+        "coarse membrane compression {} (both variants)",
+        corrector.training.compression_factor()
+    );
     println!("frames after start   sim alone mm   interleaved mm   ratio");
     for k in 0..horizon {
         println!(
