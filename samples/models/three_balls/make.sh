@@ -2,7 +2,7 @@
 # Regenerates samples/models/three_balls/ (this folder) from this repository alone: training data from
 # our own fine simulations of samples/sheet_three_balls.usda (20 mm coarse / 2.5 mm fine), then
 # the ISR network and the corrector, each with its config, log and the data manifests it was
-# trained on. About 1.5 h on 2 CPU cores.
+# trained on. About 1.75 h on 2 CPU cores.
 #
 # The two main drops are 150 frames (5 s: fall, impact, settling), four more for the corrector
 # 150 and 60 frames (two of each), the held-out one 300 frames (the 3000-step rollout). The
