@@ -241,12 +241,28 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(log.contains("mean weights of the last 2"), "{log}");
     assert!(log.contains("no phase 1 (started from"), "{log}");
     assert!(log.contains("drift windows: 1 interleaved runs"), "{log}");
-    let report = run(vec![
-        "rollout".into(),
-        "--model".into(),
-        model.clone().into(),
-        "--data".into(),
-        data.clone().into(),
+    // `clothsr rollout` of the model on the data set, with these arguments after.
+    let rollout = |args: Vec<OsString>| {
+        let mut all: Vec<OsString> = vec![
+            "rollout".into(),
+            "--model".into(),
+            model.clone().into(),
+            "--data".into(),
+            data.clone().into(),
+        ];
+        all.extend(args);
+        run(all)
+    };
+    // A CSV's rows after its header, as numbers.
+    let csv_rows = |csv: &Path| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(csv)
+            .expect("csv")
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').filter_map(|w| w.parse().ok()).collect())
+            .collect()
+    };
+    let report = rollout(vec![
         "--frames".into(),
         "2".into(),
         "--csv".into(),
@@ -264,22 +280,15 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // The simulation alone's mean edge strain in frame 2 (the sheet on the sphere), from a
     // rollout's CSV, %.
     let strain = |csv: &Path| -> f64 {
-        let text = std::fs::read_to_string(csv).expect("csv");
-        text.lines()
-            .nth(2)
-            .and_then(|l| l.split(',').nth(7))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("no sim-alone strain in {text}"))
+        let rows = csv_rows(csv);
+        rows.get(1)
+            .and_then(|r| r.get(7).copied())
+            .unwrap_or_else(|| panic!("no sim-alone strain in {rows:?}"))
     };
     let stiff = strain(&csv);
     // The corrector beside another coarse membrane than its training's, and a factor out of
     // range refused with the flag named.
-    let report = run(vec![
-        "rollout".into(),
-        "--model".into(),
-        model.clone().into(),
-        "--data".into(),
-        data.clone().into(),
+    let report = rollout(vec![
         "--frames".into(),
         "2".into(),
         "--coarse-compression".into(),
@@ -319,12 +328,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // per frame after the start, beside the factor in use; the factor reaches the simulators
     // here too (the simulation alone's error differs from the paper's membrane's).
     let horizon = |factor: &str, csv: &Path| -> (String, Vec<f64>) {
-        let report = run(vec![
-            "rollout".into(),
-            "--model".into(),
-            model.clone().into(),
-            "--data".into(),
-            data.clone().into(),
+        let report = rollout(vec![
             "--frames".into(),
             "2".into(),
             "--horizon".into(),
@@ -336,13 +340,8 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
             "--csv".into(),
             csv.into(),
         ]);
-        let text = std::fs::read_to_string(csv).expect("csv");
-        let rows: Vec<Vec<f64>> = text
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').filter_map(|w| w.parse().ok()).collect())
-            .collect();
-        assert!(rows.len() == 1 && rows[0].len() == 4, "{text}");
+        let rows = csv_rows(csv);
+        assert!(rows.len() == 1 && rows[0].len() == 4, "{rows:?}");
         (report, rows[0].clone())
     };
     let (report, soft) = horizon("0.5", &dir.path().join("horizon_soft.csv"));
@@ -392,12 +391,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         manifest.contains("\"fork\"") && manifest.contains("\"frames_done\": 3"),
         "{manifest}"
     );
-    let report = run(vec![
-        "rollout".into(),
-        "--model".into(),
-        model.clone().into(),
-        "--data".into(),
-        data.clone().into(),
+    let report = rollout(vec![
         "--frames".into(),
         "2".into(),
         "--floor".into(),
