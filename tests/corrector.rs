@@ -1,15 +1,13 @@
 //! `clothsr::corrector`: the GNN corrector on a tiny data set — training lowers the loss,
 //! save → load gives identical outputs, batching graphs changes nothing, a zero input gives a
 //! finite correction, window rollout training and the rollout evaluation run beside the real
-//! coarse simulator, an ensemble averages its members' corrections.
+//! coarse simulator.
 
 mod common;
 
 use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::graph::MeshGraph;
-use clothsr::corrector::inference::{
-    default_device, features, Corrector, ENSEMBLE_FILE, WEIGHTS_FILE,
-};
+use clothsr::corrector::inference::{default_device, features, Corrector, WEIGHTS_FILE};
 use clothsr::corrector::model::{Decoder, GraphTensors, DEFAULT_TENSION_RAMP};
 use clothsr::corrector::rollout::{
     evaluate, evaluate_from, interleaved_errors, sequence_distance_mm, HorizonErrors,
@@ -400,71 +398,6 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             .expect("predict zeros");
         assert!(p.iter().all(|p| p.iter().all(|c| c.is_finite())));
     }
-}
-
-#[test]
-fn an_ensemble_averages_its_members_corrections() {
-    let seq = load(Some(1..=1));
-    let sets = vec![TrainSet {
-        seq: seq.clone(),
-        sim: None,
-    }];
-    let norm = fit_normalisation(&sets);
-    let device = default_device().expect("device");
-    let root = tempfile::tempdir().expect("tmp");
-    let cfg = TrainingConfig::new(
-        CorrectorConfig::new()
-            .with_latent(16)
-            .with_steps(2)
-            .with_decoder(Some(Decoder::Gated))
-            .with_take_back(Some(0.5)),
-    );
-    // Two members with their own weights, and a third trained unlike them.
-    let (a, b, odd) = (root.path().join("a"), root.path().join("b"), root.path().join("odd"));
-    save_model(&a, &cfg, &norm, &cfg.model.init(&device)).expect("save a");
-    save_model(&b, &cfg, &norm, &cfg.model.init(&device)).expect("save b");
-    let odd_cfg = TrainingConfig::new(cfg.model.clone().with_take_back(None));
-    save_model(&odd, &odd_cfg, &norm, &odd_cfg.model.init(&device)).expect("save odd");
-    let ensemble = |name: &str, members: &str| {
-        let dir = root.path().join(name);
-        std::fs::create_dir_all(&dir).expect("mkdir");
-        std::fs::write(dir.join(ENSEMBLE_FILE), members).expect("write");
-        dir
-    };
-    // Members are named relative to the ensemble's folder or absolutely.
-    let both = ensemble(
-        "ab",
-        &format!(r#"{{"members": ["../a", "{}"]}}"#, b.display()),
-    );
-    let st = &seq.steps[3];
-    let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
-    let dv = vectors(st.dv.as_deref().expect("Δq after the first step"));
-    let predict = |dir: &std::path::Path| {
-        let c = Corrector::load(dir, &seq.mesh).expect("load");
-        let p = c.predict(&x, &v, &dv, &st.body).expect("predict");
-        (c.num_members(), p)
-    };
-    let ((na, pa), (nb, pb), (n, p)) = (predict(&a), predict(&b), predict(&both));
-    assert_eq!((na, nb, n), (1, 1, 2));
-    let apart = dist(&pa, &pb) / pa.len() as f64;
-    assert!(apart > 1e-6, "the two members agree ({apart} m/s): nothing is averaged");
-    for ((p, a), b) in p.iter().zip(&pa).zip(&pb) {
-        assert!((p - (a + b) / 2.0).norm() <= 1e-12, "{p} against {a} and {b}");
-    }
-    // Bad ensembles are refused, naming the file or the member.
-    let err = |dir: &std::path::Path| {
-        Corrector::load(dir, &seq.mesh)
-            .expect_err("a bad ensemble loads")
-            .to_string()
-    };
-    let e = err(&ensemble("empty", r#"{"members": []}"#));
-    assert!(e.contains(ENSEMBLE_FILE) && e.contains("no members"), "{e}");
-    let e = err(&ensemble("mixed", r#"{"members": ["../a", "../odd"]}"#));
-    assert!(e.contains(ENSEMBLE_FILE) && e.contains("trained unlike"), "{e}");
-    let e = err(&ensemble("missing", r#"{"members": ["../a", "../gone"]}"#));
-    assert!(e.contains("gone") && e.contains("not a corrector model"), "{e}");
-    let e = err(&ensemble("broken", r#"{"members": "../a"}"#));
-    assert!(e.contains(ENSEMBLE_FILE), "{e}");
 }
 
 #[test]

@@ -2,9 +2,7 @@
 //! step, M_c → M_int by q′ = q + p, x′ = x + h·p, and the simulator goes on from M_int.
 //!
 //! A model directory holds `config.json` ([`super::training::TrainingConfig`], which includes
-//! the network's [`CorrectorConfig`]), `normalisation.json` and `model.bpk` (burnpack weights);
-//! an ensemble's directory holds only `ensemble.json` ([`ENSEMBLE_FILE`]), naming member model
-//! directories whose corrections are averaged.
+//! the network's [`CorrectorConfig`]), `normalisation.json` and `model.bpk` (burnpack weights).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -33,17 +31,6 @@ pub const WEIGHTS_FILE: &str = "model.bpk";
 pub const CONFIG_FILE: &str = "config.json";
 /// The normalisation statistics file in a model directory.
 pub const NORMALISATION_FILE: &str = "normalisation.json";
-/// The file of an ensemble's directory: `{"members": ["DIR", …]}`, member model directories
-/// (relative to the ensemble's directory, or absolute) trained alike (same decoder, inference
-/// settings and coarse membrane), whose corrections [`Corrector::predict`] averages.
-pub const ENSEMBLE_FILE: &str = "ensemble.json";
-
-/// An ensemble's member list ([`ENSEMBLE_FILE`]).
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct EnsembleSpec {
-    /// Member model directories.
-    pub members: Vec<PathBuf>,
-}
 
 /// Normalised network inputs for positions `x`, velocities `v`, the step's velocity changes
 /// `dv` ([`super::graph::step_change`]) and body proximities `body` on `graph`: node rows
@@ -136,20 +123,13 @@ impl CorrectorTimes {
     }
 }
 
-/// One network of a [`Corrector`] with the statistics its inputs and outputs are scaled by.
-#[derive(Debug)]
-struct Member {
-    net: CorrectorNet,
-    norm: Normalisation,
-}
-
-/// A loaded corrector for one coarse mesh: one network, or an ensemble of networks trained
-/// alike whose corrections are averaged.
+/// A loaded corrector for one coarse mesh.
 #[derive(Debug)]
 pub struct Corrector {
     /// Where its time goes.
     pub times: CorrectorTimes,
-    members: Vec<Member>,
+    net: CorrectorNet,
+    norm: Normalisation,
     graph: MeshGraph,
     /// The graph's edge lists on the device, uploaded once.
     senders: Tensor<1, Int>,
@@ -234,48 +214,11 @@ pub fn take_back_weights(
 }
 
 impl Corrector {
-    /// Loads the model in `dir` for `mesh` (the coarse simulation mesh): one network, or the
-    /// members of an ensemble ([`ENSEMBLE_FILE`]).
+    /// Loads the model in `dir` for `mesh` (the coarse simulation mesh).
     pub fn load(dir: &Path, mesh: &ClothMesh) -> Result<Corrector> {
         let device = default_device()?;
-        let spec_path = dir.join(ENSEMBLE_FILE);
-        if !spec_path.exists() {
-            let (net, norm, config) = load_net(dir, &device)?;
-            return Ok(Corrector::new(net, norm, config, mesh, dir, &device));
-        }
-        let spec: EnsembleSpec = read_json(&spec_path)?;
-        let Some((first, rest)) = spec.members.split_first() else {
-            return Err(Error::bad_input(&spec_path, "the ensemble has no members"));
-        };
-        let (net, norm, config) = load_net(&dir.join(first), &device)?;
-        let mut corrector = Corrector::new(net, norm, config, mesh, dir, &device);
-        for m in rest {
-            let (net, norm, config) = load_net(&dir.join(m), &device)?;
-            let (a, b) = (&corrector.training, &config);
-            let same = a.model.decoder == b.model.decoder
-                && a.model.tension_ramp == b.model.tension_ramp
-                && a.model.take_back == b.model.take_back
-                && a.model.smoothing == b.model.smoothing
-                && a.compression_factor() == b.compression_factor();
-            if !same {
-                return Err(Error::bad_input(
-                    &spec_path,
-                    format!(
-                        "member {} was trained unlike member {} (decoder, tension ramp, \
-                         take-back, smoothing or coarse membrane compression differ)",
-                        m.display(),
-                        first.display()
-                    ),
-                ));
-            }
-            corrector.members.push(Member { net, norm });
-        }
-        Ok(corrector)
-    }
-
-    /// Number of networks whose corrections are averaged (1 unless an ensemble).
-    pub fn num_members(&self) -> usize {
-        self.members.len()
+        let (net, norm, config) = load_net(dir, &device)?;
+        Ok(Corrector::new(net, norm, config, mesh, dir, &device))
     }
 
     /// A corrector from a network on `device` (trained with `config`, inputs and outputs
@@ -292,7 +235,8 @@ impl Corrector {
         let graph = MeshGraph::new(mesh);
         Corrector {
             times: CorrectorTimes::default(),
-            members: vec![Member { net, norm }],
+            net,
+            norm,
             senders: index_tensor(&graph.senders, device),
             receivers: index_tensor(&graph.receivers, device),
             inv_mass: inverse_masses(&graph.mass),
@@ -304,9 +248,9 @@ impl Corrector {
         }
     }
 
-    /// The predicted velocity correction p (an ensemble's mean) for M_c = (x, v), reached by a
-    /// step that changed the velocities by `dv` beyond gravity ([`step_change`]), with body
-    /// proximities `body` ([`super::graph::body_proximity`]), m/s per vertex.
+    /// The predicted velocity correction p for M_c = (x, v), reached by a step that changed
+    /// the velocities by `dv` beyond gravity ([`step_change`]), with body proximities `body`
+    /// ([`super::graph::body_proximity`]), m/s per vertex.
     /// The gated decoder's tension limit ([`CorrectorConfig::tension_ramp`]) is measured at x.
     pub fn predict(
         &self,
@@ -324,57 +268,41 @@ impl Corrector {
             )));
         }
         let t = Instant::now();
-        let (mut raw_nodes, mut raw_edges) = (Vec::new(), Vec::new());
-        self.graph.node_features(v, dv, body, &mut raw_nodes);
-        self.graph.edge_features(x, v, &mut raw_edges);
-        let tension = self.take_back_weights(x);
-        let raw_dv = flat32(dv);
+        let (nodes, edges) = features(&self.graph, x, v, dv, body, &self.norm);
         CorrectorTimes::add(&self.times.features_ns, t);
-        let mut sum = vec![0f64; 3 * n];
-        for m in &self.members {
-            let t = Instant::now();
-            let (mut nodes, mut edges) = (raw_nodes.clone(), raw_edges.clone());
-            m.norm.nodes.apply(&mut nodes);
-            m.norm.edges.apply(&mut edges);
-            let mut step_change = raw_dv.clone();
-            m.norm.targets.apply(&mut step_change);
-            CorrectorTimes::add(&self.times.features_ns, t);
-            let t = Instant::now();
-            let g = GraphTensors::with_indices(
-                nodes,
-                edges,
-                self.senders.clone(),
-                self.receivers.clone(),
-                self.inv_mass.clone(),
-                step_change.clone(),
-            )
-            .with_tension(tension.clone());
-            let out = m.net.forward(&g).into_data();
-            let mut p: Vec<f32> = out
-                .try_to_vec::<f32>()
-                .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
-            CorrectorTimes::add(&self.times.network_ns, t);
-            if let Some(k) = (0..p.len()).find(|&k| {
-                (p[k].abs() > MAX_CORRECTION_STD + step_change[k].abs()) || !p[k].is_finite()
-            }) {
-                return Err(Error::Simulation(format!(
-                    "the corrector diverged: its correction at vertex {} is {:.1} standard \
-                     deviations of its training data (limit {MAX_CORRECTION_STD} beyond the \
-                     step's velocity change, {:.1})",
-                    k / 3,
-                    p[k],
-                    step_change[k]
-                )));
-            }
-            m.norm.targets.invert(&mut p);
-            sum.iter_mut()
-                .zip(&p)
-                .for_each(|(s, p)| *s += f64::from(*p));
+        let t = Instant::now();
+        let mut step_change = flat32(dv);
+        self.norm.targets.apply(&mut step_change);
+        let g = GraphTensors::with_indices(
+            nodes,
+            edges,
+            self.senders.clone(),
+            self.receivers.clone(),
+            self.inv_mass.clone(),
+            step_change.clone(),
+        )
+        .with_tension(self.take_back_weights(x));
+        let out = self.net.forward(&g).into_data();
+        let mut p: Vec<f32> = out
+            .try_to_vec::<f32>()
+            .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
+        CorrectorTimes::add(&self.times.network_ns, t);
+        if let Some(k) = (0..p.len()).find(|&k| {
+            (p[k].abs() > MAX_CORRECTION_STD + step_change[k].abs()) || !p[k].is_finite()
+        }) {
+            return Err(Error::Simulation(format!(
+                "the corrector diverged: its correction at vertex {} is {:.1} standard deviations \
+                 of its training data (limit {MAX_CORRECTION_STD} beyond the step's velocity \
+                 change, {:.1})",
+                k / 3,
+                p[k],
+                step_change[k]
+            )));
         }
-        let k = 1.0 / self.members.len() as f64;
-        let p: Vec<Vector3<f64>> = sum
+        self.norm.targets.invert(&mut p);
+        let p: Vec<Vector3<f64>> = p
             .chunks_exact(3)
-            .map(|c| Vector3::new(c[0] * k, c[1] * k, c[2] * k))
+            .map(|c| Vector3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2])))
             .collect();
         if p.iter().any(|c| !c.iter().all(|x| x.is_finite())) {
             return Err(Error::Simulation(
