@@ -373,6 +373,39 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         stiff[1]
     );
 
+    // Jitter: the rollout again from the start moved 0.1 mm sideways, pooled with the
+    // nominal one; the moved run is 0.1 mm from the ground truth at the end of frame 1.
+    let jitter_csv = dir.path().join("jitter.csv");
+    let report = rollout(vec![
+        "--frames".into(),
+        "1".into(),
+        "--jitter".into(),
+        "1".into(),
+        "--csv".into(),
+        jitter_csv.clone().into(),
+    ]);
+    assert!(
+        report.contains("start moved 0.1 mm along (+1.000, +0.000, +0.000)")
+            && report.contains("pooled over 2 runs, 2 frames")
+            && report.contains("range over runs"),
+        "{report}"
+    );
+    let text = std::fs::read_to_string(&jitter_csv).expect("csv");
+    let moved: Vec<f64> = text
+        .lines()
+        .find(|l| l.contains("@1,1,"))
+        .map(|l| {
+            l.split(',')
+                .skip(2)
+                .filter_map(|w| w.parse().ok())
+                .collect()
+        })
+        .unwrap_or_else(|| panic!("no moved run in {text}"));
+    assert!(
+        (0.09..0.13).contains(&moved[0]) && (0.09..0.13).contains(&moved[1]),
+        "the moved start's sim-alone and interleaved errors in frame 1: {moved:?}"
+    );
+
     // The data set forked at frame 1 with the sheet moved 1 mm, and the distance between the
     // two ground truths reported beside the rollout as its predictability floor.
     let forked = dir.path().join("forked");

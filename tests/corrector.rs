@@ -10,7 +10,8 @@ use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector, WEIGHTS_FILE};
 use clothsr::corrector::model::{Decoder, GraphTensors, DEFAULT_TENSION_RAMP};
 use clothsr::corrector::rollout::{
-    evaluate, evaluate_from, interleaved_errors, sequence_distance_mm, HorizonErrors,
+    evaluate, evaluate_from, interleaved_errors, jitter_directions, sequence_distance_mm,
+    HorizonErrors,
 };
 use clothsr::corrector::training::{
     fit_normalisation, save_model, train, TrainSet, ValidationSet, VALIDATION_LOG,
@@ -398,6 +399,30 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             .expect("predict zeros");
         assert!(p.iter().all(|p| p.iter().all(|c| c.is_finite())));
     }
+}
+
+#[test]
+fn jitter_directions_are_horizontal_unit_and_evenly_spread() {
+    let down = Vector3::new(0.0, -9.81, 0.0);
+    let d = jitter_directions(down, 4);
+    assert_eq!(d.len(), 4);
+    assert!((d[0] - Vector3::x()).norm() < 1e-12, "{:?}", d[0]);
+    for v in &d {
+        assert!(
+            (v.norm() - 1.0).abs() < 1e-12 && v.dot(&down).abs() < 1e-12,
+            "{v}"
+        );
+    }
+    // Four directions at right angles: opposite pairs, the second a quarter turn on.
+    assert!((d[0] + d[2]).norm() < 1e-12 && (d[1] + d[3]).norm() < 1e-12);
+    assert!(d[0].dot(&d[1]).abs() < 1e-12);
+    // Any gravity: perpendicular to it, summing to zero.
+    let g = Vector3::new(1.0, -2.0, 0.5);
+    let d = jitter_directions(g, 3);
+    let sum: Vector3<f64> = d.iter().sum();
+    assert!(sum.norm() < 1e-12 && d.iter().all(|v| v.dot(&g).abs() < 1e-12));
+    assert!(jitter_directions(Vector3::zeros(), 3).is_empty());
+    assert!(jitter_directions(down, 0).is_empty());
 }
 
 #[test]

@@ -7,12 +7,14 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clothsr::corrector::data::Sequence;
 use clothsr::corrector::rollout::{
-    evaluate, evaluate_from, sequence_distance_mm, HorizonErrors, RolloutErrors,
+    evaluate_from, evaluate_shifted, jitter_directions, sequence_distance_mm, HorizonErrors,
+    RolloutErrors,
 };
 use clothsr::corrector::Corrector;
 use clothsr::data::{coarse_simulation, read_manifest};
 use clothsr::mesh::ClothMesh;
 use clothsr::scene::Scene;
+use nalgebra::Vector3;
 
 /// Arguments of `rollout`.
 #[derive(Debug, clap::Args)]
@@ -65,6 +67,15 @@ pub struct Args {
     /// beside a compression-soft coarse membrane without retraining it.
     #[arg(long)]
     coarse_compression: Option<f64>,
+    /// Roll each data set out this many more times, each from its start moved rigidly by
+    /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
+    /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
+    /// rollout's ratio is one draw, the pooled one what the corrector gives on average.
+    #[arg(long, default_value_t = 0)]
+    jitter: usize,
+    /// How far `--jitter` moves each start, mm.
+    #[arg(long, default_value_t = 0.1)]
+    jitter_mm: f64,
 }
 
 /// Loads `--model` for `mesh` with the inference settings given on the command line.
@@ -99,12 +110,17 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
 /// Runs `rollout`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.start_frame >= 1, "--start-frame counts from 1");
-    if let [data] = args.data.as_slice() {
+    anyhow::ensure!(
+        args.jitter_mm.is_finite() && args.jitter_mm > 0.0,
+        "--jitter-mm {}: the distance must be positive",
+        args.jitter_mm
+    );
+    if let ([data], 0) = (args.data.as_slice(), args.jitter) {
         let (scene, frames) = open(&args, data)?;
         if let Some(horizon) = args.horizon {
             return short_horizons(&args, data, &scene, frames, horizon);
         }
-        let (e, corrector) = long_rollout(&args, data, &scene, frames)?;
+        let (e, corrector, _) = long_rollout(&args, data, &scene, frames, 0)?;
         if let Some(csv) = &args.csv {
             clothsr::io::write_atomic(csv, e.csv().as_bytes())?;
         }
@@ -113,7 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     anyhow::ensure!(
         args.horizon.is_none() && args.floor.is_none(),
-        "--horizon and --floor take one --data"
+        "--horizon and --floor take one --data and no --jitter"
     );
     // Every data set is checked before the first rollout starts.
     let opened = args
@@ -124,38 +140,60 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut runs = Vec::new();
     let mut csv = String::new();
     for (data, (scene, frames)) in args.data.iter().zip(opened) {
-        let (e, corrector) = long_rollout(&args, data, &scene, frames)?;
-        println!("== {}", data.display());
-        report(&e, &corrector);
-        let name = data.display().to_string().replace(',', "_");
-        let table = e.csv();
-        let mut lines = table.lines();
-        let header = lines.next().unwrap_or_default();
-        if csv.is_empty() {
-            csv += &format!("data,{header}\n");
+        for k in 0..=args.jitter {
+            let (e, corrector, shift) = long_rollout(&args, data, &scene, frames, k)?;
+            let mut name = data.display().to_string().replace(',', "_");
+            if k == 0 {
+                println!("== {}", data.display());
+            } else {
+                let d = shift / shift.norm();
+                println!(
+                    "== {}, start moved {} mm along ({:+.3}, {:+.3}, {:+.3})",
+                    data.display(),
+                    args.jitter_mm,
+                    d.x,
+                    d.y,
+                    d.z
+                );
+                name += &format!("@{k}");
+            }
+            report(&e, &corrector);
+            let table = e.csv();
+            let mut lines = table.lines();
+            let header = lines.next().unwrap_or_default();
+            if csv.is_empty() {
+                csv += &format!("data,{header}\n");
+            }
+            for line in lines {
+                csv += &format!("{name},{line}\n");
+            }
+            runs.push(e);
         }
-        for line in lines {
-            csv += &format!("{name},{line}\n");
-        }
-        runs.push(e);
     }
     if let Some(path) = &args.csv {
         clothsr::io::write_atomic(path, csv.as_bytes())?;
     }
     let p = RolloutErrors::pooled(&runs);
     let ratios: Vec<String> = p.ratios.iter().map(|r| format!("{r:.2}×")).collect();
-    println!(
-        "== pooled over {} data sets, {} frames",
-        runs.len(),
-        p.frames
-    );
+    let what = if args.jitter > 0 { "run" } else { "data set" };
+    println!("== pooled over {} {what}s, {} frames", runs.len(), p.frames);
     println!("mean error, sim alone       {:.3} mm", p.sim_alone_mm);
     println!(
-        "mean error, interleaved     {:.3} mm  ({:.2}× sim alone; per data set {}, worst {:.2}×)",
+        "mean error, interleaved     {:.3} mm  ({:.2}× sim alone; per {what} {}, worst {:.2}×)",
         p.interleaved_mm,
         p.ratio(),
         ratios.join(", "),
         p.worst_ratio()
+    );
+    let range = |f: fn(&RolloutErrors) -> f64| {
+        let v: Vec<f64> = runs.iter().map(f).collect();
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        (lo, v.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+    };
+    let (a, b) = (range(|e| e.means().0), range(|e| e.means().1));
+    println!(
+        "range over {what}s          sim alone {:.3}–{:.3} mm, interleaved {:.3}–{:.3} mm",
+        a.0, a.1, b.0, b.1
     );
     Ok(())
 }
@@ -182,13 +220,16 @@ fn open(args: &Args, data: &Path) -> anyhow::Result<(Scene, usize)> {
     Ok((source.load()?, frames))
 }
 
-/// One long rollout of `frames` from `--start-frame` on `data`, with the floor when asked.
+/// One long rollout of `frames` from `--start-frame` on `data`, with the floor when asked;
+/// `jitter` k > 0: from the start moved by `--jitter-mm` along the k-th of `--jitter`
+/// horizontal directions. Returns the errors, the corrector and the start's shift, m.
 fn long_rollout(
     args: &Args,
     data: &Path,
     scene: &Scene,
     frames: usize,
-) -> anyhow::Result<(RolloutErrors, Corrector)> {
+    jitter: usize,
+) -> anyhow::Result<(RolloutErrors, Corrector, Vector3<f64>)> {
     let mut sim = coarse_simulation(scene, data, args.start_frame)?;
     let t0 = sim.state.t_s;
     let seq = Sequence::load(
@@ -202,8 +243,25 @@ fn long_rollout(
     for s in [&mut sim, &mut alone, &mut check] {
         corrector.training.prepare_coarse(s)?;
     }
-    let mut e = evaluate(
+    let shift = match jitter {
+        0 => Vector3::zeros(),
+        k => {
+            jitter_directions(sim.sim.params.gravity_m_s2, args.jitter)
+                .get(k - 1)
+                .copied()
+                .with_context(|| {
+                    format!(
+                        "{}: the scene has no gravity to jitter across",
+                        data.display()
+                    )
+                })?
+                * (args.jitter_mm * 1e-3)
+        }
+    };
+    let mut e = evaluate_shifted(
         &seq,
+        0,
+        shift,
         [&mut alone, &mut sim, &mut check],
         t0,
         &corrector,
@@ -224,7 +282,7 @@ fn long_rollout(
         )?;
         e.floor_mm = sequence_distance_mm(&seq, &other, &e.frame)?;
     }
-    Ok((e, corrector))
+    Ok((e, corrector, shift))
 }
 
 /// Prints one rollout's summary.

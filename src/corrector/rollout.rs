@@ -338,6 +338,49 @@ pub fn evaluate_from(
     t0_s: f64,
     corrector: &Corrector,
     frames: usize,
+    on_frame: impl FnMut(usize, f64, f64, f64),
+) -> Result<RolloutErrors> {
+    let none = Vector3::zeros();
+    evaluate_shifted(
+        seq, start_step, none, sims, t0_s, corrector, frames, on_frame,
+    )
+}
+
+/// `n` unit directions perpendicular to `gravity`, evenly spread over the circle (for a
+/// downward gravity: horizontal), the first along the horizontal axis closest to x; `[]` for
+/// zero gravity or `n` = 0.
+pub fn jitter_directions(gravity: Vector3<f64>, n: usize) -> Vec<Vector3<f64>> {
+    let Some(down) = gravity.try_normalize(1e-12) else {
+        return Vec::new();
+    };
+    let axis = [Vector3::x(), Vector3::z(), Vector3::y()]
+        .into_iter()
+        .min_by(|a, b| a.dot(&down).abs().total_cmp(&b.dot(&down).abs()))
+        .unwrap_or_else(Vector3::x);
+    let a = (axis - down * axis.dot(&down)).normalize();
+    let b = down.cross(&a);
+    (0..n)
+        .map(|k| {
+            let t = std::f64::consts::TAU * k as f64 / n as f64;
+            a * t.cos() + b * t.sin()
+        })
+        .collect()
+}
+
+/// [`evaluate_from`] with the start of the simulation alone and of the interleaved run moved
+/// rigidly by `shift`, m, while the ground truth stays: a start a fraction of a millimetre
+/// away, to measure how much of a rollout's error is a draw of a chaotic scene (contact,
+/// folds and friction decide between fold layouts on such differences; `clothsr rollout
+/// --jitter`). The one-step check starts from the ground truth as ever.
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_shifted(
+    seq: &Sequence,
+    start_step: usize,
+    shift: Vector3<f64>,
+    sims: [&mut Simulation; 3],
+    t0_s: f64,
+    corrector: &Corrector,
+    frames: usize,
     mut on_frame: impl FnMut(usize, f64, f64, f64),
 ) -> Result<RolloutErrors> {
     let s = seq.manifest.steps_per_frame;
@@ -354,7 +397,8 @@ pub fn evaluate_from(
         ));
     }
     let steps_at = |i: usize| &seq.steps[start_step + i];
-    let start = seq.int_state(start_step, t0_s);
+    let mut start = seq.int_state(start_step, t0_s);
+    start.x.iter_mut().for_each(|x| *x += shift);
     let (mut alone, mut inter) = (start.clone(), start);
     let mut out = RolloutErrors::default();
     let (mut sim_s, mut corr_s) = (0.0, 0.0);
