@@ -158,6 +158,10 @@ fn g_inv_mass(g: &MeshGraph) -> Vec<f32> {
     clothsr::corrector::model::inverse_masses(&g.mass)
 }
 
+fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
+    x.iter().flat_map(|p| p.iter().map(|c| *c as f32)).collect()
+}
+
 fn dist(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum()
 }
@@ -439,19 +443,102 @@ fn recomputed_coarse_steps_are_the_stored_ones_unless_the_simulator_changes() {
     let mut same = stored.clone();
     let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
     let t0 = sim.state.t_s;
-    same.recompute_coarse(&mut sim, t0).expect("recompute");
+    same.recompute_coarse(&mut sim, t0, 1).expect("recompute");
     let mut soft = stored.clone();
     let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
     sim.sim
         .model
         .set_membrane_compression(0.05)
         .expect("factor");
-    soft.recompute_coarse(&mut sim, t0).expect("recompute");
+    soft.recompute_coarse(&mut sim, t0, 1).expect("recompute");
     let (g_same, g_soft) = (mean_gap(&same), mean_gap(&soft));
     eprintln!("recomputed M_c vs stored: same simulator {g_same:e} m, soft membrane {g_soft:e} m");
     assert!(g_same < 1e-6, "{g_same}");
     assert!(g_soft > 1e-5 && g_soft > 100.0 * g_same, "{g_soft}");
     assert!(sim.sim.model.set_membrane_compression(0.0).is_err());
+}
+
+#[test]
+fn k_step_targets_vanish_on_the_coarse_simulations_own_path_and_scale_with_the_gap() {
+    const K: usize = 5;
+    let stored = load(None);
+    let n = stored.steps.len();
+    assert!(n > 2 * K, "{n} steps");
+    let sim = || coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
+    let t0 = sim().state.t_s;
+    let mean_norm = |p: &[f32]| {
+        p.chunks_exact(3).map(|c| vectors(c)[0].norm()).sum::<f64>() / (p.len() / 3) as f64
+    };
+    // Horizon 1 is the paper's target: no target positions, p̄ = v_int − v_c.
+    let mut one = stored.clone();
+    one.recompute_coarse(&mut sim(), t0, 1).expect("recompute");
+    assert!(one.steps.iter().all(|s| s.target_x.is_none()));
+    let st = &one.steps[3];
+    let want: Vec<f32> = st
+        .int_v
+        .iter()
+        .zip(&st.coarse_v)
+        .map(|(a, b)| a - b)
+        .collect();
+    assert_eq!(one.target(3), want);
+
+    // A ground truth that is the coarse simulation's own path needs no correction over any
+    // horizon.
+    let mut own = stored.clone();
+    let mut s = sim();
+    let mut state = own.int_state(0, t0);
+    for i in 1..n {
+        state = s.step_from(&state).expect("step").0;
+        own.steps[i].int_x = flat32(&state.x);
+        own.steps[i].int_v = flat32(&state.v);
+    }
+    own.recompute_coarse(&mut sim(), t0, K).expect("recompute");
+    let mut real = stored.clone();
+    real.recompute_coarse(&mut sim(), t0, K).expect("recompute");
+    let (mut p_own, mut p_real) = (0.0, 0.0);
+    for i in 1..n {
+        // The horizon shortens to the steps left: one step at the end has no target positions.
+        assert_eq!(real.steps[i].target_x.is_some(), n - i > 1, "step {i}");
+        p_own += mean_norm(&own.target(i)) / (n - 1) as f64;
+        p_real += mean_norm(&real.target(i)) / (n - 1) as f64;
+    }
+    eprintln!("mean |p̄| over {K} steps: own path {p_own:e} m/s, ground truth {p_real:e} m/s");
+    assert!(p_own < 1e-4, "{p_own}");
+    assert!(p_real > 1e-3 && p_real > 100.0 * p_own, "{p_real}");
+
+    // Moving the ground truth K steps on by δ moves the step's target by 2δ/(K(K + 1)) and
+    // its correction by that over h.
+    let (i, delta) = (2, Vector3::new(0.0, 1e-3, 0.0));
+    let mut moved = stored.clone();
+    let end = &mut moved.steps[i - 1 + K].int_x;
+    *end = flat32(&vectors(end).iter().map(|p| p + delta).collect::<Vec<_>>());
+    moved
+        .recompute_coarse(&mut sim(), t0, K)
+        .expect("recompute");
+    let (a, b) = (
+        vectors(moved.steps[i].target_x.as_deref().expect("target")),
+        vectors(real.steps[i].target_x.as_deref().expect("target")),
+    );
+    let want = delta * 2.0 / (K * (K + 1)) as f64;
+    let off = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q - want).norm())
+        .fold(0.0, f64::max);
+    assert!(off < 1e-3 * want.norm(), "{off} against {}", want.norm());
+    let h = stored.manifest.dt_s;
+    let gap = mean_norm(
+        &moved
+            .target(i)
+            .iter()
+            .zip(real.target(i))
+            .map(|(p, q)| p - q)
+            .collect::<Vec<_>>(),
+    );
+    assert!(
+        (gap - want.norm() / h).abs() < 1e-3 * want.norm() / h,
+        "{gap}"
+    );
 }
 
 #[test]

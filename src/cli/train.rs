@@ -155,6 +155,12 @@ pub struct CorrectorArgs {
     /// Stop phase 2 once the mean loss of the last 20 windows is below this (0: never).
     #[arg(long, default_value_t = 0.0)]
     rollout_stop_loss: f64,
+    /// Phase-1 target horizon, steps: the per-step correction that, kept up over this many
+    /// uncorrected coarse steps from the ground truth, closes the gap to it (1: the paper's
+    /// one-step target, which is mostly the coarse mesh's spring-back out of M_int's
+    /// wrinkles).
+    #[arg(long, default_value_t = 1)]
+    target_steps: usize,
     /// Latent width of every MLP.
     #[arg(long, default_value_t = 64)]
     latent: usize,
@@ -308,6 +314,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_rollout_lr(a.rollout_lr)
         .with_rollout_stop_loss(a.rollout_stop_loss)
         .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
+        .with_target_steps((a.target_steps != 1).then_some(a.target_steps))
         .with_seed(a.seed)
         .with_coarse_compression((compression != 1.0).then_some(compression))
         .with_init_from(a.init.clone())
@@ -346,7 +353,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         // M_c from this simulator, in a fresh instance (a simulator carries warm starts).
         let mut fresh = coarse_simulation(&scene, dir, 1)?;
         cfg.prepare_coarse(&mut fresh)?;
-        seq.recompute_coarse(&mut fresh, t0)?;
+        seq.recompute_coarse(&mut fresh, t0, cfg.target_steps.unwrap_or(1))?;
         let sim = (a.rollout_iters > 0).then_some((sim, t0));
         tracing::info!(
             "{}: {} steps, {} coarse vertices, {} edges",

@@ -33,6 +33,10 @@ pub struct Step {
     /// the previous step's M_int, m/s; `None` for a data set's very first step, whose start
     /// state is not stored.
     pub dv: Option<Vec<f32>>,
+    /// Where the training target lands the step: x_c + h·p̄. `None`: on M_int (p̄ = v_int −
+    /// v_c, the paper's one-step target); set by [`Sequence::recompute_coarse`] for a
+    /// horizon of more than one step.
+    pub target_x: Option<Vec<f32>>,
 }
 
 /// Δq = v_c − v_start − g·h of flattened arrays.
@@ -119,6 +123,7 @@ impl Sequence {
                     coarse_v,
                     int_x: f.int_x[r].to_vec(),
                     int_v: int_v.clone(),
+                    target_x: None,
                 });
                 start_v = Some(int_v);
             }
@@ -139,19 +144,76 @@ impl Sequence {
     /// corrector learns to correct the simulator it will run with rather than the one that
     /// made the data set. The first step's M_c (from the state before the sequence, which is
     /// not stored) stays as stored.
-    pub fn recompute_coarse(&mut self, sim: &mut Simulation, t0_s: f64) -> Result<()> {
+    ///
+    /// With a `horizon` K > 1 the target of each such step is also set
+    /// ([`Step::target_x`]): the simulator runs on for K steps from the same M_int without
+    /// correction, and the target is the constant per-step velocity correction that, kept up
+    /// over those steps, closes the gap to M_int K steps later, p̄ = 2 (x_int,K − x_c,K) /
+    /// (h K (K + 1)) (the cloth's reaction to it ignored). With K = 1 this is the paper's
+    /// one-step target. M_int is a point sample of the fine cloth, wrinkles and all, and the
+    /// coarse mesh springs back out of it within a step or two: a one-step target is mostly
+    /// that spring-back (which an interleaved run, starting from its own states, never has),
+    /// while over K steps it is divided among K(K + 1)/2 and the gap the coarse dynamics open
+    /// (the impact's fold layout) remains. Near the end of the sequence the horizon shortens
+    /// to the steps left.
+    pub fn recompute_coarse(
+        &mut self,
+        sim: &mut Simulation,
+        t0_s: f64,
+        horizon: usize,
+    ) -> Result<()> {
+        let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
         for i in 1..self.steps.len() {
             let state = self.int_state(i - 1, t0_s);
             let c = sim.step_from(&state)?.0;
-            let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
             let dv = flat32(&step_change(&c.v, &state.v, gravity_dt));
+            let k = horizon.min(self.steps.len() - i);
+            let target_x = if k > 1 {
+                let mut end = sim.step_from(&c)?.0;
+                for _ in 2..k {
+                    end = sim.step_from(&end)?.0;
+                }
+                let gt = vectors(&self.steps[i - 1 + k].int_x);
+                let scale = 2.0 / (k * (k + 1)) as f64;
+                let x: Vec<Vector3<f64>> =
+                    c.x.iter()
+                        .zip(gt.iter().zip(&end.x))
+                        .map(|(xc, (g, e))| xc + (g - e) * scale)
+                        .collect();
+                Some(flat32(&x))
+            } else {
+                None
+            };
             let st = &mut self.steps[i];
             st.body = body_proximity(&c.x, &sim.colliders, c.t_s);
             st.coarse_x = flat32(&c.x);
             st.coarse_v = flat32(&c.v);
             st.dv = Some(dv);
+            st.target_x = target_x;
         }
         Ok(())
+    }
+
+    /// The per-step target velocity correction p̄ of `steps[i]`, flattened: (x_target −
+    /// x_c)/h towards [`Step::target_x`], or without one v_int − v_c (the same as towards
+    /// M_int).
+    pub fn target(&self, i: usize) -> Vec<f32> {
+        let st = &self.steps[i];
+        match &st.target_x {
+            Some(to) => {
+                let h = self.manifest.dt_s as f32;
+                to.iter()
+                    .zip(&st.coarse_x)
+                    .map(|(a, b)| (a - b) / h)
+                    .collect()
+            }
+            None => st
+                .int_v
+                .iter()
+                .zip(&st.coarse_v)
+                .map(|(a, b)| a - b)
+                .collect(),
+        }
     }
 
     /// The ground truth M_int at the end of `steps[i]` as a simulator state, with the coarse
