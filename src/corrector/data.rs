@@ -8,6 +8,7 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 use super::graph::{body_proximity, step_change, MeshGraph};
 use crate::data::{flat32, read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
@@ -162,36 +163,76 @@ impl Sequence {
         t0_s: f64,
         horizon: usize,
     ) -> Result<()> {
+        let base = sim.clone();
         let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
         for i in 1..self.steps.len() {
             let state = self.int_state(i - 1, t0_s);
             let c = sim.step_from(&state)?.0;
             let dv = flat32(&step_change(&c.v, &state.v, gravity_dt));
-            let k = horizon.min(self.steps.len() - i);
-            let target_x = if k > 1 {
-                let mut end = sim.step_from(&c)?.0;
-                for _ in 2..k {
-                    end = sim.step_from(&end)?.0;
-                }
-                let gt = vectors(&self.steps[i - 1 + k].int_x);
-                let scale = 2.0 / (k * (k + 1)) as f64;
-                let x: Vec<Vector3<f64>> =
-                    c.x.iter()
-                        .zip(gt.iter().zip(&end.x))
-                        .map(|(xc, (g, e))| xc + (g - e) * scale)
-                        .collect();
-                Some(flat32(&x))
-            } else {
-                None
-            };
             let st = &mut self.steps[i];
             st.body = body_proximity(&c.x, &sim.colliders, c.t_s);
             st.coarse_x = flat32(&c.x);
             st.coarse_v = flat32(&c.v);
             st.dv = Some(dv);
-            st.target_x = target_x;
+            st.target_x = None;
+        }
+        if horizon <= 1 {
+            return Ok(());
+        }
+        // The K-step runs, in fixed blocks of steps (each on its own copy of the simulator as
+        // it was handed in, so that the result does not depend on the number of threads).
+        const BLOCK: usize = 32;
+        let n = self.steps.len();
+        let this = &*self;
+        let blocks: Vec<Result<Vec<Option<Vec<f32>>>>> = (1..n)
+            .step_by(BLOCK)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|first| {
+                let mut sim = base.clone();
+                (first..(first + BLOCK).min(n))
+                    .map(|i| this.k_step_target(&mut sim, t0_s, i, horizon))
+                    .collect()
+            })
+            .collect();
+        let mut i = 1;
+        for block in blocks {
+            for target_x in block? {
+                self.steps[i].target_x = target_x;
+                i += 1;
+            }
         }
         Ok(())
+    }
+
+    /// [`Step::target_x`] of `steps[i]` over `horizon` steps (shortened to the steps left):
+    /// `None` for a horizon of one.
+    fn k_step_target(
+        &self,
+        sim: &mut Simulation,
+        t0_s: f64,
+        i: usize,
+        horizon: usize,
+    ) -> Result<Option<Vec<f32>>> {
+        let k = horizon.min(self.steps.len() - i);
+        if k <= 1 {
+            return Ok(None);
+        }
+        let mut end = self.int_state(i - 1, t0_s);
+        for _ in 0..k {
+            end = sim.step_from(&end)?.0;
+        }
+        let gt = vectors(&self.steps[i - 1 + k].int_x);
+        let scale = 2.0 / (k * (k + 1)) as f64;
+        let x: Vec<f32> = vectors(&self.steps[i].coarse_x)
+            .iter()
+            .zip(gt.iter().zip(&end.x))
+            .flat_map(|(xc, (g, e))| {
+                let p = xc + (g - e) * scale;
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect();
+        Ok(Some(x))
     }
 
     /// The per-step target velocity correction p̄ of `steps[i]`, flattened: (x_target −
