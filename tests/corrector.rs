@@ -448,14 +448,19 @@ fn recomputed_coarse_steps_are_the_stored_ones_unless_the_simulator_changes() {
     let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
     sim.sim
         .model
-        .set_membrane_compression(0.05)
+        .set_membrane_compression(0.05, None)
         .expect("factor");
     soft.recompute_coarse(&mut sim, t0, 1).expect("recompute");
     let (g_same, g_soft) = (mean_gap(&same), mean_gap(&soft));
     eprintln!("recomputed M_c vs stored: same simulator {g_same:e} m, soft membrane {g_soft:e} m");
     assert!(g_same < 1e-6, "{g_same}");
     assert!(g_soft > 1e-5 && g_soft > 100.0 * g_same, "{g_soft}");
-    assert!(sim.sim.model.set_membrane_compression(0.0).is_err());
+    assert!(sim.sim.model.set_membrane_compression(0.0, None).is_err());
+    assert!(sim
+        .sim
+        .model
+        .set_membrane_compression(0.1, Some(0.0))
+        .is_err());
 }
 
 #[test]

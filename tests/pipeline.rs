@@ -87,28 +87,46 @@ fn run(
     report
 }
 
-/// Without a corrector the coarse membrane's compression factor is the option's (1 when
-/// unset), and a factor outside (0, 1] is refused.
+/// Without a corrector the coarse membrane's compression factor and knee are the options'
+/// (1 and none when unset), and a factor outside (0, 1] or a knee ≤ 0 is refused.
 #[test]
 fn the_coarse_compression_option_sets_up_the_coarse_membrane() {
     let (scene, isr) = (scene(), tiny_isr());
-    let factors = |o: Options| -> Vec<f64> {
+    let factors = |o: Options| -> Vec<(f64, f64)> {
         let p = Pipeline::new(&scene, &isr, None, o).expect("pipeline");
         let k = &p.coarse.sim.model.membrane_k;
         assert!(!k.is_empty());
-        k.iter().map(|k| k.compression).collect()
+        k.iter()
+            .map(|k| (k.compression, k.compression_knee))
+            .collect()
     };
-    assert!(factors(options()).iter().all(|&c| c == 1.0));
+    assert!(factors(options())
+        .iter()
+        .all(|&c| c == (1.0, f64::INFINITY)));
     let soft = Options {
         coarse_compression: Some(0.1),
         ..options()
     };
-    assert!(factors(soft).iter().all(|&c| c == 0.1));
-    let bad = Options {
-        coarse_compression: Some(0.0),
+    assert!(factors(soft).iter().all(|&c| c == (0.1, f64::INFINITY)));
+    let knee = Options {
+        coarse_compression: Some(0.1),
+        coarse_compression_knee: Some(0.2),
         ..options()
     };
-    assert!(Pipeline::new(&scene, &isr, None, bad).is_err());
+    assert!(factors(knee).iter().all(|&c| c == (0.1, 0.2)));
+    for bad in [
+        Options {
+            coarse_compression: Some(0.0),
+            ..options()
+        },
+        Options {
+            coarse_compression: Some(0.1),
+            coarse_compression_knee: Some(-0.2),
+            ..options()
+        },
+    ] {
+        assert!(Pipeline::new(&scene, &isr, None, bad).is_err());
+    }
 }
 
 fn cloth_frames(path: &Path) -> Vec<Vec<Vector3<f32>>> {

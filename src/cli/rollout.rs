@@ -67,6 +67,11 @@ pub struct Args {
     /// beside a compression-soft coarse membrane without retraining it.
     #[arg(long)]
     coarse_compression: Option<f64>,
+    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
+    /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none), instead of the
+    /// one the corrector was trained beside.
+    #[arg(long)]
+    coarse_compression_knee: Option<f64>,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
     /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
@@ -103,6 +108,13 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
             "--coarse-compression {c}: the factor must be in (0, 1]"
         );
         corrector.training.coarse_compression = (c != 1.0).then_some(c);
+    }
+    if let Some(s) = args.coarse_compression_knee {
+        anyhow::ensure!(
+            s >= 0.0 && s.is_finite(),
+            "--coarse-compression-knee {s}: the shortening must be > 0 (0: none)"
+        );
+        corrector.training.coarse_compression_knee = (s > 0.0).then_some(s);
     }
     Ok(corrector)
 }

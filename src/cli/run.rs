@@ -95,6 +95,11 @@ pub struct Args {
     /// error).
     #[arg(long)]
     coarse_compression: Option<f64>,
+    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
+    /// membrane is stiff again, as the fine cloth's wrinkles pack tight
+    /// (default: the corrector's, else none).
+    #[arg(long)]
+    coarse_compression_knee: Option<f64>,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -210,6 +215,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         match_contact_thickness: true,
         dress: !args.no_dress,
         coarse_compression: args.coarse_compression,
+        coarse_compression_knee: args.coarse_compression_knee,
     };
     let multi = MultiProgress::new();
     let overall = (jobs.len() > 1).then(|| {

@@ -219,6 +219,11 @@ pub struct CorrectorArgs {
     /// [default: 1, or the `--init` model's]
     #[arg(long)]
     coarse_compression: Option<f64>,
+    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
+    /// membrane is stiff again, as the fine cloth's wrinkles pack tight; saved
+    /// with the model. [default: none, or the `--init` model's]
+    #[arg(long)]
+    coarse_compression_knee: Option<f64>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -317,6 +322,10 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_target_steps((a.target_steps != 1).then_some(a.target_steps))
         .with_seed(a.seed)
         .with_coarse_compression((compression != 1.0).then_some(compression))
+        .with_coarse_compression_knee(
+            a.coarse_compression_knee
+                .or_else(|| init.as_ref().and_then(|c| c.coarse_compression_knee)),
+        )
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)
         .with_rollout_as_inference(a.rollout_as_inference.then_some(true))

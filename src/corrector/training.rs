@@ -116,6 +116,10 @@ pub struct TrainingConfig {
     /// and so must run with (`None`: 1, the full Baraff-Witkin membrane). Optional so that
     /// models saved before it load.
     pub coarse_compression: Option<f64>,
+    /// The shortening beyond which that compression-soft coarse membrane is stiff again
+    /// ([`crate::sim::ClothModel::set_membrane_compression`]; `None`: soft however short).
+    /// Optional so that models saved before it load.
+    pub coarse_compression_knee: Option<f64>,
     /// Validate every this many phase-2 windows, and at the end of each phase (a warm start's
     /// model before phase 2 too: [`Self::init_from`]), on the held-out
     /// [`ValidationSet`]s given to [`train`]: the interleaved rollout's mean distance to M_int
@@ -182,7 +186,7 @@ impl TrainingConfig {
     pub fn prepare_coarse(&self, sim: &mut Simulation) -> Result<()> {
         sim.sim
             .model
-            .set_membrane_compression(self.compression_factor())
+            .set_membrane_compression(self.compression_factor(), self.coarse_compression_knee)
     }
 }
 
@@ -508,14 +512,18 @@ fn warm_start(
             ),
         ));
     }
-    if old.compression_factor() != cfg.compression_factor() {
+    if old.compression_factor() != cfg.compression_factor()
+        || old.coarse_compression_knee != cfg.coarse_compression_knee
+    {
         return Err(Error::bad_input(
             &config_path,
             format!(
                 "the network to start from was trained beside a coarse membrane with \
-                 compression factor {}, the training asks for {}",
+                 compression factor {} (knee {:?}), the training asks for {} (knee {:?})",
                 old.compression_factor(),
-                cfg.compression_factor()
+                old.coarse_compression_knee,
+                cfg.compression_factor(),
+                cfg.coarse_compression_knee
             ),
         ));
     }

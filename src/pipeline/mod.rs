@@ -45,6 +45,10 @@ pub struct Options {
     /// corrector's (the one it was trained beside), else 1. A corrector trained with another
     /// factor is an error.
     pub coarse_compression: Option<f64>,
+    /// The shortening beyond which the compression-soft coarse membrane is stiff again
+    /// (`None`: the corrector's, else soft however short). A corrector trained with another
+    /// is an error.
+    pub coarse_compression_knee: Option<f64>,
 }
 
 impl Default for Options {
@@ -56,6 +60,7 @@ impl Default for Options {
             match_contact_thickness: true,
             dress: true,
             coarse_compression: None,
+            coarse_compression_knee: None,
         }
     }
 }
@@ -168,9 +173,24 @@ impl<'a> Pipeline<'a> {
                     c.training.compression_factor()
                 )));
             }
+            (Some(c), _)
+                if opts.coarse_compression_knee.is_some()
+                    && c.training.coarse_compression_knee != opts.coarse_compression_knee =>
+            {
+                return Err(Error::Invalid(format!(
+                    "the corrector in {} was trained beside a coarse membrane compression \
+                     knee of {:?}, not {:?}",
+                    c.dir.display(),
+                    c.training.coarse_compression_knee,
+                    opts.coarse_compression_knee
+                )));
+            }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
-            (None, Some(f)) => coarse.sim.model.set_membrane_compression(f)?,
-            (None, None) => {}
+            (None, f) if f.is_some() || opts.coarse_compression_knee.is_some() => coarse
+                .sim
+                .model
+                .set_membrane_compression(f.unwrap_or(1.0), opts.coarse_compression_knee)?,
+            (None, _) => {}
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {

@@ -49,15 +49,23 @@ pub struct ClothModel {
 
 impl ClothModel {
     /// Makes every membrane compression-soft: weft and warp stiffness times `factor` (in
-    /// (0, 1]) where shortened ([`MembraneStiffness::compression`]).
-    pub fn set_membrane_compression(&mut self, factor: f64) -> Result<()> {
+    /// (0, 1]) where shortened ([`MembraneStiffness::compression`]), up to a shortening of
+    /// `knee` (> 0) beyond which the full stiffness returns
+    /// ([`MembraneStiffness::compression_knee`]; `None`: soft however short).
+    pub fn set_membrane_compression(&mut self, factor: f64, knee: Option<f64>) -> Result<()> {
         if !(factor > 0.0 && factor <= 1.0) {
             return Err(Error::Invalid(format!(
                 "membrane compression factor must be in (0, 1], got {factor}"
             )));
         }
+        if let Some(s) = knee.filter(|s| !(*s > 0.0 && s.is_finite())) {
+            return Err(Error::Invalid(format!(
+                "membrane compression knee must be a shortening > 0, got {s}"
+            )));
+        }
         for k in &mut self.membrane_k {
             k.compression = factor;
+            k.compression_knee = knee.unwrap_or(f64::INFINITY);
         }
         Ok(())
     }
@@ -90,12 +98,11 @@ impl ClothModel {
                 .extend(m.panel_names.iter().map(|p| format!("{name}/{p}")));
             mesh.seam_pairs
                 .extend(m.seam_pairs.iter().map(|p| p.map(|v| v + v0)));
-            let k = MembraneStiffness {
-                weft_n_m: fabric.stretch_weft_n_m,
-                warp_n_m: fabric.stretch_warp_n_m,
-                shear_n_m: fabric.shear_n_m,
-                compression: 1.0,
-            };
+            let k = MembraneStiffness::new(
+                fabric.stretch_weft_n_m,
+                fabric.stretch_warp_n_m,
+                fabric.shear_n_m,
+            );
             for (t, tri) in m.triangles.iter().enumerate() {
                 let el = Membrane::new(*tri, &m.material).ok_or_else(|| {
                     Error::Invalid(format!(

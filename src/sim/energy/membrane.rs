@@ -12,6 +12,10 @@
 //! mesh cannot buckle within its triangles as the cloth it stands for does, so at full
 //! stiffness it resists, as membrane, shortening that the real cloth takes up in wrinkles
 //! (the energy and its gradient stay continuous at |w| = 1; c = 1 is Baraff-Witkin's).
+//! An optional compression knee s₀ gives the full stiffness back beyond a shortening of s₀
+//! (|w| < 1 − s₀): with d = 1 − |w|, the term is ½ c k d² up to s₀ and
+//! ½ c k s₀² + c k s₀ (d − s₀) + ½ k (d − s₀)² beyond, the cloth's wrinkles packing tight (C¹:
+//! the force is continuous, its slope jumps from c k to k).
 //! Gradients and Hessians are taken in the 6D space (w_u, w_v), then
 //! mapped to the 9 vertex coordinates by the constant linear map w = B·x. The Hessian is made PSD
 //! in that 6D space: the stretch terms analytically (the eigenvalue k(1 − 1/|w|) across the
@@ -46,15 +50,42 @@ pub struct MembraneStiffness {
     pub shear_n_m: f64,
     /// Factor on the weft and warp stiffnesses under compression (|w| < 1), in (0, 1].
     pub compression: f64,
+    /// Shortening 1 − |w| beyond which the compression-soft stiffness gives way to the full
+    /// one again (`f64::INFINITY`: never).
+    pub compression_knee: f64,
 }
 
 impl MembraneStiffness {
-    /// The stretch stiffness `k` at stretch ratio `l`: `k·compression` below 1.
-    fn at(&self, k: f64, l: f64) -> f64 {
-        if l < 1.0 {
-            k * self.compression
+    /// Full Baraff-Witkin stiffnesses: no compression softness.
+    pub fn new(weft_n_m: f64, warp_n_m: f64, shear_n_m: f64) -> MembraneStiffness {
+        MembraneStiffness {
+            weft_n_m,
+            warp_n_m,
+            shear_n_m,
+            compression: 1.0,
+            compression_knee: f64::INFINITY,
+        }
+    }
+
+    /// The stretch term ψ(l) of stiffness `k` at stretch ratio `l` per rest area, and its first
+    /// two derivatives in `l`: ½ k (l − 1)² in tension; under compression softened by
+    /// `compression` up to the knee and stiff again beyond it.
+    fn stretch(&self, k: f64, l: f64) -> (f64, f64, f64) {
+        let d = 1.0 - l;
+        if d <= 0.0 {
+            return (0.5 * k * d * d, -k * d, k);
+        }
+        let c = self.compression;
+        let s0 = self.compression_knee;
+        if d <= s0 {
+            (0.5 * c * k * d * d, -c * k * d, c * k)
         } else {
-            k
+            let e = d - s0;
+            (
+                0.5 * c * k * s0 * s0 + c * k * s0 * e + 0.5 * k * e * e,
+                -(c * k * s0 + k * e),
+                k,
+            )
         }
     }
 }
@@ -85,10 +116,8 @@ impl Membrane {
     pub fn energy(&self, k: &MembraneStiffness, x: &[Vector3<f64>; 3]) -> f64 {
         let (wu, wv) = self.stretch_vectors(x);
         let (lu, lv, s) = (wu.norm(), wv.norm(), wu.dot(&wv));
-        let (ku, kv) = (k.at(k.weft_n_m, lu), k.at(k.warp_n_m, lv));
-        self.area_m2
-            * 0.5
-            * (ku * (lu - 1.0).powi(2) + kv * (lv - 1.0).powi(2) + k.shear_n_m * s * s)
+        let (eu, ev) = (k.stretch(k.weft_n_m, lu).0, k.stretch(k.warp_n_m, lv).0);
+        self.area_m2 * (eu + ev + 0.5 * k.shear_n_m * s * s)
     }
 
     /// Energy, gradient in (w_u, w_v) and the 6×6 Hessian there; `psd` clamps the stretch
@@ -105,18 +134,20 @@ impl Membrane {
         let (lu, lv) = (wu.norm().max(1e-12), wv.norm().max(1e-12));
         let (nu, nv) = (wu / lu, wv / lv);
         let s = wu.dot(&wv);
-        let (ku, kv) = (k.at(k.weft_n_m, lu), k.at(k.warp_n_m, lv));
-        let e = a * 0.5 * (ku * (lu - 1.0).powi(2) + kv * (lv - 1.0).powi(2) + k.shear_n_m * s * s);
-        let gu = (nu * (ku * (lu - 1.0)) + wv * (k.shear_n_m * s)) * a;
-        let gv = (nv * (kv * (lv - 1.0)) + wu * (k.shear_n_m * s)) * a;
-        let stretch = |kk: f64, n: &Vector3<f64>, l: f64| {
+        let (eu, du, ddu) = k.stretch(k.weft_n_m, lu);
+        let (ev, dv, ddv) = k.stretch(k.warp_n_m, lv);
+        let e = a * (eu + ev + 0.5 * k.shear_n_m * s * s);
+        let gu = (nu * du + wv * (k.shear_n_m * s)) * a;
+        let gv = (nv * dv + wu * (k.shear_n_m * s)) * a;
+        // ∇²ψ(|w|) = ψ'' n nᵀ + (ψ' / |w|)(I − n nᵀ); the second is negative under compression.
+        let stretch = |d1: f64, d2: f64, n: &Vector3<f64>, l: f64| {
             let nn = n * n.transpose();
-            let perp = 1.0 - 1.0 / l;
+            let perp = d1 / l;
             let perp = if psd { perp.max(0.0) } else { perp };
-            (nn + (Matrix3::identity() - nn) * perp) * kk
+            nn * d2 + (Matrix3::identity() - nn) * perp
         };
-        let huu = (stretch(ku, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
-        let hvv = (stretch(kv, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
+        let huu = (stretch(du, ddu, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
+        let hvv = (stretch(dv, ddv, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
         let coupling = if shear_coupling { s } else { 0.0 };
         let huv = (wv * wu.transpose() + Matrix3::identity() * coupling) * (k.shear_n_m * a);
         let mut h = SMatrix::<f64, 6, 6>::zeros();
@@ -207,6 +238,11 @@ mod tests {
             warp_n_m: 2500.0,
             shear_n_m: 100.0,
             compression: if r.next() < 0.5 { 1.0 } else { 0.1 },
+            compression_knee: if r.next() < 0.5 {
+                f64::INFINITY
+            } else {
+                0.05 + 0.2 * r.next()
+            },
         };
         // World: rotated, stretched or compressed, and sheared copy of the material triangle.
         let mut x = Vec9::zeros();
@@ -261,6 +297,7 @@ mod tests {
             warp_n_m: 1500.0,
             shear_n_m: 50.0,
             compression: 1.0,
+            compression_knee: f64::INFINITY,
         };
         let x = [
             Vector3::zeros(),
@@ -284,6 +321,7 @@ mod tests {
             warp_n_m: 1500.0,
             shear_n_m: 50.0,
             compression: 1.0,
+            compression_knee: f64::INFINITY,
         };
         let soft = MembraneStiffness {
             compression: 0.1,
@@ -305,6 +343,54 @@ mod tests {
     }
 
     #[test]
+    fn compression_knee_gives_the_full_stiffness_back_beyond_it() {
+        let material = [
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.02, 0.0),
+            Vector2::new(0.0, 0.02),
+        ];
+        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        let knee = MembraneStiffness {
+            compression: 0.1,
+            compression_knee: 0.2,
+            ..MembraneStiffness::new(1000.0, 1500.0, 50.0)
+        };
+        let scaled = |su: f64| material.map(|u| Vector3::new(su * u.x, u.y, 0.0));
+        let a = m.area_m2;
+        // Up to the knee: the soft membrane's ½ c k d².
+        let e = m.energy(&knee, &scaled(0.9));
+        assert!((e - a * 0.5 * 0.1 * 1000.0 * 0.01).abs() < 1e-12, "{e}");
+        // Beyond it: ½ c k s₀² + c k s₀ (d − s₀) + ½ k (d − s₀)², at d = 0.3.
+        let e = m.energy(&knee, &scaled(0.7));
+        let want = a * (0.5 * 100.0 * 0.04 + 100.0 * 0.2 * 0.1 + 0.5 * 1000.0 * 0.01);
+        assert!((e - want).abs() < 1e-12, "{e} vs {want}");
+        // The force is continuous through the knee; its slope jumps from c k to k.
+        let f = |s: f64| m.gradient(&knee, &scaled(s))[3];
+        let (below, above) = (f(0.8 + 1e-9), f(0.8 - 1e-9));
+        assert!(
+            (below - above).abs() < 1e-6 * below.abs(),
+            "{below} vs {above}"
+        );
+        let slope = |s: f64| (f(s + 1e-6) - f(s - 1e-6)) / 2e-6;
+        let (soft, stiff) = (slope(0.85), slope(0.75));
+        assert!((stiff / soft - 10.0).abs() < 1e-4, "{soft} vs {stiff}");
+        // Gradient and Hessian on both sides of the knee, by finite differences.
+        for s in [0.85, 0.75, 0.6] {
+            let x = Vec9::from_iterator(
+                scaled(s)
+                    .iter()
+                    .zip([0.0, 0.002, -0.001])
+                    .flat_map(|(p, dz)| [p.x, p.y + 0.1 * p.x, p.z + dz]),
+            );
+            let g = m.gradient(&knee, &pts(&x));
+            fd::check_gradient(|y| m.energy(&knee, &pts(y)), &g, &x, 1e-7, 1e-5);
+            let h = m.hessian_exact(&knee, &pts(&x));
+            fd::check_hessian(|y| m.gradient(&knee, &pts(y)), &h, &x, 1e-7, 1e-5);
+            fd::check_psd(&m.energy_gradient_hessian(&knee, &pts(&x)).2);
+        }
+    }
+
+    #[test]
     fn rest_state_is_free_and_rigid_motion_costs_nothing() {
         let material = [
             Vector2::new(0.0, 0.0),
@@ -317,6 +403,7 @@ mod tests {
             warp_n_m: 1500.0,
             shear_n_m: 50.0,
             compression: 1.0,
+            compression_knee: f64::INFINITY,
         };
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -1.1, 0.7);
         let x = material.map(|u| rot * Vector3::new(u.x, u.y, 0.0) + Vector3::new(1.0, 2.0, 3.0));
