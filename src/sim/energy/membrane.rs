@@ -67,25 +67,40 @@ impl MembraneStiffness {
         }
     }
 
-    /// The stretch term ψ(l) of stiffness `k` at stretch ratio `l` per rest area, and its first
-    /// two derivatives in `l`: ½ k (l − 1)² in tension; under compression softened by
-    /// `compression` up to the knee and stiff again beyond it.
-    fn stretch(&self, k: f64, l: f64) -> (f64, f64, f64) {
-        let d = 1.0 - l;
-        if d <= 0.0 {
-            return (0.5 * k * d * d, -k * d, k);
-        }
-        let c = self.compression;
-        let s0 = self.compression_knee;
-        if d <= s0 {
-            (0.5 * c * k * d * d, -c * k * d, c * k)
+    /// The stretch stiffness `k` at stretch ratio `l` up to the knee: `k·compression` below 1.
+    fn at(&self, k: f64, l: f64) -> f64 {
+        if l < 1.0 {
+            k * self.compression
         } else {
+            k
+        }
+    }
+
+    /// Beyond the knee (a shortening d = 1 − `l` > `compression_knee`), the stretch term ψ(l)
+    /// of stiffness `k` per rest area and its derivative in `l`:
+    /// ½ c k s₀² + c k s₀ (d − s₀) + ½ k (d − s₀)² (its second derivative is `k`); `None`
+    /// within it, where ψ = ½ [`Self::at`] (l − 1)². The two forms are kept apart so that a
+    /// membrane without a knee computes exactly what it did before the knee existed.
+    fn beyond_knee(&self, k: f64, l: f64) -> Option<(f64, f64)> {
+        let (d, s0, c) = (1.0 - l, self.compression_knee, self.compression);
+        (d > s0).then(|| {
             let e = d - s0;
             (
                 0.5 * c * k * s0 * s0 + c * k * s0 * e + 0.5 * k * e * e,
                 -(c * k * s0 + k * e),
-                k,
             )
+        })
+    }
+
+    /// Twice the stretch term, its derivative in `l` and the stiffness along the stretch
+    /// direction (ψ''), at stretch ratio `l`.
+    fn stretch(&self, k: f64, l: f64) -> (f64, f64, f64) {
+        match self.beyond_knee(k, l) {
+            Some((e, f)) => (2.0 * e, f, k),
+            None => {
+                let kk = self.at(k, l);
+                (kk * (l - 1.0).powi(2), kk * (l - 1.0), kk)
+            }
         }
     }
 }
@@ -117,7 +132,7 @@ impl Membrane {
         let (wu, wv) = self.stretch_vectors(x);
         let (lu, lv, s) = (wu.norm(), wv.norm(), wu.dot(&wv));
         let (eu, ev) = (k.stretch(k.weft_n_m, lu).0, k.stretch(k.warp_n_m, lv).0);
-        self.area_m2 * (eu + ev + 0.5 * k.shear_n_m * s * s)
+        self.area_m2 * 0.5 * (eu + ev + k.shear_n_m * s * s)
     }
 
     /// Energy, gradient in (w_u, w_v) and the 6×6 Hessian there; `psd` clamps the stretch
@@ -134,20 +149,24 @@ impl Membrane {
         let (lu, lv) = (wu.norm().max(1e-12), wv.norm().max(1e-12));
         let (nu, nv) = (wu / lu, wv / lv);
         let s = wu.dot(&wv);
-        let (eu, du, ddu) = k.stretch(k.weft_n_m, lu);
-        let (ev, dv, ddv) = k.stretch(k.warp_n_m, lv);
-        let e = a * (eu + ev + 0.5 * k.shear_n_m * s * s);
+        let (eu, du, ku) = k.stretch(k.weft_n_m, lu);
+        let (ev, dv, kv) = k.stretch(k.warp_n_m, lv);
+        let e = a * 0.5 * (eu + ev + k.shear_n_m * s * s);
         let gu = (nu * du + wv * (k.shear_n_m * s)) * a;
         let gv = (nv * dv + wu * (k.shear_n_m * s)) * a;
         // ∇²ψ(|w|) = ψ'' n nᵀ + (ψ' / |w|)(I − n nᵀ); the second is negative under compression.
-        let stretch = |d1: f64, d2: f64, n: &Vector3<f64>, l: f64| {
+        // Within the knee ψ' / |w| = k(1 − 1/|w|), written so.
+        let stretch = |kk: f64, d1: f64, n: &Vector3<f64>, l: f64| {
             let nn = n * n.transpose();
-            let perp = d1 / l;
-            let perp = if psd { perp.max(0.0) } else { perp };
-            nn * d2 + (Matrix3::identity() - nn) * perp
+            let clamp = |p: f64| if psd { p.max(0.0) } else { p };
+            if k.compression_knee < 1.0 - l {
+                nn * kk + (Matrix3::identity() - nn) * clamp(d1 / l)
+            } else {
+                (nn + (Matrix3::identity() - nn) * clamp(1.0 - 1.0 / l)) * kk
+            }
         };
-        let huu = (stretch(du, ddu, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
-        let hvv = (stretch(dv, ddv, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
+        let huu = (stretch(ku, du, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
+        let hvv = (stretch(kv, dv, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
         let coupling = if shear_coupling { s } else { 0.0 };
         let huv = (wv * wu.transpose() + Matrix3::identity() * coupling) * (k.shear_n_m * a);
         let mut h = SMatrix::<f64, 6, 6>::zeros();
