@@ -17,7 +17,7 @@ use clothsr::corrector::training::{
     fit_normalisation, save_model, train, TrainSet, ValidationSet, VALIDATION_LOG,
 };
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
-use clothsr::data::{coarse_simulation, generate, Options, Variation};
+use clothsr::data::{coarse_simulation, flat32, generate, Options, Variation};
 use clothsr::garment::Fabric;
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::Scene;
@@ -156,10 +156,6 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
 
 fn g_inv_mass(g: &MeshGraph) -> Vec<f32> {
     clothsr::corrector::model::inverse_masses(&g.mass)
-}
-
-fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
-    x.iter().flat_map(|p| p.iter().map(|c| *c as f32)).collect()
 }
 
 fn dist(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {

@@ -287,7 +287,7 @@ fn frame_path(dir: &Path, k: usize) -> PathBuf {
 }
 
 /// Vectors as a flat (N·3) f32 array, for tensor files and networks.
-pub(crate) fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
+pub fn flat32(x: &[Vector3<f64>]) -> Vec<f32> {
     x.iter()
         .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
         .collect()

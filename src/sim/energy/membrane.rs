@@ -278,6 +278,17 @@ mod tests {
         (m, k, x)
     }
 
+    /// The right triangle with 20 mm legs along the weft and warp, and its membrane.
+    fn right_triangle() -> ([Vector2<f64>; 3], Membrane) {
+        let material = [
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.02, 0.0),
+            Vector2::new(0.0, 0.02),
+        ];
+        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        (material, m)
+    }
+
     fn pts(x: &Vec9) -> [Vector3<f64>; 3] {
         [0, 1, 2].map(|i| Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]))
     }
@@ -305,19 +316,8 @@ mod tests {
             assert!((g - m.gradient(&k, &pts(&x))).norm() < 1e-9 * g.norm().max(1.0));
         }
         // Pure stretch along both axes, no shear: the exact Hessian is already PSD.
-        let material = [
-            Vector2::new(0.0, 0.0),
-            Vector2::new(0.02, 0.0),
-            Vector2::new(0.0, 0.02),
-        ];
-        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
-        let k = MembraneStiffness {
-            weft_n_m: 1000.0,
-            warp_n_m: 1500.0,
-            shear_n_m: 50.0,
-            compression: 1.0,
-            compression_knee: f64::INFINITY,
-        };
+        let (_, m) = right_triangle();
+        let k = MembraneStiffness::new(1000.0, 1500.0, 50.0);
         let x = [
             Vector3::zeros(),
             Vector3::new(0.022, 0.0, 0.0),
@@ -329,19 +329,8 @@ mod tests {
 
     #[test]
     fn compression_softness_scales_only_shortened_directions() {
-        let material = [
-            Vector2::new(0.0, 0.0),
-            Vector2::new(0.02, 0.0),
-            Vector2::new(0.0, 0.02),
-        ];
-        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
-        let stiff = MembraneStiffness {
-            weft_n_m: 1000.0,
-            warp_n_m: 1500.0,
-            shear_n_m: 50.0,
-            compression: 1.0,
-            compression_knee: f64::INFINITY,
-        };
+        let (material, m) = right_triangle();
+        let stiff = MembraneStiffness::new(1000.0, 1500.0, 50.0);
         let soft = MembraneStiffness {
             compression: 0.1,
             ..stiff
@@ -363,12 +352,7 @@ mod tests {
 
     #[test]
     fn compression_knee_gives_the_full_stiffness_back_beyond_it() {
-        let material = [
-            Vector2::new(0.0, 0.0),
-            Vector2::new(0.02, 0.0),
-            Vector2::new(0.0, 0.02),
-        ];
-        let m = Membrane::new([0, 1, 2], &material).expect("triangle");
+        let (material, m) = right_triangle();
         let knee = MembraneStiffness {
             compression: 0.1,
             compression_knee: 0.2,
@@ -417,13 +401,7 @@ mod tests {
             Vector2::new(0.004, 0.018),
         ];
         let m = Membrane::new([0, 1, 2], &material).expect("triangle");
-        let k = MembraneStiffness {
-            weft_n_m: 1000.0,
-            warp_n_m: 1500.0,
-            shear_n_m: 50.0,
-            compression: 1.0,
-            compression_knee: f64::INFINITY,
-        };
+        let k = MembraneStiffness::new(1000.0, 1500.0, 50.0);
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -1.1, 0.7);
         let x = material.map(|u| rot * Vector3::new(u.x, u.y, 0.0) + Vector3::new(1.0, 2.0, 3.0));
         assert!(m.energy(&k, &x) < 1e-20);
