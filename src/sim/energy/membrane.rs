@@ -67,40 +67,22 @@ impl MembraneStiffness {
         }
     }
 
-    /// The stretch stiffness `k` at stretch ratio `l` up to the knee: `k·compression` below 1.
-    fn at(&self, k: f64, l: f64) -> f64 {
-        if l < 1.0 {
-            k * self.compression
-        } else {
-            k
-        }
-    }
-
-    /// Beyond the knee (a shortening d = 1 − `l` > `compression_knee`), the stretch term ψ(l)
-    /// of stiffness `k` per rest area and its derivative in `l`:
-    /// ½ c k s₀² + c k s₀ (d − s₀) + ½ k (d − s₀)² (its second derivative is `k`); `None`
-    /// within it, where ψ = ½ [`Self::at`] (l − 1)². The two forms are kept apart so that a
-    /// membrane without a knee computes exactly what it did before the knee existed.
-    fn beyond_knee(&self, k: f64, l: f64) -> Option<(f64, f64)> {
+    /// The stretch term of stiffness `k` per rest area at stretch ratio `l`: twice ψ(l), ψ',
+    /// ψ'' (the stiffness along the stretch direction) and whether `l` is beyond the knee.
+    /// Within the knee ψ = ½ k′ (l − 1)² with k′ = k·compression under compression (l < 1);
+    /// beyond it (a shortening d = 1 − l > s₀ = `compression_knee`)
+    /// ψ = ½ c k s₀² + c k s₀ (d − s₀) + ½ k (d − s₀)², whose ψ'' is `k`. The two forms are kept
+    /// apart so that a membrane without a knee computes exactly what it did before the knee
+    /// existed.
+    fn stretch(&self, k: f64, l: f64) -> (f64, f64, f64, bool) {
         let (d, s0, c) = (1.0 - l, self.compression_knee, self.compression);
-        (d > s0).then(|| {
+        if d > s0 {
             let e = d - s0;
-            (
-                0.5 * c * k * s0 * s0 + c * k * s0 * e + 0.5 * k * e * e,
-                -(c * k * s0 + k * e),
-            )
-        })
-    }
-
-    /// Twice the stretch term, its derivative in `l` and the stiffness along the stretch
-    /// direction (ψ''), at stretch ratio `l`.
-    fn stretch(&self, k: f64, l: f64) -> (f64, f64, f64) {
-        match self.beyond_knee(k, l) {
-            Some((e, f)) => (2.0 * e, f, k),
-            None => {
-                let kk = self.at(k, l);
-                (kk * (l - 1.0).powi(2), kk * (l - 1.0), kk)
-            }
+            let psi = 0.5 * c * k * s0 * s0 + c * k * s0 * e + 0.5 * k * e * e;
+            (2.0 * psi, -(c * k * s0 + k * e), k, true)
+        } else {
+            let kk = if l < 1.0 { k * c } else { k };
+            (kk * (l - 1.0).powi(2), kk * (l - 1.0), kk, false)
         }
     }
 }
@@ -149,24 +131,24 @@ impl Membrane {
         let (lu, lv) = (wu.norm().max(1e-12), wv.norm().max(1e-12));
         let (nu, nv) = (wu / lu, wv / lv);
         let s = wu.dot(&wv);
-        let (eu, du, ku) = k.stretch(k.weft_n_m, lu);
-        let (ev, dv, kv) = k.stretch(k.warp_n_m, lv);
+        let (eu, du, ku, beyond_u) = k.stretch(k.weft_n_m, lu);
+        let (ev, dv, kv, beyond_v) = k.stretch(k.warp_n_m, lv);
         let e = a * 0.5 * (eu + ev + k.shear_n_m * s * s);
         let gu = (nu * du + wv * (k.shear_n_m * s)) * a;
         let gv = (nv * dv + wu * (k.shear_n_m * s)) * a;
         // ∇²ψ(|w|) = ψ'' n nᵀ + (ψ' / |w|)(I − n nᵀ); the second is negative under compression.
         // Within the knee ψ' / |w| = k(1 − 1/|w|), written so.
-        let stretch = |kk: f64, d1: f64, n: &Vector3<f64>, l: f64| {
+        let stretch = |kk: f64, d1: f64, beyond: bool, n: &Vector3<f64>, l: f64| {
             let nn = n * n.transpose();
             let clamp = |p: f64| if psd { p.max(0.0) } else { p };
-            if k.compression_knee < 1.0 - l {
+            if beyond {
                 nn * kk + (Matrix3::identity() - nn) * clamp(d1 / l)
             } else {
                 (nn + (Matrix3::identity() - nn) * clamp(1.0 - 1.0 / l)) * kk
             }
         };
-        let huu = (stretch(ku, du, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
-        let hvv = (stretch(kv, dv, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
+        let huu = (stretch(ku, du, beyond_u, &nu, lu) + wv * wv.transpose() * k.shear_n_m) * a;
+        let hvv = (stretch(kv, dv, beyond_v, &nv, lv) + wu * wu.transpose() * k.shear_n_m) * a;
         let coupling = if shear_coupling { s } else { 0.0 };
         let huv = (wv * wu.transpose() + Matrix3::identity() * coupling) * (k.shear_n_m * a);
         let mut h = SMatrix::<f64, 6, 6>::zeros();
