@@ -391,6 +391,32 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             let stretched: Vec<Vector3<f64>> = x.iter().map(|p| c + (p - c) * 1.05).collect();
             let p = lim.predict(&stretched, &v, &dv, &far).expect("predict");
             assert!(p.iter().all(|p| *p == Vector3::zeros()), "stretched 5 %");
+            // A lowest share m maps the same gate output σ to m + (1 − m)σ: at m = −1 the
+            // correction is 2p + Δq (it may amplify the step's velocity change), nothing in
+            // free fall still.
+            let mut wide = cfg.clone();
+            wide.model.share_min = Some(-1.0);
+            let two_sided = with_config(&wide);
+            let q = two_sided.predict(&x, &v, &dv, &far).expect("predict");
+            for ((a, b), d) in free.iter().zip(&q).zip(&dv) {
+                assert!(
+                    (a * 2.0 + d - b).norm() <= 1e-6 * (1.0 + a.norm() + d.norm()),
+                    "{a} {b} {d}"
+                );
+            }
+            assert!(
+                q.iter()
+                    .zip(&dv)
+                    .any(|(q, d)| (0..3).any(|k| q[k] * d[k] > 0.0)),
+                "nothing amplified"
+            );
+            let p = two_sided.predict(&x, &v, &zero, &far).expect("predict");
+            assert!(p.iter().all(|p| *p == Vector3::zeros()), "free fall");
+            for bad in [1.0, f64::NAN] {
+                let mut c = wide.clone();
+                c.model.share_min = Some(bad);
+                assert!(c.model.check().is_err(), "share min {bad}");
+            }
         }
         // A mesh collapsed to a point at rest still gets a finite correction.
         let zeros = vec![Vector3::zeros(); x.len()];
@@ -985,6 +1011,12 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
     })
     .expect_err("other membrane");
     assert!(e.to_string().contains("compression"), "{e}");
+    let grip = tune(2).with_coarse_friction(Some(1.0));
+    let e = train(&grip, &mut sets(), &[], &tmp.path().join("z"), |_| {
+        ControlFlow::Continue(())
+    })
+    .expect_err("other friction");
+    assert!(e.to_string().contains("friction"), "{e}");
 
     // Two and three phase-2 windows from the base network: the same first two windows.
     let (two, three, mean) = (

@@ -129,6 +129,33 @@ fn the_coarse_compression_option_sets_up_the_coarse_membrane() {
     }
 }
 
+/// Without a corrector the coarse simulator's friction against bodies is the option's (the
+/// simulator's when unset), and a negative or non-finite coefficient is refused.
+#[test]
+fn the_coarse_friction_option_sets_up_the_coarse_contact() {
+    let (scene, isr) = (scene(), tiny_isr());
+    let friction = |o: Options| {
+        Pipeline::new(&scene, &isr, None, o)
+            .map(|p| p.coarse.sim.params.friction)
+            .map_err(|e| e.to_string())
+    };
+    let default = clothsr::sim::SimParams::for_edge(0.02).friction;
+    assert_eq!(friction(options()), Ok(default));
+    let grip = Options {
+        coarse_friction: Some(1.0),
+        ..options()
+    };
+    assert_eq!(friction(grip), Ok(1.0));
+    for bad in [-0.1, f64::NAN, f64::INFINITY] {
+        let o = Options {
+            coarse_friction: Some(bad),
+            ..options()
+        };
+        let e = friction(o).expect_err("a bad friction coefficient");
+        assert!(e.contains("friction"), "{e}");
+    }
+}
+
 fn cloth_frames(path: &Path) -> Vec<Vec<Vector3<f32>>> {
     let stage = read_usd(path).expect("read");
     let cloth: Vec<_> = stage
@@ -285,6 +312,15 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
                 .err()
                 .expect("a compression factor the corrector was not trained with");
             assert!(err.to_string().contains("compression factor"), "{err}");
+            // So is a friction coefficient it was not trained beside.
+            let other = Options {
+                coarse_friction: Some(0.9),
+                ..Options::default()
+            };
+            let err = Pipeline::new(&scene, &isr, corrector, other)
+                .err()
+                .expect("a friction coefficient the corrector was not trained with");
+            assert!(err.to_string().contains("friction"), "{err}");
         }
         let mut p = Pipeline::new(&scene, &isr, corrector, Options::default()).expect("set up");
         assert_eq!(p.has_corrector(), ships_corrector);

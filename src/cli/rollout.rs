@@ -72,6 +72,10 @@ pub struct Args {
     /// one the corrector was trained beside.
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
+    /// Run the coarse simulator (all three variants) with this Coulomb friction coefficient
+    /// against bodies instead of the one the corrector was trained beside.
+    #[arg(long)]
+    coarse_friction: Option<f64>,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
     /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
@@ -115,6 +119,13 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
             "--coarse-compression-knee {s}: the shortening must be > 0 (0: none)"
         );
         corrector.training.coarse_compression_knee = (s > 0.0).then_some(s);
+    }
+    if let Some(mu) = args.coarse_friction {
+        anyhow::ensure!(
+            mu >= 0.0 && mu.is_finite(),
+            "--coarse-friction {mu}: the coefficient must be finite and not negative"
+        );
+        corrector.training.coarse_friction = Some(mu);
     }
     Ok(corrector)
 }

@@ -100,6 +100,11 @@ pub struct Args {
     /// (default: the corrector's, else none).
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
+    /// The coarse simulator's Coulomb friction coefficient against bodies (a 20 mm mesh grips
+    /// a ball at fewer points than the fine cloth's wrinkles do; default: the corrector's,
+    /// else the simulator's 0.3; a corrector trained with another is an error)
+    #[arg(long)]
+    coarse_friction: Option<f64>,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -216,6 +221,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dress: !args.no_dress,
         coarse_compression: args.coarse_compression,
         coarse_compression_knee: args.coarse_compression_knee,
+        coarse_friction: args.coarse_friction,
     };
     let multi = MultiProgress::new();
     let overall = (jobs.len() > 1).then(|| {

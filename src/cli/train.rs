@@ -24,9 +24,9 @@ pub struct Args {
 #[derive(Debug, clap::Subcommand)]
 enum What {
     /// The GNN corrector (M_c → M_int).
-    Corrector(CorrectorArgs),
+    Corrector(Box<CorrectorArgs>),
     /// The ISR network of mesh super-resolution (M_int coordinate map → fine map).
-    Isr(IsrArgs),
+    Isr(Box<IsrArgs>),
 }
 
 /// Arguments of `train isr`.
@@ -197,6 +197,11 @@ pub struct CorrectorArgs {
     /// M_int, which the interleaved run does not have). [default: 0, or the `--init` model's]
     #[arg(long)]
     smoothing: Option<usize>,
+    /// The gated decoder's lowest share, fixed when the network is made (not with `--init`):
+    /// the learned share of the step's velocity change taken back lies in (m, 1); below 0
+    /// the corrector may also amplify the step's response. [default: 0]
+    #[arg(long, allow_hyphen_values = true)]
+    share_min: Option<f64>,
     /// Held-out data sets to select the network on (repeat for several; never a training
     /// set): at the end of each phase (with `--init`, the starting model too) and every
     /// `--validate-every` phase-2 windows the network is rolled out interleaved with the
@@ -224,6 +229,11 @@ pub struct CorrectorArgs {
     /// with the model. [default: none, or the `--init` model's]
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
+    /// The coarse simulator's Coulomb friction coefficient against bodies, saved with the
+    /// model, which then runs with it (a 20 mm mesh grips a ball at fewer points than the
+    /// fine cloth's wrinkles do). [default: the simulator's, 0.3, or the `--init` model's]
+    #[arg(long)]
+    coarse_friction: Option<f64>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -256,8 +266,8 @@ pub struct CorrectorArgs {
 /// Runs `train`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
-        What::Corrector(a) => corrector(a),
-        What::Isr(a) => isr(a),
+        What::Corrector(a) => corrector(*a),
+        What::Isr(a) => isr(*a),
     }
 }
 
@@ -303,6 +313,13 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     if let Some(n) = a.smoothing {
         model = model.with_smoothing((n > 0).then_some(n));
     }
+    if let Some(m) = a.share_min {
+        anyhow::ensure!(
+            init.is_none(),
+            "--share-min shapes a new network; it cannot change the --init model's"
+        );
+        model = model.with_share_min((m != 0.0).then_some(m));
+    }
     let compression = a
         .coarse_compression
         .or_else(|| init.as_ref().map(TrainingConfig::compression_factor))
@@ -325,6 +342,10 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_coarse_compression_knee(
             a.coarse_compression_knee
                 .or_else(|| init.as_ref().and_then(|c| c.coarse_compression_knee)),
+        )
+        .with_coarse_friction(
+            a.coarse_friction
+                .or_else(|| init.as_ref().and_then(|c| c.coarse_friction)),
         )
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)

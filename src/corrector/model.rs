@@ -97,6 +97,11 @@ pub struct CorrectorConfig {
     /// motion the interleaved run does not have; its learned cancellation is then a local
     /// bias, while the fine cloth's drift from the coarse one is smooth over the garment.
     pub smoothing: Option<usize>,
+    /// The gated decoder's lowest share (beyond the paper): γ = m + (1 − m)·σ(·) ∈ (m, 1)³
+    /// instead of (0, 1)³ (`None`: 0, also for models saved before it existed). Below 0 the
+    /// decoder may also amplify the step's velocity change, where the fine cloth responds
+    /// faster than the coarse one (the hanging flaps swinging in under an impact).
+    pub share_min: Option<f64>,
 }
 
 /// How the network's node latents become velocity corrections.
@@ -149,6 +154,9 @@ impl CorrectorConfig {
             .is_some_and(|k| !(k.is_finite() && k > 0.0 && k <= 1.0))
         {
             return Err("the take-back scale must be in (0, 1]".into());
+        }
+        if self.share_min.is_some_and(|m| !(m.is_finite() && m < 1.0)) {
+            return Err("the gated decoder's lowest share must be below 1".into());
         }
         Ok(())
     }
@@ -415,6 +423,7 @@ pub struct CorrectorNet {
     decode: Mlp,
     decode_edges: Option<Mlp>,
     gate: Option<Mlp>,
+    share_min: Option<f64>,
 }
 
 impl CorrectorConfig {
@@ -442,6 +451,7 @@ impl CorrectorConfig {
                 .decoder_kind()
                 .is_gated()
                 .then(|| Mlp::new(l, l, h, 3, false, device)),
+            share_min: self.share_min,
         }
     }
 }
@@ -462,6 +472,10 @@ impl CorrectorNet {
                 let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
                 let contact = ((body - 1.0) * ratio + 1.0).clamp(0.0, 1.0); // [N, 1]
                 let share = sigmoid(gate.forward(nodes.clone())); // [N, 3]
+                let share = match self.share_min {
+                    Some(m) if m != 0.0 => share * (1.0 - m) as f32 + m as f32, // [N, 3]
+                    _ => share,
+                };
                 let mut taken = share * g.step_change.clone() * (contact.clone().neg() + 1.0); // [N, 3]
                 if let Some(w) = &g.tension {
                     taken = taken * w.clone(); // [N, 3]

@@ -49,6 +49,9 @@ pub struct Options {
     /// (`None`: the corrector's, else soft however short). A corrector trained with another
     /// is an error.
     pub coarse_compression_knee: Option<f64>,
+    /// The coarse simulator's Coulomb friction coefficient against bodies (`None`: the
+    /// corrector's, else the simulator's). A corrector trained with another is an error.
+    pub coarse_friction: Option<f64>,
 }
 
 impl Default for Options {
@@ -61,6 +64,7 @@ impl Default for Options {
             dress: true,
             coarse_compression: None,
             coarse_compression_knee: None,
+            coarse_friction: None,
         }
     }
 }
@@ -185,12 +189,29 @@ impl<'a> Pipeline<'a> {
                     opts.coarse_compression_knee
                 )));
             }
+            (Some(c), _)
+                if opts.coarse_friction.is_some()
+                    && c.training.coarse_friction != opts.coarse_friction =>
+            {
+                return Err(Error::Invalid(format!(
+                    "the corrector in {} was trained beside a coarse friction coefficient of \
+                     {}, not {:?}",
+                    c.dir.display(),
+                    c.training
+                        .coarse_friction
+                        .map_or("the simulator's".to_string(), |mu| mu.to_string()),
+                    opts.coarse_friction
+                )));
+            }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
             (None, f) if f.is_some() || opts.coarse_compression_knee.is_some() => coarse
                 .sim
                 .model
                 .set_membrane_compression(f.unwrap_or(1.0), opts.coarse_compression_knee)?,
             (None, _) => {}
+        }
+        if let (None, Some(mu)) = (&corrector, opts.coarse_friction) {
+            crate::corrector::training::set_friction(&mut coarse, mu)?;
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {
