@@ -303,24 +303,28 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
         assert_eq!(corrector.join("config.json").exists(), ships_corrector);
         let corrector = ships_corrector.then_some(corrector.as_path());
         if corrector.is_some() {
-            // A coarse membrane the corrector was not trained beside is refused.
-            let other = Options {
-                coarse_compression: Some(0.5),
-                ..Options::default()
-            };
-            let err = Pipeline::new(&scene, &isr, corrector, other)
-                .err()
-                .expect("a compression factor the corrector was not trained with");
-            assert!(err.to_string().contains("compression factor"), "{err}");
-            // So is a friction coefficient it was not trained beside.
-            let other = Options {
-                coarse_friction: Some(0.9),
-                ..Options::default()
-            };
-            let err = Pipeline::new(&scene, &isr, corrector, other)
-                .err()
-                .expect("a friction coefficient the corrector was not trained with");
-            assert!(err.to_string().contains("friction"), "{err}");
+            // A coarse membrane or friction the corrector was not trained beside is refused.
+            for (other, what) in [
+                (
+                    Options {
+                        coarse_compression: Some(0.5),
+                        ..Options::default()
+                    },
+                    "compression factor",
+                ),
+                (
+                    Options {
+                        coarse_friction: Some(0.9),
+                        ..Options::default()
+                    },
+                    "friction",
+                ),
+            ] {
+                let err = Pipeline::new(&scene, &isr, corrector, other)
+                    .err()
+                    .expect(what);
+                assert!(err.to_string().contains(what), "{err}");
+            }
         }
         let mut p = Pipeline::new(&scene, &isr, corrector, Options::default()).expect("set up");
         assert_eq!(p.has_corrector(), ships_corrector);

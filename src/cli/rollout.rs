@@ -121,10 +121,8 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
         corrector.training.coarse_compression_knee = (s > 0.0).then_some(s);
     }
     if let Some(mu) = args.coarse_friction {
-        anyhow::ensure!(
-            mu >= 0.0 && mu.is_finite(),
-            "--coarse-friction {mu}: the coefficient must be finite and not negative"
-        );
+        clothsr::corrector::training::check_friction(mu)
+            .map_err(|e| anyhow::anyhow!("--coarse-friction: {e}"))?;
         corrector.training.coarse_friction = Some(mu);
     }
     Ok(corrector)

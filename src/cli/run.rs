@@ -100,9 +100,10 @@ pub struct Args {
     /// (default: the corrector's, else none).
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
-    /// The coarse simulator's Coulomb friction coefficient against bodies (a 20 mm mesh grips
-    /// a ball at fewer points than the fine cloth's wrinkles do; default: the corrector's,
-    /// else the simulator's 0.3; a corrector trained with another is an error)
+    /// The coarse simulator's Coulomb friction coefficient against bodies (on the three balls
+    /// the coarse sheet comes closest to the fine one at several times the fine cloth's;
+    /// default: the corrector's, else the simulator's 0.3; a corrector trained with another
+    /// is an error)
     #[arg(long)]
     coarse_friction: Option<f64>,
     /// Write text USD even for a .usd file.

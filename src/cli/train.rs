@@ -230,8 +230,7 @@ pub struct CorrectorArgs {
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
     /// The coarse simulator's Coulomb friction coefficient against bodies, saved with the
-    /// model, which then runs with it (a 20 mm mesh grips a ball at fewer points than the
-    /// fine cloth's wrinkles do). [default: the simulator's, 0.3, or the `--init` model's]
+    /// model, which then runs with it. [default: the simulator's, 0.3, or the `--init` model's]
     #[arg(long)]
     coarse_friction: Option<f64>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,

@@ -122,10 +122,10 @@ pub struct TrainingConfig {
     pub coarse_compression_knee: Option<f64>,
     /// The coarse simulator's Coulomb friction coefficient against bodies the corrector is
     /// trained with, and so must run with (`None`: the simulator's,
-    /// [`crate::sim::SimParams`]' default, the fine simulation's). A 20 mm mesh touches a
-    /// ball at a few vertices where the fine cloth's wrinkles grip it at many: on the
-    /// three balls the coarse sheet slides further over the balls than the fine one does
-    /// with the fine cloth's coefficient. Optional so that models saved before it load.
+    /// [`crate::sim::SimParams`]' default, the fine simulation's). On the three balls the
+    /// coarse sheet comes closest to the fine one with several times the fine cloth's
+    /// coefficient (the three-balls README, session 28). Optional so that models saved
+    /// before it load.
     pub coarse_friction: Option<f64>,
     /// Validate every this many phase-2 windows, and at the end of each phase (a warm start's
     /// model before phase 2 too: [`Self::init_from`]), on the held-out
@@ -200,13 +200,21 @@ impl TrainingConfig {
     }
 }
 
-/// Sets a coarse simulation's Coulomb friction coefficient against bodies (finite, ≥ 0).
-pub fn set_friction(sim: &mut Simulation, mu: f64) -> Result<()> {
-    if !(mu.is_finite() && mu >= 0.0) {
-        return Err(Error::Invalid(format!(
+/// Why `mu` is no Coulomb friction coefficient (it must be finite and not negative).
+pub fn check_friction(mu: f64) -> std::result::Result<(), String> {
+    if mu.is_finite() && mu >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!(
             "the friction coefficient must be finite and not negative, got {mu}"
-        )));
+        ))
     }
+}
+
+/// Sets a coarse simulation's Coulomb friction coefficient against bodies
+/// ([`check_friction`]).
+pub fn set_friction(sim: &mut Simulation, mu: f64) -> Result<()> {
+    check_friction(mu).map_err(Error::Invalid)?;
     sim.sim.params.friction = mu;
     Ok(())
 }
@@ -453,11 +461,8 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
     if let Err(e) = cfg.model.check() {
         return bad(&e);
     }
-    if cfg
-        .coarse_friction
-        .is_some_and(|mu| !(mu.is_finite() && mu >= 0.0))
-    {
-        return bad("the coarse friction coefficient must be finite and not negative");
+    if let Some(Err(e)) = cfg.coarse_friction.map(check_friction) {
+        return bad(&format!("coarse: {e}"));
     }
     if cfg
         .rollout_tau_steps
