@@ -274,7 +274,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         3
     );
     assert!(
-        report.contains("coarse membrane compression 1 "),
+        report.contains("coarse membrane compression 1, friction the simulator's ("),
         "{report}"
     );
     // The simulation alone's mean edge strain in frame 2 (the sheet on the sphere), from a
@@ -297,7 +297,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         csv.clone().into(),
     ]);
     assert!(
-        report.contains("coarse membrane compression 0.25 "),
+        report.contains("coarse membrane compression 0.25, friction the simulator's ("),
         "{report}"
     );
     // The factor reaches the simulator: the simulation alone's edges shorten more under the
@@ -347,7 +347,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let (report, soft) = horizon("0.5", &dir.path().join("horizon_soft.csv"));
     assert!(
         report.contains("2 rollouts of 1 frames, from frames 1..=2")
-            && report.contains("coarse membrane compression 0.5 "),
+            && report.contains("coarse membrane compression 0.5, friction the simulator's ("),
         "{report}"
     );
     assert!(
@@ -363,7 +363,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     );
     let (report, stiff) = horizon("1", &dir.path().join("horizon_stiff.csv"));
     assert!(
-        report.contains("coarse membrane compression 1 "),
+        report.contains("coarse membrane compression 1, friction the simulator's ("),
         "{report}"
     );
     assert!(
@@ -371,6 +371,17 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "sim alone {} mm at factor 0.5 and {} mm at 1",
         soft[1],
         stiff[1]
+    );
+    // The friction in use is reported beside the membrane.
+    let report = rollout(vec![
+        "--frames".into(),
+        "1".into(),
+        "--coarse-friction".into(),
+        "0.6".into(),
+    ]);
+    assert!(
+        report.contains("coarse membrane compression 1, friction 0.6 (all three variants)"),
+        "{report}"
     );
 
     // Jitter: the rollout again from the start moved 0.1 mm sideways, pooled with the

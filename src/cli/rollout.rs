@@ -310,10 +310,7 @@ fn long_rollout(
 fn report(e: &RolloutErrors, corrector: &Corrector) {
     let (a, b, c) = e.means();
     println!("frames                      {}", e.frame.len());
-    println!(
-        "coarse membrane compression {} (all three variants)",
-        corrector.training.compression_factor()
-    );
+    println!("{} (all three variants)", coarse_setup(&corrector.training));
     if let Some(f) = e.diverged_at_frame {
         println!("interleaved rollout DIVERGED in frame {f}: the corrector's output left its training range");
     }
@@ -419,10 +416,7 @@ fn short_horizons(
         starts[starts.len() - 1],
         args.every
     );
-    println!(
-        "coarse membrane compression {} (both variants)",
-        corrector.training.compression_factor()
-    );
+    println!("{} (both variants)", coarse_setup(&corrector.training));
     println!("frames after start   sim alone mm   interleaved mm   ratio");
     for k in 0..horizon {
         println!(
@@ -434,4 +428,15 @@ fn short_horizons(
         );
     }
     Ok(())
+}
+
+/// The coarse simulator's settings a corrector runs beside: its membrane's compression factor
+/// and its friction coefficient against bodies.
+fn coarse_setup(t: &clothsr::corrector::training::TrainingConfig) -> String {
+    format!(
+        "coarse membrane compression {}, friction {}",
+        t.compression_factor(),
+        t.coarse_friction
+            .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string())
+    )
 }
