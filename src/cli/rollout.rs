@@ -436,7 +436,6 @@ fn coarse_setup(t: &clothsr::corrector::training::TrainingConfig) -> String {
     format!(
         "coarse membrane compression {}, friction {}",
         t.compression_factor(),
-        t.coarse_friction
-            .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string())
+        t.friction_label()
     )
 }

@@ -189,6 +189,13 @@ impl TrainingConfig {
         self.coarse_compression.unwrap_or(1.0)
     }
 
+    /// The coarse friction coefficient the corrector was trained beside, for reports: the
+    /// number, or "the simulator's" when unset ([`Self::coarse_friction`]).
+    pub fn friction_label(&self) -> String {
+        self.coarse_friction
+            .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string())
+    }
+
     /// Sets up `sim` (a coarse simulation) as the corrector was trained with.
     pub fn prepare_coarse(&self, sim: &mut Simulation) -> Result<()> {
         if let Some(mu) = self.coarse_friction {

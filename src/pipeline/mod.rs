@@ -197,9 +197,7 @@ impl<'a> Pipeline<'a> {
                     "the corrector in {} was trained beside a coarse friction coefficient of \
                      {}, not {:?}",
                     c.dir.display(),
-                    c.training
-                        .coarse_friction
-                        .map_or("the simulator's".to_string(), |mu| mu.to_string()),
+                    c.training.friction_label(),
                     opts.coarse_friction
                 )));
             }
