@@ -383,6 +383,39 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         report.contains("coarse membrane compression 1, friction 0.6 (all three variants)"),
         "{report}"
     );
+    // So is the wrinkle bending gain, when on; a negative one is refused, naming the option.
+    let report = rollout(vec![
+        "--frames".into(),
+        "1".into(),
+        "--coarse-wrinkle-bending".into(),
+        "1.5".into(),
+    ]);
+    assert!(
+        report.contains(
+            "coarse membrane compression 1, friction the simulator's, wrinkle bending 1.5 (all \
+             three variants)"
+        ),
+        "{report}"
+    );
+    let out = clothsr()
+        .args([
+            "rollout",
+            "--frames",
+            "1",
+            "--coarse-wrinkle-bending=-1",
+            "--model",
+        ])
+        .arg(&model)
+        .arg("--data")
+        .arg(&data)
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--coarse-wrinkle-bending: the wrinkle bending gain must be finite and not negative, got -1"),
+        "{err}"
+    );
 
     // Jitter: the rollout again from the start moved 0.1 mm sideways, pooled with the
     // nominal one; the moved run is 0.1 mm from the ground truth at the end of frame 1.

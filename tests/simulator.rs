@@ -532,3 +532,100 @@ fn a_sheet_dropped_over_a_table_edge_gains_no_energy_in_fast_mode() {
         );
     }
 }
+
+#[test]
+fn wrinkle_bending_stiffens_shortened_hinges_of_a_settled_sheet_only() {
+    use clothsr::sim::WrinkleBending;
+    let scene = sheet_scene(0.2, 1.0, Fabric::preset("cotton").expect("preset"));
+    let mut sim = Simulation::new(&scene, 0.04, |_| {}).expect("setup");
+    let own: Vec<f64> = sim.sim.model.hinges.iter().map(|h| h.weight).collect();
+    let w = WrinkleBending::with_gain(2.0);
+    sim.sim.model.set_wrinkle_bending(Some(w)).expect("valid");
+    assert!(sim
+        .sim
+        .model
+        .set_wrinkle_bending(Some(WrinkleBending::with_gain(-1.0)))
+        .is_err());
+    assert_eq!(
+        sim.sim.model.wrinkle_bending(),
+        Some(w),
+        "a refused setting keeps the last"
+    );
+    let n = sim.state.x.len();
+    let still = vec![Vector3::zeros(); n];
+    let weights =
+        |sim: &Simulation| -> Vec<f64> { sim.sim.model.hinges.iter().map(|h| h.weight).collect() };
+    // Flat and at rest: no edge shortened (but for rounding), nothing added.
+    let rest = sim.state.x.clone();
+    sim.sim.model.update_wrinkle_bending(&rest, &still);
+    for (w, o) in weights(&sim).iter().zip(&own) {
+        assert!((w / o - 1.0).abs() < 1e-9, "{w} {o}");
+    }
+    // Shrunk by half the full strain about its centre, at rest: every hinge's five edges are
+    // shortened by 0.15 %, so each weight gains half the gain.
+    let c = rest.iter().sum::<Vector3<f64>>() / n as f64;
+    let shrunk: Vec<_> = rest
+        .iter()
+        .map(|x| c + (x - c) * (1.0 - 0.5 * WrinkleBending::DEFAULT_STRAIN))
+        .collect();
+    sim.sim.model.update_wrinkle_bending(&shrunk, &still);
+    for (w, o) in weights(&sim).iter().zip(&own) {
+        assert!((w / o - 2.0).abs() < 1e-9, "{w} {o}");
+    }
+    // Shrunk twice the full strain: the gain is capped at its full value.
+    let crushed: Vec<_> = rest
+        .iter()
+        .map(|x| c + (x - c) * (1.0 - 2.0 * WrinkleBending::DEFAULT_STRAIN))
+        .collect();
+    sim.sim.model.update_wrinkle_bending(&crushed, &still);
+    for (w, o) in weights(&sim).iter().zip(&own) {
+        assert!((w / o - 3.0).abs() < 1e-9, "{w} {o}");
+    }
+    // Moving at half the settle speed: half of it; at the settle speed or faster: none.
+    let half = vec![Vector3::new(0.0, -0.5 * WrinkleBending::DEFAULT_SETTLE_SPEED_M_S, 0.0); n];
+    sim.sim.model.update_wrinkle_bending(&crushed, &half);
+    for (w, o) in weights(&sim).iter().zip(&own) {
+        assert!((w / o - 2.0).abs() < 1e-9, "{w} {o}");
+    }
+    let fast = vec![Vector3::new(0.0, -WrinkleBending::DEFAULT_SETTLE_SPEED_M_S, 0.0); n];
+    sim.sim.model.update_wrinkle_bending(&crushed, &fast);
+    assert_eq!(weights(&sim), own);
+    // Stretched: nothing added.
+    let stretched: Vec<_> = rest.iter().map(|x| c + (x - c) * 1.01).collect();
+    sim.sim.model.update_wrinkle_bending(&stretched, &still);
+    assert_eq!(weights(&sim), own);
+    // Off again: the fabric's weights, and a step no longer changes them.
+    sim.sim.model.update_wrinkle_bending(&crushed, &still);
+    sim.sim.model.set_wrinkle_bending(None).expect("off");
+    assert_eq!(weights(&sim), own);
+    sim.state.x = crushed;
+    sim.step().expect("step");
+    assert_eq!(weights(&sim), own);
+}
+
+#[test]
+fn a_settled_compressed_sheet_steps_with_the_stiffened_hinges() {
+    use clothsr::sim::WrinkleBending;
+    // The simulator applies the stiffening itself at each step: a sheet at rest, shrunk by
+    // the full strain, steps with every hinge at (1 + gain) times its weight.
+    let scene = sheet_scene(0.2, 1.0, Fabric::preset("cotton").expect("preset"));
+    let mut sim = Simulation::new(&scene, 0.04, |_| {}).expect("setup");
+    let own: Vec<f64> = sim.sim.model.hinges.iter().map(|h| h.weight).collect();
+    sim.sim
+        .model
+        .set_wrinkle_bending(Some(WrinkleBending::with_gain(1.5)))
+        .expect("valid");
+    let n = sim.state.x.len();
+    let c = sim.state.x.iter().sum::<Vector3<f64>>() / n as f64;
+    sim.state.x = sim
+        .state
+        .x
+        .iter()
+        .map(|x| c + (x - c) * (1.0 - WrinkleBending::DEFAULT_STRAIN))
+        .collect();
+    sim.step().expect("step");
+    for (h, o) in sim.sim.model.hinges.iter().zip(&own) {
+        assert!((h.weight / o - 2.5).abs() < 1e-9, "{} {o}", h.weight);
+    }
+    assert!(sim.state.x.iter().all(|x| x.iter().all(|c| c.is_finite())));
+}

@@ -76,6 +76,11 @@ pub struct Args {
     /// against bodies instead of the one the corrector was trained beside.
     #[arg(long)]
     coarse_friction: Option<f64>,
+    /// The coarse simulator's wrinkle bending gain (extra bending stiffness where the coarse
+    /// membrane is shortened, once the cloth has settled; 0: off), for both variants, in
+    /// place of the corrector's
+    #[arg(long, value_name = "GAIN")]
+    coarse_wrinkle_bending: Option<f64>,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
     /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
@@ -124,6 +129,12 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
         clothsr::corrector::training::check_friction(mu)
             .map_err(|e| anyhow::anyhow!("--coarse-friction: {e}"))?;
         corrector.training.coarse_friction = Some(mu);
+    }
+    if let Some(g) = args.coarse_wrinkle_bending {
+        clothsr::sim::WrinkleBending::with_gain(g)
+            .check()
+            .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?;
+        corrector.training.coarse_wrinkle_bending = (g > 0.0).then_some(g);
     }
     Ok(corrector)
 }
@@ -430,11 +441,14 @@ fn short_horizons(
     Ok(())
 }
 
-/// The coarse simulator's settings a corrector runs beside: its membrane's compression factor
-/// and its friction coefficient against bodies.
+/// The coarse simulator's settings a corrector runs beside: its membrane's compression factor,
+/// its friction coefficient against bodies and, when on, its wrinkle bending gain.
 fn coarse_setup(t: &clothsr::corrector::training::TrainingConfig) -> String {
+    let wrinkles = t
+        .coarse_wrinkle_bending
+        .map_or_else(String::new, |g| format!(", wrinkle bending {g}"));
     format!(
-        "coarse membrane compression {}, friction {}",
+        "coarse membrane compression {}, friction {}{wrinkles}",
         t.compression_factor(),
         t.friction_label()
     )

@@ -106,6 +106,12 @@ pub struct Args {
     /// is an error)
     #[arg(long)]
     coarse_friction: Option<f64>,
+    /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
+    /// membrane is shortened (as a fine cloth's wrinkles stiffen it), up to this multiple of
+    /// the fabric's, once the cloth's mean speed falls below 6 cm/s (default: the corrector's,
+    /// else off; a corrector trained with another is an error)
+    #[arg(long, value_name = "GAIN")]
+    coarse_wrinkle_bending: Option<f64>,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -223,6 +229,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coarse_compression: args.coarse_compression,
         coarse_compression_knee: args.coarse_compression_knee,
         coarse_friction: args.coarse_friction,
+        coarse_wrinkle_bending: args.coarse_wrinkle_bending,
     };
     let multi = MultiProgress::new();
     let overall = (jobs.len() > 1).then(|| {

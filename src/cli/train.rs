@@ -233,6 +233,11 @@ pub struct CorrectorArgs {
     /// model, which then runs with it. [default: the simulator's, 0.3, or the `--init` model's]
     #[arg(long)]
     coarse_friction: Option<f64>,
+    /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
+    /// membrane is shortened, up to this multiple of the fabric's, once the cloth has settled;
+    /// saved with the model, which then runs with it. [default: off, or the `--init` model's]
+    #[arg(long, value_name = "GAIN")]
+    coarse_wrinkle_bending: Option<f64>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -345,6 +350,10 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_coarse_friction(
             a.coarse_friction
                 .or_else(|| init.as_ref().and_then(|c| c.coarse_friction)),
+        )
+        .with_coarse_wrinkle_bending(
+            a.coarse_wrinkle_bending
+                .or_else(|| init.as_ref().and_then(|c| c.coarse_wrinkle_bending)),
         )
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)

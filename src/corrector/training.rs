@@ -51,6 +51,7 @@ use crate::io::write_atomic;
 use crate::scene::Scene;
 use crate::sim::driver::Simulation;
 use crate::sim::SimState;
+use crate::sim::WrinkleBending;
 
 /// How to train (saved as `config.json`, with the network's sizes).
 #[derive(Config, Debug, PartialEq)]
@@ -127,6 +128,11 @@ pub struct TrainingConfig {
     /// coefficient (the three-balls README, session 28). Optional so that models saved
     /// before it load.
     pub coarse_friction: Option<f64>,
+    /// The coarse simulator's wrinkle bending gain the corrector is trained beside, and so
+    /// must run with ([`crate::sim::WrinkleBending::with_gain`]: extra bending stiffness where
+    /// the coarse membrane is shortened, once the cloth has settled; `None`: off). Optional so
+    /// that models saved before it load.
+    pub coarse_wrinkle_bending: Option<f64>,
     /// Validate every this many phase-2 windows, and at the end of each phase (a warm start's
     /// model before phase 2 too: [`Self::init_from`]), on the held-out
     /// [`ValidationSet`]s given to [`train`]: the interleaved rollout's mean distance to M_int
@@ -201,6 +207,9 @@ impl TrainingConfig {
         if let Some(mu) = self.coarse_friction {
             set_friction(sim, mu)?;
         }
+        sim.sim
+            .model
+            .set_wrinkle_bending(self.coarse_wrinkle_bending.map(WrinkleBending::with_gain))?;
         sim.sim
             .model
             .set_membrane_compression(self.compression_factor(), self.coarse_compression_knee)
@@ -468,6 +477,12 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
     if let Err(e) = cfg.model.check() {
         return bad(&e);
     }
+    if let Some(Err(e)) = cfg
+        .coarse_wrinkle_bending
+        .map(|g| WrinkleBending::with_gain(g).check())
+    {
+        return bad(&e);
+    }
     if let Some(Err(e)) = cfg.coarse_friction.map(check_friction) {
         return bad(&format!("coarse: {e}"));
     }
@@ -558,6 +573,16 @@ fn warm_start(
                 "the network to start from was trained beside a coarse friction coefficient \
                  of {:?}, the training asks for {:?} (None: the simulator's)",
                 old.coarse_friction, cfg.coarse_friction
+            ),
+        ));
+    }
+    if old.coarse_wrinkle_bending != cfg.coarse_wrinkle_bending {
+        return Err(Error::bad_input(
+            &config_path,
+            format!(
+                "the network to start from was trained beside a coarse wrinkle bending gain \
+                 of {:?}, the training asks for {:?} (None: off)",
+                old.coarse_wrinkle_bending, cfg.coarse_wrinkle_bending
             ),
         ));
     }

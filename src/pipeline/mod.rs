@@ -52,6 +52,9 @@ pub struct Options {
     /// The coarse simulator's Coulomb friction coefficient against bodies (`None`: the
     /// corrector's, else the simulator's). A corrector trained with another is an error.
     pub coarse_friction: Option<f64>,
+    /// The coarse simulator's wrinkle bending gain ([`crate::sim::WrinkleBending::with_gain`];
+    /// `None`: the corrector's, else off). A corrector trained with another is an error.
+    pub coarse_wrinkle_bending: Option<f64>,
 }
 
 impl Default for Options {
@@ -65,6 +68,7 @@ impl Default for Options {
             coarse_compression: None,
             coarse_compression_knee: None,
             coarse_friction: None,
+            coarse_wrinkle_bending: None,
         }
     }
 }
@@ -201,6 +205,18 @@ impl<'a> Pipeline<'a> {
                     opts.coarse_friction
                 )));
             }
+            (Some(c), _)
+                if opts.coarse_wrinkle_bending.is_some()
+                    && c.training.coarse_wrinkle_bending != opts.coarse_wrinkle_bending =>
+            {
+                return Err(Error::Invalid(format!(
+                    "the corrector in {} was trained beside a coarse wrinkle bending gain of \
+                     {:?}, not {:?}",
+                    c.dir.display(),
+                    c.training.coarse_wrinkle_bending,
+                    opts.coarse_wrinkle_bending
+                )));
+            }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
             (None, f) if f.is_some() || opts.coarse_compression_knee.is_some() => coarse
                 .sim
@@ -210,6 +226,12 @@ impl<'a> Pipeline<'a> {
         }
         if let (None, Some(mu)) = (&corrector, opts.coarse_friction) {
             crate::corrector::training::set_friction(&mut coarse, mu)?;
+        }
+        if let (None, Some(g)) = (&corrector, opts.coarse_wrinkle_bending) {
+            coarse
+                .sim
+                .model
+                .set_wrinkle_bending(Some(crate::sim::WrinkleBending::with_gain(g)))?;
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {

@@ -12,7 +12,7 @@ pub mod scatter;
 pub mod sparse;
 pub mod step;
 
-pub use model::ClothModel;
+pub use model::{ClothModel, WrinkleBending};
 pub use step::{
     ColliderFrame, LinearSolver, Pin, PinTarget, SimParams, SimState, Simulator, StepStats,
 };

@@ -900,6 +900,7 @@ impl Simulator {
         colliders_start: &[ColliderFrame<'_>],
         colliders_end: &[ColliderFrame<'_>],
     ) -> Result<(SimState, StepStats)> {
+        self.model.update_wrinkle_bending(&state.x, &state.v);
         let mut stats = StepStats::default();
         let h = self.params.dt_s;
         // On a worker of rayon's pool: the step's many short parallel passes then start from
