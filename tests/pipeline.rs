@@ -156,6 +156,33 @@ fn the_coarse_friction_option_sets_up_the_coarse_contact() {
     }
 }
 
+/// Without a corrector the coarse simulator's wrinkle bending is the option's (off when unset
+/// or 0), and a negative or non-finite gain is refused.
+#[test]
+fn the_coarse_wrinkle_bending_option_sets_up_the_coarse_hinges() {
+    use clothsr::sim::WrinkleBending;
+    let (scene, isr) = (scene(), tiny_isr());
+    let wrinkles = |g: Option<f64>| {
+        let o = Options {
+            coarse_wrinkle_bending: g,
+            ..options()
+        };
+        Pipeline::new(&scene, &isr, None, o)
+            .map(|p| p.coarse.sim.model.wrinkle_bending())
+            .map_err(|e| e.to_string())
+    };
+    assert_eq!(wrinkles(None), Ok(None));
+    assert_eq!(wrinkles(Some(0.0)), Ok(None));
+    assert_eq!(
+        wrinkles(Some(1.5)),
+        Ok(Some(WrinkleBending::with_gain(1.5)))
+    );
+    for bad in [-0.5, f64::NAN, f64::INFINITY] {
+        let e = wrinkles(Some(bad)).expect_err("a bad gain");
+        assert!(e.contains("wrinkle bending gain"), "{e}");
+    }
+}
+
 fn cloth_frames(path: &Path) -> Vec<Vec<Vector3<f32>>> {
     let stage = read_usd(path).expect("read");
     let cloth: Vec<_> = stage
@@ -319,12 +346,27 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
                     },
                     "friction",
                 ),
+                (
+                    Options {
+                        coarse_wrinkle_bending: Some(1.0),
+                        ..Options::default()
+                    },
+                    "wrinkle bending",
+                ),
             ] {
                 let err = Pipeline::new(&scene, &isr, corrector, other)
                     .err()
                     .expect(what);
                 assert!(err.to_string().contains(what), "{err}");
             }
+        }
+        if corrector.is_some() {
+            // A gain of 0 is no wrinkle bending, as the corrector was trained.
+            let off = Options {
+                coarse_wrinkle_bending: Some(0.0),
+                ..Options::default()
+            };
+            assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
         }
         let mut p = Pipeline::new(&scene, &isr, corrector, Options::default()).expect("set up");
         assert_eq!(p.has_corrector(), ships_corrector);

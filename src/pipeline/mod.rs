@@ -53,7 +53,8 @@ pub struct Options {
     /// corrector's, else the simulator's). A corrector trained with another is an error.
     pub coarse_friction: Option<f64>,
     /// The coarse simulator's wrinkle bending gain ([`crate::sim::WrinkleBending::with_gain`];
-    /// `None`: the corrector's, else off). A corrector trained with another is an error.
+    /// 0: off; `None`: the corrector's, else off). A corrector trained with another is an
+    /// error.
     pub coarse_wrinkle_bending: Option<f64>,
 }
 
@@ -171,6 +172,13 @@ impl<'a> Pipeline<'a> {
         let corrector = corrector_dir
             .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
             .transpose()?;
+        // A wrinkle bending gain of 0 is none.
+        let on = |g: Option<f64>| g.filter(|&g| g != 0.0);
+        if let Some(g) = opts.coarse_wrinkle_bending {
+            crate::sim::WrinkleBending::with_gain(g)
+                .check()
+                .map_err(Error::Invalid)?;
+        }
         // After dressing: sewing is done with the full membrane.
         match (&corrector, opts.coarse_compression) {
             (Some(c), Some(f)) if c.training.compression_factor() != f => {
@@ -207,7 +215,7 @@ impl<'a> Pipeline<'a> {
             }
             (Some(c), _)
                 if opts.coarse_wrinkle_bending.is_some()
-                    && c.training.coarse_wrinkle_bending != opts.coarse_wrinkle_bending =>
+                    && on(c.training.coarse_wrinkle_bending) != on(opts.coarse_wrinkle_bending) =>
             {
                 return Err(Error::Invalid(format!(
                     "the corrector in {} was trained beside a coarse wrinkle bending gain of \
@@ -227,7 +235,7 @@ impl<'a> Pipeline<'a> {
         if let (None, Some(mu)) = (&corrector, opts.coarse_friction) {
             crate::corrector::training::set_friction(&mut coarse, mu)?;
         }
-        if let (None, Some(g)) = (&corrector, opts.coarse_wrinkle_bending) {
+        if let (None, Some(g)) = (&corrector, on(opts.coarse_wrinkle_bending)) {
             coarse
                 .sim
                 .model
