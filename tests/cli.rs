@@ -225,8 +225,20 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert_eq!(refused.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("need --drift-share"));
     assert!(!tuned.exists());
+    // So is a negative wrinkle bending gain, naming the option.
+    let refused = tune(&["--coarse-wrinkle-bending=-1"]);
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains(
+            "--coarse-wrinkle-bending: the wrinkle bending gain must be finite and not negative"
+        ),
+        "{err}"
+    );
+    assert!(!tuned.exists());
     // Every window a drift window (DAgger).
-    let out = tune(&["--drift-share", "1"]);
+    // A wrinkle bending gain of 0 is none, as the model was trained.
+    let out = tune(&["--drift-share", "1", "--coarse-wrinkle-bending", "0"]);
     assert!(
         out.status.success(),
         "{}",
@@ -234,7 +246,9 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     );
     let config = std::fs::read_to_string(tuned.join("config.json")).expect("config");
     assert!(
-        config.contains("\"latent\": 8") && config.contains("\"init_from\""),
+        config.contains("\"latent\": 8")
+            && config.contains("\"init_from\"")
+            && config.contains("\"coarse_wrinkle_bending\": null"),
         "{config}"
     );
     let log = String::from_utf8_lossy(&out.stderr);

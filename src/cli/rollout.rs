@@ -77,8 +77,8 @@ pub struct Args {
     #[arg(long)]
     coarse_friction: Option<f64>,
     /// The coarse simulator's wrinkle bending gain (extra bending stiffness where the coarse
-    /// membrane is shortened, once the cloth has settled; 0: off), for both variants, in
-    /// place of the corrector's
+    /// membrane is shortened, fading in as the cloth's mean speed falls from 6 cm/s to rest;
+    /// 0: off), for every variant, in place of the corrector's
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
     /// Roll each data set out this many more times, each from its start moved rigidly by

@@ -108,8 +108,9 @@ pub struct Args {
     coarse_friction: Option<f64>,
     /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
     /// membrane is shortened (as a fine cloth's wrinkles stiffen it), up to this multiple of
-    /// the fabric's, once the cloth's mean speed falls below 6 cm/s (0: off; default: the
-    /// corrector's, else off; a corrector trained with another is an error)
+    /// the fabric's, fading in linearly as the cloth's mean speed falls from 6 cm/s to rest
+    /// (0: off; default: the corrector's, else off; a corrector trained with another is an
+    /// error)
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
     /// Write text USD even for a .usd file.

@@ -234,8 +234,9 @@ pub struct CorrectorArgs {
     #[arg(long)]
     coarse_friction: Option<f64>,
     /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
-    /// membrane is shortened, up to this multiple of the fabric's, once the cloth has settled;
-    /// saved with the model, which then runs with it. [default: off, or the `--init` model's]
+    /// membrane is shortened, up to this multiple of the fabric's, fading in as the cloth's
+    /// mean speed falls from 6 cm/s to rest; saved with the model, which then runs with it
+    /// (0: off). [default: off, or the `--init` model's]
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
@@ -351,10 +352,11 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             a.coarse_friction
                 .or_else(|| init.as_ref().and_then(|c| c.coarse_friction)),
         )
-        .with_coarse_wrinkle_bending(
-            a.coarse_wrinkle_bending
-                .or_else(|| init.as_ref().and_then(|c| c.coarse_wrinkle_bending)),
-        )
+        .with_coarse_wrinkle_bending(match a.coarse_wrinkle_bending {
+            // 0 is none (and an `--init` model trained with a gain is then refused).
+            Some(g) => (g != 0.0).then_some(g),
+            None => init.as_ref().and_then(|c| c.coarse_wrinkle_bending),
+        })
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)
         .with_rollout_as_inference(a.rollout_as_inference.then_some(true))
@@ -363,6 +365,11 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_drift_tau_steps(a.drift_tau.filter(|&t| t != DEFAULT_DRIFT_TAU_STEPS))
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
+    if let Some(g) = a.coarse_wrinkle_bending {
+        clothsr::sim::WrinkleBending::with_gain(g)
+            .check()
+            .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?;
+    }
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
     anyhow::ensure!(
         a.drift_share != 0.0 || (a.drift_refresh.is_none() && a.drift_tau.is_none()),
