@@ -321,22 +321,21 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         soft < stiff - 0.005,
         "sim alone mean strain {stiff} % at factor 1 and {soft} % at 0.25"
     );
-    let out = clothsr()
-        .args([
-            "rollout",
-            "--frames",
-            "1",
-            "--coarse-compression",
-            "0",
-            "--model",
-        ])
-        .arg(&model)
-        .arg("--data")
-        .arg(&data)
-        .output()
-        .expect("run");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    // `clothsr rollout` with these arguments refused: its error output.
+    let rollout_refused = |args: &[&str]| -> String {
+        let out = clothsr()
+            .arg("rollout")
+            .args(args)
+            .arg("--model")
+            .arg(&model)
+            .arg("--data")
+            .arg(&data)
+            .output()
+            .expect("run");
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = rollout_refused(&["--frames", "1", "--coarse-compression", "0"]);
     assert!(err.contains("--coarse-compression 0"), "{err}");
     // Short horizons: two one-frame rollouts from the ground truth (frames 1 and 2), averaged
     // per frame after the start, beside the factor in use; the factor reaches the simulators
@@ -411,21 +410,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         ),
         "{report}"
     );
-    let out = clothsr()
-        .args([
-            "rollout",
-            "--frames",
-            "1",
-            "--coarse-wrinkle-bending=-1",
-            "--model",
-        ])
-        .arg(&model)
-        .arg("--data")
-        .arg(&data)
-        .output()
-        .expect("run");
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = rollout_refused(&["--frames", "1", "--coarse-wrinkle-bending=-1"]);
     assert!(
         err.contains("--coarse-wrinkle-bending: the wrinkle bending gain must be finite and not negative, got -1"),
         "{err}"

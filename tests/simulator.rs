@@ -555,44 +555,37 @@ fn wrinkle_bending_stiffens_shortened_hinges_of_a_settled_sheet_only() {
     let still = vec![Vector3::zeros(); n];
     let weights =
         |sim: &Simulation| -> Vec<f64> { sim.sim.model.hinges.iter().map(|h| h.weight).collect() };
+    // Every hinge's weight, as a multiple of its own.
+    let assert_ratio = |sim: &Simulation, ratio: f64| {
+        for (w, o) in weights(sim).iter().zip(&own) {
+            assert!((w / o - ratio).abs() < 1e-9, "{w} {o}");
+        }
+    };
     // Flat and at rest: no edge shortened (but for rounding), nothing added.
     let rest = sim.state.x.clone();
     sim.sim.model.update_wrinkle_bending(&rest, &still);
-    for (w, o) in weights(&sim).iter().zip(&own) {
-        assert!((w / o - 1.0).abs() < 1e-9, "{w} {o}");
-    }
-    // Shrunk by half the full strain about its centre, at rest: every hinge's five edges are
-    // shortened by 0.15 %, so each weight gains half the gain.
+    assert_ratio(&sim, 1.0);
+    // The sheet scaled by `f` about its centre.
     let c = rest.iter().sum::<Vector3<f64>>() / n as f64;
-    let shrunk: Vec<_> = rest
-        .iter()
-        .map(|x| c + (x - c) * (1.0 - 0.5 * WrinkleBending::DEFAULT_STRAIN))
-        .collect();
+    let scaled = |f: f64| -> Vec<Vector3<f64>> { rest.iter().map(|x| c + (x - c) * f).collect() };
+    // Shrunk by half the full strain, at rest: every hinge's five edges are shortened by
+    // 0.15 %, so each weight gains half the gain.
+    let shrunk = scaled(1.0 - 0.5 * WrinkleBending::DEFAULT_STRAIN);
     sim.sim.model.update_wrinkle_bending(&shrunk, &still);
-    for (w, o) in weights(&sim).iter().zip(&own) {
-        assert!((w / o - 2.0).abs() < 1e-9, "{w} {o}");
-    }
+    assert_ratio(&sim, 2.0);
     // Shrunk twice the full strain: the gain is capped at its full value.
-    let crushed: Vec<_> = rest
-        .iter()
-        .map(|x| c + (x - c) * (1.0 - 2.0 * WrinkleBending::DEFAULT_STRAIN))
-        .collect();
+    let crushed = scaled(1.0 - 2.0 * WrinkleBending::DEFAULT_STRAIN);
     sim.sim.model.update_wrinkle_bending(&crushed, &still);
-    for (w, o) in weights(&sim).iter().zip(&own) {
-        assert!((w / o - 3.0).abs() < 1e-9, "{w} {o}");
-    }
+    assert_ratio(&sim, 3.0);
     // Moving at half the settle speed: half of it; at the settle speed or faster: none.
     let half = vec![Vector3::new(0.0, -0.5 * WrinkleBending::DEFAULT_SETTLE_SPEED_M_S, 0.0); n];
     sim.sim.model.update_wrinkle_bending(&crushed, &half);
-    for (w, o) in weights(&sim).iter().zip(&own) {
-        assert!((w / o - 2.0).abs() < 1e-9, "{w} {o}");
-    }
+    assert_ratio(&sim, 2.0);
     let fast = vec![Vector3::new(0.0, -WrinkleBending::DEFAULT_SETTLE_SPEED_M_S, 0.0); n];
     sim.sim.model.update_wrinkle_bending(&crushed, &fast);
     assert_eq!(weights(&sim), own);
     // Stretched: nothing added.
-    let stretched: Vec<_> = rest.iter().map(|x| c + (x - c) * 1.01).collect();
-    sim.sim.model.update_wrinkle_bending(&stretched, &still);
+    sim.sim.model.update_wrinkle_bending(&scaled(1.01), &still);
     assert_eq!(weights(&sim), own);
     // Off again: the fabric's weights, and a step no longer changes them.
     sim.sim.model.update_wrinkle_bending(&crushed, &still);

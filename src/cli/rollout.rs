@@ -131,10 +131,8 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
         corrector.training.coarse_friction = Some(mu);
     }
     if let Some(g) = args.coarse_wrinkle_bending {
-        clothsr::sim::WrinkleBending::with_gain(g)
-            .check()
+        corrector.training.coarse_wrinkle_bending = clothsr::sim::WrinkleBending::gain_option(g)
             .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?;
-        corrector.training.coarse_wrinkle_bending = (g > 0.0).then_some(g);
     }
     Ok(corrector)
 }

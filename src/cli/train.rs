@@ -325,6 +325,12 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         );
         model = model.with_share_min((m != 0.0).then_some(m));
     }
+    let wrinkles = a
+        .coarse_wrinkle_bending
+        .map(clothsr::sim::WrinkleBending::gain_option)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?
+        .flatten();
     let compression = a
         .coarse_compression
         .or_else(|| init.as_ref().map(TrainingConfig::compression_factor))
@@ -354,7 +360,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         )
         .with_coarse_wrinkle_bending(match a.coarse_wrinkle_bending {
             // 0 is none (and an `--init` model trained with a gain is then refused).
-            Some(g) => (g != 0.0).then_some(g),
+            Some(_) => wrinkles,
             None => init.as_ref().and_then(|c| c.coarse_wrinkle_bending),
         })
         .with_init_from(a.init.clone())
@@ -365,11 +371,6 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_drift_tau_steps(a.drift_tau.filter(|&t| t != DEFAULT_DRIFT_TAU_STEPS))
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
-    if let Some(g) = a.coarse_wrinkle_bending {
-        clothsr::sim::WrinkleBending::with_gain(g)
-            .check()
-            .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?;
-    }
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
     anyhow::ensure!(
         a.drift_share != 0.0 || (a.drift_refresh.is_none() && a.drift_tau.is_none()),

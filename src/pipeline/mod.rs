@@ -173,12 +173,12 @@ impl<'a> Pipeline<'a> {
             .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
             .transpose()?;
         // A wrinkle bending gain of 0 is none.
-        let on = |g: Option<f64>| g.filter(|&g| g != 0.0);
-        if let Some(g) = opts.coarse_wrinkle_bending {
-            crate::sim::WrinkleBending::with_gain(g)
-                .check()
-                .map_err(Error::Invalid)?;
-        }
+        let wrinkles = opts
+            .coarse_wrinkle_bending
+            .map(crate::sim::WrinkleBending::gain_option)
+            .transpose()
+            .map_err(Error::Invalid)?
+            .flatten();
         // After dressing: sewing is done with the full membrane.
         match (&corrector, opts.coarse_compression) {
             (Some(c), Some(f)) if c.training.compression_factor() != f => {
@@ -215,7 +215,7 @@ impl<'a> Pipeline<'a> {
             }
             (Some(c), _)
                 if opts.coarse_wrinkle_bending.is_some()
-                    && on(c.training.coarse_wrinkle_bending) != on(opts.coarse_wrinkle_bending) =>
+                    && c.training.coarse_wrinkle_bending.filter(|&g| g != 0.0) != wrinkles =>
             {
                 return Err(Error::Invalid(format!(
                     "the corrector in {} was trained beside a coarse wrinkle bending gain of \
@@ -235,7 +235,7 @@ impl<'a> Pipeline<'a> {
         if let (None, Some(mu)) = (&corrector, opts.coarse_friction) {
             crate::corrector::training::set_friction(&mut coarse, mu)?;
         }
-        if let (None, Some(g)) = (&corrector, on(opts.coarse_wrinkle_bending)) {
+        if let (None, Some(g)) = (&corrector, wrinkles) {
             coarse
                 .sim
                 .model

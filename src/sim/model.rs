@@ -88,6 +88,12 @@ impl WrinkleBending {
         }
     }
 
+    /// A gain as the options take it: checked, and 0 as none.
+    pub fn gain_option(gain: f64) -> std::result::Result<Option<f64>, String> {
+        Self::with_gain(gain).check()?;
+        Ok((gain != 0.0).then_some(gain))
+    }
+
     /// Why these settings are unusable, if they are.
     pub fn check(&self) -> std::result::Result<(), String> {
         if !(self.gain >= 0.0 && self.gain.is_finite()) {
