@@ -636,6 +636,28 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let rec = clothsr::viz::read_rrd(&eval_rrd).expect("a valid recording");
     assert!(rec.entities.contains("world/prediction"), "{rec:?}");
     assert!(rec.entities.contains("world/upsampled"), "{rec:?}");
+    // The data set as the ground truth and its fork as a baseline: the fork's distance from
+    // it, the predictability floor, is about the 1 mm it was moved by at the end of frame 1.
+    let table = run(vec![
+        "eval".into(),
+        "--gt".into(),
+        data.clone().into(),
+        "--pred".into(),
+        usd.clone().into(),
+        "--baseline".into(),
+        format!("floor={}", forked.display()).into(),
+    ]);
+    let floor_mm: f64 = table
+        .lines()
+        .find_map(|l| l.strip_prefix("floor "))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no floor row in {table}"));
+    assert!(
+        floor_mm > 0.1 && floor_mm < 5.0,
+        "floor {floor_mm} mm: {table}"
+    );
+    assert!(table.contains("prediction / floor"), "{table}");
     // A prediction on another mesh is refused, naming the file.
     let out = clothsr()
         .args(["eval", "--gt"])

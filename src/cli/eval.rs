@@ -19,7 +19,10 @@ pub struct Args {
     #[arg(long)]
     pred: PathBuf,
     /// Baselines on the same fine mesh (e.g. `clothsr run --upsampled-out`, or a run without
-    /// the corrector); NAME=FILE sets the label, else the file's name.
+    /// the corrector); NAME=FILE sets the label, else the file's name. A `clothsr dataset`
+    /// directory is read as its fine frames, like `--gt`: with a `clothsr fork` of the ground
+    /// truth's data set (its garment moved a fraction of a millimetre), this baseline is the
+    /// scene's predictability floor, which no prediction can be expected to beat.
     #[arg(long)]
     baseline: Vec<String>,
     /// Per-frame metrics of every series as CSV.
@@ -58,12 +61,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::ensure!(h.is_finite() && h > 0.0, "--heat-max-mm must be positive");
     }
     let pred_anim = Animation::read_usd(&args.pred)?;
-    let gt = if args.gt.is_dir() {
-        let start = pred_anim.time_codes.first().copied().unwrap_or(0.0);
-        Animation::read_dataset(&args.gt, start)?
-    } else {
-        Animation::read_usd(&args.gt)?
+    // A data set's frames 1.. follow the prediction's first time code.
+    let start = pred_anim.time_codes.first().copied().unwrap_or(0.0);
+    let read = |path: &std::path::Path| {
+        if path.is_dir() {
+            Animation::read_dataset(path, start)
+        } else {
+            Animation::read_usd(path)
+        }
     };
+    let gt = read(&args.gt)?;
     let mut inputs = vec![label_and_path(&format!(
         "prediction={}",
         args.pred.display()
@@ -75,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (name, path) in &inputs {
         let a = match pred_anim.take() {
             Some(a) => a,
-            None => Animation::read_usd(path)?,
+            None => read(path)?,
         };
         let m = compare(&gt, &a, path)?;
         series.push((name.clone(), m));
