@@ -658,6 +658,28 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "floor {floor_mm} mm: {table}"
     );
     assert!(table.contains("prediction / floor"), "{table}");
+    // Without the corrector `run` takes the models folder's coarse.json; a bad one is refused
+    // before anything is written, naming the file.
+    let calibration = dir.path().join("models").join("coarse.json");
+    std::fs::write(&calibration, r#"{"compression": 2}"#).expect("write");
+    let refused = dir.path().join("refused.usdc");
+    let out = clothsr()
+        .arg("run")
+        .arg(&sample)
+        .arg("--models")
+        .arg(dir.path().join("models"))
+        .args(["--coarse-mm", "80", "--frames", "1", "--no-corrector", "-o"])
+        .arg(&refused)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("coarse.json") && err.contains("compression must be in (0, 1], got 2"),
+        "{err}"
+    );
+    assert!(!refused.exists());
+    std::fs::remove_file(&calibration).expect("remove");
     // A prediction on another mesh is refused, naming the file.
     let out = clothsr()
         .args(["eval", "--gt"])

@@ -14,7 +14,9 @@ use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
 use clothsr::msr::model::IsrConfig;
 use clothsr::msr::training::IsrTrainingConfig;
 use clothsr::msr::Isr;
-use clothsr::pipeline::{resume_path, run_to_files, Options, Outputs, Pipeline, Preview, Report};
+use clothsr::pipeline::{
+    resume_path, run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Report,
+};
 use clothsr::scene::Scene;
 use clothsr::viz::{paths, read_rrd, Recorder};
 use nalgebra::Vector3;
@@ -368,7 +370,18 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             };
             assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
         }
-        let mut p = Pipeline::new(&scene, &isr, corrector, Options::default()).expect("set up");
+        // Without a corrector, the folder's own coarse model (the table's: c = 0.03).
+        let cal = CoarseCalibration::load(&models).expect("a valid coarse.json, if any");
+        let opts = match (corrector, cal) {
+            (None, Some(cal)) => cal.fill(Options::default()),
+            _ => Options::default(),
+        };
+        let mut p = Pipeline::new(&scene, &isr, corrector, opts).expect("set up");
+        if !ships_corrector {
+            assert_eq!(cal.and_then(|c| c.compression), Some(0.03));
+            let k = &p.coarse.sim.model.membrane_k;
+            assert!(k.iter().all(|k| k.compression == 0.03), "{:?}", k.first());
+        }
         assert_eq!(p.has_corrector(), ships_corrector);
         assert_eq!(p.fine.num_vertices(), 44_923, "{}", models.display());
         let first: Vec<Vector3<f64>> = p.super_resolve().expect("frame 0").to_vec();
@@ -424,4 +437,65 @@ fn shipped_skirt_models_run_a_frame_on_the_walking_avatar() {
         .map(|(a, b)| (a - b).norm())
         .fold(0.0, f64::max);
     assert!(moved > 1e-5 && moved < 0.05, "{moved}");
+}
+
+/// A models folder's `coarse.json`: absent is none; fields fill only unset options; a bad
+/// value or an unknown field is refused, naming the file.
+#[test]
+fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
+    let dir = tempfile::tempdir().expect("tmp");
+    assert_eq!(CoarseCalibration::load(dir.path()).expect("absent"), None);
+    let file = dir.path().join(CoarseCalibration::FILE);
+    std::fs::write(
+        &file,
+        r#"{"compression": 0.01, "friction": 2.5, "wrinkle_bending": 1}"#,
+    )
+    .expect("write");
+    let cal = CoarseCalibration::load(dir.path())
+        .expect("valid")
+        .expect("present");
+    assert_eq!(
+        cal.to_string(),
+        "compression 0.01, friction 2.5, wrinkle bending 1"
+    );
+    let given = Options {
+        coarse_friction: Some(0.3),
+        ..Options::default()
+    };
+    let filled = cal.fill(given);
+    assert_eq!(filled.coarse_compression, Some(0.01));
+    assert_eq!(filled.coarse_compression_knee, None);
+    assert_eq!(filled.coarse_friction, Some(0.3), "an option given wins");
+    assert_eq!(filled.coarse_wrinkle_bending, Some(1.0));
+    assert_eq!(filled.coarse_edge_m, given.coarse_edge_m);
+    for (text, expected) in [
+        (
+            r#"{"compression": 2}"#,
+            "compression must be in (0, 1], got 2",
+        ),
+        (
+            r#"{"compression_knee": 0}"#,
+            "compression_knee must be a shortening > 0",
+        ),
+        (
+            r#"{"friction": -1}"#,
+            "friction: the friction coefficient must be finite",
+        ),
+        (
+            r#"{"wrinkle_bending": -1}"#,
+            "wrinkle_bending: the wrinkle bending gain",
+        ),
+        (r#"{"compresion": 0.1}"#, "unknown field `compresion`"),
+        ("0.03", "not a coarse calibration"),
+    ] {
+        std::fs::write(&file, text).expect("write");
+        let err = CoarseCalibration::load(dir.path())
+            .err()
+            .unwrap_or_else(|| panic!("{text} accepted"))
+            .to_string();
+        assert!(
+            err.contains(expected) && err.contains("coarse.json"),
+            "{text}: {err}"
+        );
+    }
 }

@@ -10,7 +10,9 @@ use anyhow::Context;
 use clothsr::data::Variation;
 use clothsr::eval::Animation;
 use clothsr::msr::Isr;
-use clothsr::pipeline::{run_to_files, Options, Outputs, Pipeline, Preview, Progress};
+use clothsr::pipeline::{
+    run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Progress,
+};
 use clothsr::scene::Scene;
 use clothsr::viz::Recorder;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -29,8 +31,9 @@ pub struct Args {
     /// Output folder for several scenes: DIR/<scene name>.usdc (and .rrd with --rrd).
     #[arg(long)]
     out_dir: Option<PathBuf>,
-    /// Model directory: `isr/` (required, `clothsr train isr`) and `corrector/` (used when
-    /// present, `clothsr train corrector`).
+    /// Model directory: `isr/` (required, `clothsr train isr`), `corrector/` (used when
+    /// present, `clothsr train corrector`) and `coarse.json` (without a corrector: the coarse
+    /// model's defaults, e.g. `{"compression": 0.03}`; the options below override it).
     #[arg(long)]
     models: PathBuf,
     /// Save a Rerun recording (colliders, coarse M_c and M_int, fine meshes, stage timings on
@@ -221,7 +224,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let corrector_dir = args.models.join("corrector");
     let corrector = (!args.no_corrector && corrector_dir.join("config.json").exists())
         .then_some(corrector_dir.as_path());
-    let opts = Options {
+    let given = Options {
         coarse_edge_m: args.coarse_mm * 1e-3,
         fast: !args.converged,
         self_collision: args.self_collision,
@@ -231,6 +234,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coarse_compression_knee: args.coarse_compression_knee,
         coarse_friction: args.coarse_friction,
         coarse_wrinkle_bending: args.coarse_wrinkle_bending,
+    };
+    // Without a corrector, the models folder's own coarse calibration, under the options.
+    let opts = match corrector {
+        Some(_) => given,
+        None => match CoarseCalibration::load(&args.models)? {
+            Some(cal) => {
+                tracing::info!(
+                    "coarse model from {}: {cal}",
+                    args.models.join(CoarseCalibration::FILE).display()
+                );
+                cal.fill(given)
+            }
+            None => given,
+        },
     };
     let multi = MultiProgress::new();
     let overall = (jobs.len() > 1).then(|| {

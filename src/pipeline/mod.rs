@@ -74,6 +74,103 @@ impl Default for Options {
     }
 }
 
+/// A models folder's coarse model for runs without a corrector (`DIR/coarse.json`): the
+/// calibration the folder's figures were measured with, since the best coarse model differs
+/// from scene to scene (the three balls' grip and wrinkle bending make the table worse). A
+/// corrector carries its own coarse model, so with one this file is not read. Each field is
+/// optional; `clothsr run`'s options override it.
+///
+/// `{"compression": 0.03}` is the table's: [`Options::coarse_compression`]; likewise
+/// `compression_knee`, `friction` and `wrinkle_bending` (0: off).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoarseCalibration {
+    /// [`Options::coarse_compression`], in (0, 1].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compression: Option<f64>,
+    /// [`Options::coarse_compression_knee`], a shortening > 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compression_knee: Option<f64>,
+    /// [`Options::coarse_friction`], ≥ 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction: Option<f64>,
+    /// [`Options::coarse_wrinkle_bending`], ≥ 0 (0: off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wrinkle_bending: Option<f64>,
+}
+
+impl CoarseCalibration {
+    /// Its file name in a models folder.
+    pub const FILE: &'static str = "coarse.json";
+
+    /// The calibration in `models/coarse.json`, checked; `None` where there is no such file.
+    pub fn load(models: &std::path::Path) -> Result<Option<CoarseCalibration>> {
+        let path = models.join(Self::FILE);
+        if !path.exists() {
+            return Ok(None);
+        }
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let cal: CoarseCalibration = serde_json::from_str(&text)
+            .map_err(|e| Error::bad_input(&path, format!("not a coarse calibration: {e}")))?;
+        cal.check().map_err(|m| Error::bad_input(&path, m))?;
+        Ok(Some(cal))
+    }
+
+    /// Why these settings are unusable, if they are.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if let Some(c) = self.compression {
+            if !(c > 0.0 && c <= 1.0) {
+                return Err(format!("compression must be in (0, 1], got {c}"));
+            }
+        }
+        if let Some(k) = self.compression_knee {
+            if !(k > 0.0 && k.is_finite()) {
+                return Err(format!(
+                    "compression_knee must be a shortening > 0, got {k}"
+                ));
+            }
+        }
+        if let Some(mu) = self.friction {
+            crate::corrector::training::check_friction(mu).map_err(|m| format!("friction: {m}"))?;
+        }
+        if let Some(g) = self.wrinkle_bending {
+            crate::sim::WrinkleBending::gain_option(g)
+                .map_err(|m| format!("wrinkle_bending: {m}"))?;
+        }
+        Ok(())
+    }
+
+    /// `opts` with each of its coarse settings that is unset (`None`) taken from here.
+    pub fn fill(&self, opts: Options) -> Options {
+        Options {
+            coarse_compression: opts.coarse_compression.or(self.compression),
+            coarse_compression_knee: opts.coarse_compression_knee.or(self.compression_knee),
+            coarse_friction: opts.coarse_friction.or(self.friction),
+            coarse_wrinkle_bending: opts.coarse_wrinkle_bending.or(self.wrinkle_bending),
+            ..opts
+        }
+    }
+}
+
+impl std::fmt::Display for CoarseCalibration {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts: Vec<String> = [
+            ("compression", self.compression),
+            ("compression knee", self.compression_knee),
+            ("friction", self.friction),
+            ("wrinkle bending", self.wrinkle_bending),
+        ]
+        .iter()
+        .filter_map(|(name, v)| v.map(|v| format!("{name} {v}")))
+        .collect();
+        if parts.is_empty() {
+            f.write_str("the simulator's")
+        } else {
+            f.write_str(&parts.join(", "))
+        }
+    }
+}
+
 /// Seconds spent in each stage of the last frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct FrameTimes {

@@ -30,6 +30,10 @@ mkdir -p "$OUT"
 # 60) slid the sheet off the table in the interleaved rollout (README.md), so none ships and
 # `clothsr run` with this folder runs the simulator alone.
 
+# The coarse model `clothsr run` uses with this folder: the compression-soft membrane (c = 0.03,
+# README.md, session 31); the three balls' friction and wrinkle bending make the table worse.
+printf '{\n  "compression": 0.03\n}\n' > "$OUT/coarse.json"
+
 for d in train_a train_b test; do
   cp "$DATA/$d/manifest.json" "$OUT/data_$d.manifest.json"
 done
