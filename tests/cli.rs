@@ -658,6 +658,15 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "floor {floor_mm} mm: {table}"
     );
     assert!(table.contains("prediction / floor"), "{table}");
+    // Over the prediction's frames only (the fork has one more).
+    let frames = |row: &str| {
+        table
+            .lines()
+            .find_map(|l| l.strip_prefix(row))
+            .and_then(|l| l.split_whitespace().next())
+            .and_then(|v| v.parse::<usize>().ok())
+    };
+    assert_eq!(frames("floor "), frames("prediction "), "{table}");
     // Without the corrector `run` takes the models folder's coarse.json; a bad one is refused
     // before anything is written, naming the file.
     let calibration = dir.path().join("models").join("coarse.json");
@@ -680,6 +689,20 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     );
     assert!(!refused.exists());
     std::fs::remove_file(&calibration).expect("remove");
+    // A negative knee is refused at once, naming the option (0 is none).
+    let out = clothsr()
+        .arg("run")
+        .arg(&sample)
+        .arg("--models")
+        .arg(dir.path().join("models"))
+        .args(["--frames", "1", "--coarse-compression-knee=-1", "-o"])
+        .arg(&refused)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("--coarse-compression-knee must be"), "{err}");
+    assert!(!refused.exists());
     // A prediction on another mesh is refused, naming the file.
     let out = clothsr()
         .args(["eval", "--gt"])

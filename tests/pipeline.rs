@@ -370,12 +370,10 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             };
             assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
         }
-        // Without a corrector, the folder's own coarse model (the table's: c = 0.03).
-        let cal = CoarseCalibration::load(&models).expect("a valid coarse.json, if any");
-        let opts = match (corrector, cal) {
-            (None, Some(cal)) => cal.fill(Options::default()),
-            _ => Options::default(),
-        };
+        // Without a corrector, the folder's own coarse model (the table's: c = 0.03), as
+        // `clothsr run` and `clothsr bench` take it.
+        let (opts, cal) = CoarseCalibration::for_run(&models, corrector, Options::default())
+            .expect("a valid coarse.json, if any");
         let mut p = Pipeline::new(&scene, &isr, corrector, opts).expect("set up");
         if !ships_corrector {
             assert_eq!(cal.and_then(|c| c.compression), Some(0.03));
@@ -468,13 +466,25 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
     assert_eq!(filled.coarse_friction, Some(0.3), "an option given wins");
     assert_eq!(filled.coarse_wrinkle_bending, Some(1.0));
     assert_eq!(filled.coarse_edge_m, given.coarse_edge_m);
+    // As a run takes it: filled without a corrector, untouched beside one.
+    let (run_opts, used) = CoarseCalibration::for_run(dir.path(), None, given).expect("run");
+    assert_eq!((run_opts, used), (filled, Some(cal)));
+    let (run_opts, used) =
+        CoarseCalibration::for_run(dir.path(), Some(dir.path()), given).expect("run");
+    assert_eq!((run_opts, used), (given, None));
+    // A knee of 0 is none, in the file as in the options.
+    std::fs::write(&file, r#"{"compression": 0.03, "compression_knee": 0}"#).expect("write");
+    let cal = CoarseCalibration::load(dir.path())
+        .expect("valid")
+        .expect("present");
+    assert_eq!(cal.compression_knee, Some(0.0));
     for (text, expected) in [
         (
             r#"{"compression": 2}"#,
             "compression must be in (0, 1], got 2",
         ),
         (
-            r#"{"compression_knee": 0}"#,
+            r#"{"compression_knee": -1}"#,
             "compression_knee must be a shortening > 0",
         ),
         (

@@ -300,14 +300,15 @@ fn pipeline_row(
     isr: &clothsr::msr::Isr,
     scene_path: &Path,
 ) -> anyhow::Result<TableRow> {
-    use clothsr::pipeline::{Options, Pipeline};
+    use clothsr::pipeline::{CoarseCalibration, Options, Pipeline};
     let scene = Scene::load(scene_path, &Fabric::default())?;
     let corrector_dir = models.join("corrector");
     let corrector = corrector_dir
         .join("config.json")
         .exists()
         .then_some(corrector_dir.as_path());
-    let opts = Options::default();
+    // The coarse model `clothsr run` would use with these models.
+    let (opts, _) = CoarseCalibration::for_run(models, corrector, Options::default())?;
     let mut p = Pipeline::new(&scene, isr, corrector, opts)?;
     p.super_resolve()?;
     let steps = p.coarse.steps_per_frame;

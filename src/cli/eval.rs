@@ -22,7 +22,8 @@ pub struct Args {
     /// the corrector); NAME=FILE sets the label, else the file's name. A `clothsr dataset`
     /// directory is read as its fine frames, like `--gt`: with a `clothsr fork` of the ground
     /// truth's data set (its garment moved a fraction of a millimetre), this baseline is the
-    /// scene's predictability floor, which no prediction can be expected to beat.
+    /// scene's predictability floor, which no prediction can be expected to beat (its frames
+    /// up to the fork count as zero). Every baseline is measured over the prediction's frames.
     #[arg(long)]
     baseline: Vec<String>,
     /// Per-frame metrics of every series as CSV.
@@ -84,7 +85,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Some(a) => a,
             None => read(path)?,
         };
-        let m = compare(&gt, &a, path)?;
+        let mut m = compare(&gt, &a, path)?;
+        // A baseline counts over the prediction's frames only, so that the ratios compare
+        // like with like (a fork's frames before it was moved count as zero there too).
+        if let Some((_, pred)) = series.first() {
+            m.retain(|f| {
+                pred.iter()
+                    .any(|p| (p.time_code - f.time_code).abs() < 1e-6)
+            });
+        }
         series.push((name.clone(), m));
         anims.push(a);
     }

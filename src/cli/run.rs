@@ -94,26 +94,26 @@ pub struct Args {
     self_collision: bool,
     /// The coarse membrane's stiffness under compression, as a factor (0, 1] of its stretch
     /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
-    /// in wrinkles (default: the corrector's, else 1; a corrector trained with another is an
-    /// error).
+    /// in wrinkles (default: the corrector's, else the models folder's `coarse.json`'s, else 1;
+    /// a corrector trained with another is an error).
     #[arg(long)]
     coarse_compression: Option<f64>,
     /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
-    /// membrane is stiff again, as the fine cloth's wrinkles pack tight
-    /// (default: the corrector's, else none).
+    /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none; default: the
+    /// corrector's, else `coarse.json`'s, else none).
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
     /// The coarse simulator's Coulomb friction coefficient against bodies (on the three balls
     /// the coarse sheet comes closest to the fine one at several times the fine cloth's;
-    /// default: the corrector's, else the simulator's 0.3; a corrector trained with another
-    /// is an error)
+    /// default: the corrector's, else `coarse.json`'s, else the simulator's 0.3; a corrector
+    /// trained with another is an error)
     #[arg(long)]
     coarse_friction: Option<f64>,
     /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
     /// membrane is shortened (as a fine cloth's wrinkles stiffen it), up to this multiple of
     /// the fabric's, fading in linearly as the cloth's mean speed falls from 6 cm/s to rest
-    /// (0: off; default: the corrector's, else off; a corrector trained with another is an
-    /// error)
+    /// (0: off; default: the corrector's, else `coarse.json`'s, else off; a corrector trained
+    /// with another is an error)
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
     /// Write text USD even for a .usd file.
@@ -201,6 +201,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.heat_max_mm.is_finite() && args.heat_max_mm > 0.0,
         "--heat-max-mm must be positive"
     );
+    if let Some(s) = args.coarse_compression_knee {
+        anyhow::ensure!(
+            s >= 0.0 && s.is_finite(),
+            "--coarse-compression-knee must be a shortening > 0 (0: none), got {s}"
+        );
+    }
     anyhow::ensure!(
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
@@ -236,19 +242,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coarse_wrinkle_bending: args.coarse_wrinkle_bending,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
-    let opts = match corrector {
-        Some(_) => given,
-        None => match CoarseCalibration::load(&args.models)? {
-            Some(cal) => {
-                tracing::info!(
-                    "coarse model from {}: {cal}",
-                    args.models.join(CoarseCalibration::FILE).display()
-                );
-                cal.fill(given)
-            }
-            None => given,
-        },
-    };
+    let (opts, cal) = CoarseCalibration::for_run(&args.models, corrector, given)?;
+    if cal.is_some() {
+        tracing::info!(
+            "coarse model: {} ({} under the options given)",
+            CoarseCalibration::of(&opts),
+            args.models.join(CoarseCalibration::FILE).display()
+        );
+    }
     let multi = MultiProgress::new();
     let overall = (jobs.len() > 1).then(|| {
         let b = multi.add(ProgressBar::new(jobs.len() as u64));

@@ -46,8 +46,8 @@ pub struct Options {
     /// factor is an error.
     pub coarse_compression: Option<f64>,
     /// The shortening beyond which the compression-soft coarse membrane is stiff again
-    /// (`None`: the corrector's, else soft however short). A corrector trained with another
-    /// is an error.
+    /// (0: none; `None`: the corrector's, else soft however short). A corrector trained with
+    /// another is an error.
     pub coarse_compression_knee: Option<f64>,
     /// The coarse simulator's Coulomb friction coefficient against bodies (`None`: the
     /// corrector's, else the simulator's). A corrector trained with another is an error.
@@ -77,8 +77,9 @@ impl Default for Options {
 /// A models folder's coarse model for runs without a corrector (`DIR/coarse.json`): the
 /// calibration the folder's figures were measured with, since the best coarse model differs
 /// from scene to scene (the three balls' grip and wrinkle bending make the table worse). A
-/// corrector carries its own coarse model, so with one this file is not read. Each field is
-/// optional; `clothsr run`'s options override it.
+/// corrector carries its own coarse model, so this file is read only when none runs (the
+/// folder has none, or `clothsr run --no-corrector`). Each field is optional; `clothsr run`'s
+/// options override it.
 ///
 /// `{"compression": 0.03}` is the table's: [`Options::coarse_compression`]; likewise
 /// `compression_knee`, `friction` and `wrinkle_bending` (0: off).
@@ -88,7 +89,7 @@ pub struct CoarseCalibration {
     /// [`Options::coarse_compression`], in (0, 1].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compression: Option<f64>,
-    /// [`Options::coarse_compression_knee`], a shortening > 0.
+    /// [`Options::coarse_compression_knee`], a shortening > 0 (0: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compression_knee: Option<f64>,
     /// [`Options::coarse_friction`], ≥ 0.
@@ -124,9 +125,9 @@ impl CoarseCalibration {
             }
         }
         if let Some(k) = self.compression_knee {
-            if !(k > 0.0 && k.is_finite()) {
+            if !(k >= 0.0 && k.is_finite()) {
                 return Err(format!(
-                    "compression_knee must be a shortening > 0, got {k}"
+                    "compression_knee must be a shortening > 0 (0: none), got {k}"
                 ));
             }
         }
@@ -138,6 +139,33 @@ impl CoarseCalibration {
                 .map_err(|m| format!("wrinkle_bending: {m}"))?;
         }
         Ok(())
+    }
+
+    /// The options a run with `models` uses: with a corrector (`corrector`: its directory)
+    /// `given` as it is, else `given` filled from `models/coarse.json` where there is one,
+    /// which is returned too.
+    pub fn for_run(
+        models: &std::path::Path,
+        corrector: Option<&std::path::Path>,
+        given: Options,
+    ) -> Result<(Options, Option<CoarseCalibration>)> {
+        if corrector.is_some() {
+            return Ok((given, None));
+        }
+        Ok(match Self::load(models)? {
+            Some(cal) => (cal.fill(given), Some(cal)),
+            None => (given, None),
+        })
+    }
+
+    /// The coarse settings of `opts`.
+    pub fn of(opts: &Options) -> CoarseCalibration {
+        CoarseCalibration {
+            compression: opts.coarse_compression,
+            compression_knee: opts.coarse_compression_knee,
+            friction: opts.coarse_friction,
+            wrinkle_bending: opts.coarse_wrinkle_bending,
+        }
     }
 
     /// `opts` with each of its coarse settings that is unset (`None`) taken from here.
@@ -276,6 +304,8 @@ impl<'a> Pipeline<'a> {
             .transpose()
             .map_err(Error::Invalid)?
             .flatten();
+        // A compression knee of 0 is none.
+        let knee = opts.coarse_compression_knee.filter(|&s| s != 0.0);
         // After dressing: sewing is done with the full membrane.
         match (&corrector, opts.coarse_compression) {
             (Some(c), Some(f)) if c.training.compression_factor() != f => {
@@ -288,7 +318,7 @@ impl<'a> Pipeline<'a> {
             }
             (Some(c), _)
                 if opts.coarse_compression_knee.is_some()
-                    && c.training.coarse_compression_knee != opts.coarse_compression_knee =>
+                    && c.training.coarse_compression_knee != knee =>
             {
                 return Err(Error::Invalid(format!(
                     "the corrector in {} was trained beside a coarse membrane compression \
@@ -323,10 +353,10 @@ impl<'a> Pipeline<'a> {
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
-            (None, f) if f.is_some() || opts.coarse_compression_knee.is_some() => coarse
+            (None, f) if f.is_some() || knee.is_some() => coarse
                 .sim
                 .model
-                .set_membrane_compression(f.unwrap_or(1.0), opts.coarse_compression_knee)?,
+                .set_membrane_compression(f.unwrap_or(1.0), knee)?,
             (None, _) => {}
         }
         if let (None, Some(mu)) = (&corrector, opts.coarse_friction) {
