@@ -385,31 +385,29 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         soft[1],
         stiff[1]
     );
-    // The friction in use is reported beside the membrane.
-    let report = rollout(vec![
-        "--frames".into(),
-        "1".into(),
-        "--coarse-friction".into(),
-        "0.6".into(),
-    ]);
-    assert!(
-        report.contains("coarse membrane compression 1, friction 0.6 (all three variants)"),
-        "{report}"
-    );
-    // So is the wrinkle bending gain, when on; a negative one is refused, naming the option.
-    let report = rollout(vec![
-        "--frames".into(),
-        "1".into(),
-        "--coarse-wrinkle-bending".into(),
-        "1.5".into(),
-    ]);
-    assert!(
-        report.contains(
-            "coarse membrane compression 1, friction the simulator's, wrinkle bending 1.5 (all \
-             three variants)"
+    // The friction in use is reported beside the membrane, and so is the wrinkle bending
+    // gain, when on; a negative gain is refused, naming the option.
+    for (option, value, setup) in [
+        (
+            "--coarse-friction",
+            "0.6",
+            "coarse membrane compression 1, friction 0.6 (all three variants)",
         ),
-        "{report}"
-    );
+        (
+            "--coarse-wrinkle-bending",
+            "1.5",
+            "coarse membrane compression 1, friction the simulator's, wrinkle bending 1.5 (all \
+             three variants)",
+        ),
+    ] {
+        let report = rollout(vec![
+            "--frames".into(),
+            "1".into(),
+            option.into(),
+            value.into(),
+        ]);
+        assert!(report.contains(setup), "{report}");
+    }
     let err = rollout_refused(&["--frames", "1", "--coarse-wrinkle-bending=-1"]);
     assert!(
         err.contains("--coarse-wrinkle-bending: the wrinkle bending gain must be finite and not negative, got -1"),
@@ -647,62 +645,56 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "--baseline".into(),
         format!("floor={}", forked.display()).into(),
     ]);
-    let floor_mm: f64 = table
-        .lines()
-        .find_map(|l| l.strip_prefix("floor "))
-        .and_then(|l| l.split_whitespace().nth(1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no floor row in {table}"));
+    // Column `k` (0: frames, 1: mean mm) of the table's row for a series.
+    let cell = |row: &str, k: usize| -> f64 {
+        table
+            .lines()
+            .find_map(|l| l.strip_prefix(row))
+            .and_then(|l| l.split_whitespace().nth(k))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no {row}row in {table}"))
+    };
+    let floor_mm = cell("floor ", 1);
     assert!(
         floor_mm > 0.1 && floor_mm < 5.0,
         "floor {floor_mm} mm: {table}"
     );
     assert!(table.contains("prediction / floor"), "{table}");
     // Over the prediction's frames only (the fork has one more).
-    let frames = |row: &str| {
-        table
-            .lines()
-            .find_map(|l| l.strip_prefix(row))
-            .and_then(|l| l.split_whitespace().next())
-            .and_then(|v| v.parse::<usize>().ok())
-    };
-    assert_eq!(frames("floor "), frames("prediction "), "{table}");
+    assert_eq!(cell("floor ", 0), cell("prediction ", 0), "{table}");
     // Without the corrector `run` takes the models folder's coarse.json; a bad one is refused
     // before anything is written, naming the file.
     let calibration = dir.path().join("models").join("coarse.json");
     std::fs::write(&calibration, r#"{"compression": 2}"#).expect("write");
+    // `clothsr run` on the sample with these arguments, refused before writing: its exit
+    // code and error output.
     let refused = dir.path().join("refused.usdc");
-    let out = clothsr()
-        .arg("run")
-        .arg(&sample)
-        .arg("--models")
-        .arg(dir.path().join("models"))
-        .args(["--coarse-mm", "80", "--frames", "1", "--no-corrector", "-o"])
-        .arg(&refused)
-        .output()
-        .expect("run");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{err}");
+    let run_refused = |args: &[&str]| -> (Option<i32>, String) {
+        let out = clothsr()
+            .arg("run")
+            .arg(&sample)
+            .arg("--models")
+            .arg(dir.path().join("models"))
+            .args(args)
+            .arg("-o")
+            .arg(&refused)
+            .output()
+            .expect("run");
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(!out.status.success(), "{err}");
+        assert!(!refused.exists());
+        (out.status.code(), err)
+    };
+    let (code, err) = run_refused(&["--coarse-mm", "80", "--frames", "1", "--no-corrector"]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("coarse.json") && err.contains("compression must be in (0, 1], got 2"),
         "{err}"
     );
-    assert!(!refused.exists());
     std::fs::remove_file(&calibration).expect("remove");
     // A negative knee is refused at once, naming the option (0 is none).
-    let out = clothsr()
-        .arg("run")
-        .arg(&sample)
-        .arg("--models")
-        .arg(dir.path().join("models"))
-        .args(["--frames", "1", "--coarse-compression-knee=-1", "-o"])
-        .arg(&refused)
-        .output()
-        .expect("run");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let (_, err) = run_refused(&["--frames", "1", "--coarse-compression-knee=-1"]);
     assert!(err.contains("--coarse-compression-knee must be"), "{err}");
-    assert!(!refused.exists());
     // A prediction on another mesh is refused, naming the file.
     let out = clothsr()
         .args(["eval", "--gt"])
