@@ -171,6 +171,82 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     ]);
     let manifest = std::fs::read_to_string(data.join("manifest.json")).expect("manifest");
     assert!(manifest.contains("-0.005") && manifest.contains("\"fast\": true"));
+    // calibrate: two membranes and two grips (the simulator's own among them) run alone from
+    // the data set's M_int; the table lists all four best first, the CSV each, and the best
+    // is written as a models folder's coarse.json.
+    let (cal_json, cal_csv) = (
+        dir.path().join("cal_models/coarse.json"),
+        dir.path().join("cal.csv"),
+    );
+    let calibrate = |extra: &[&str]| {
+        let mut args: Vec<OsString> = vec![
+            "calibrate".into(),
+            "--data".into(),
+            data.clone().into(),
+            "-o".into(),
+            cal_json.clone().into(),
+            "--csv".into(),
+            cal_csv.clone().into(),
+            "--wrinkle-bending".into(),
+            "0".into(),
+        ];
+        args.extend(extra.iter().map(OsString::from));
+        clothsr().args(&args).output().expect("run")
+    };
+    let bad = calibrate(&["--compression", "1,1.5"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("compression"),
+        "{err}"
+    );
+    let bad = calibrate(&["--friction", "scene,grippy"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("grippy"), "{err}");
+    assert!(!cal_json.exists() && !cal_csv.exists());
+    let out = calibrate(&[
+        "--compression",
+        "1,0.05",
+        "--friction",
+        "scene,2",
+        "--frames",
+        "2",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows: Vec<Vec<f64>> = std::fs::read_to_string(&cal_csv)
+        .expect("calibration csv")
+        .lines()
+        .skip(1)
+        .map(|l| {
+            l.split(',')
+                .map(|c| {
+                    if c == "scene" {
+                        -1.0
+                    } else {
+                        c.parse().expect("number")
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    assert_eq!(rows.len(), 4, "{stdout}");
+    // Best first; the simulator's own model is 1.00× itself.
+    assert!(rows.windows(2).all(|w| w[0][4] <= w[1][4]), "{rows:?}");
+    let own = rows
+        .iter()
+        .find(|r| r[0] == 1.0 && r[2] == -1.0)
+        .expect("own");
+    assert!((own[5] - 1.0).abs() < 1e-12 && own[4] > 0.0, "{own:?}");
+    let chosen: clothsr::pipeline::CoarseCalibration =
+        serde_json::from_str(&std::fs::read_to_string(&cal_json).expect("coarse.json"))
+            .expect("a calibration");
+    assert_eq!(chosen.compression.unwrap_or(1.0), rows[0][0]);
+    assert_eq!(chosen.friction.unwrap_or(-1.0), rows[0][2]);
+    assert!(stdout.contains("chosen:"), "{stdout}");
     run(vec![
         "train".into(),
         "corrector".into(),

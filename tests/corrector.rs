@@ -19,6 +19,8 @@ use clothsr::corrector::training::{
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
 use clothsr::data::{coarse_simulation, flat32, generate, Options, Variation};
 use clothsr::garment::Fabric;
+use clothsr::pipeline::calibrate::{score, sim_alone_errors, CalibrationSet};
+use clothsr::pipeline::CoarseCalibration;
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::Scene;
 use nalgebra::Vector3;
@@ -645,6 +647,45 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         .expect("not diverged");
     assert_eq!(only, e.interleaved_mm);
     assert!(interleaved_errors(&seq, &mut fresh, t0, &corrector, 4).is_err());
+    // `clothsr calibrate` scores a coarse model by the simulation alone: the simulator's own
+    // model gives evaluate's sim-alone column bit for bit; a compression-soft membrane, a
+    // grip or wrinkle bending set through `CoarseCalibration::apply` changes it.
+    let mut fresh = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    let own = sim_alone_errors(&seq, &mut fresh, t0, 3, Vector3::zeros()).expect("sim alone");
+    assert_eq!(own, e.sim_alone_mm);
+    let set = CalibrationSet::load(scene(), &dir, Some(3)).expect("calibration set");
+    let soft = CoarseCalibration {
+        compression: Some(0.05),
+        friction: Some(2.0),
+        wrinkle_bending: Some(1.0),
+        ..CoarseCalibration::default()
+    };
+    let runs = std::sync::atomic::AtomicUsize::new(0);
+    let shift = [Vector3::new(1e-4, 0.0, 0.0)];
+    let scored = score(
+        &[set],
+        &[CoarseCalibration::default(), soft],
+        &shift,
+        || {
+            runs.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        },
+    )
+    .expect("score");
+    assert_eq!(runs.into_inner(), 4);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert_eq!(scored[0].run_means_mm[0][0], mean(&e.sim_alone_mm));
+    assert_ne!(scored[0].run_means_mm[0][0], scored[0].run_means_mm[0][1]);
+    assert!(
+        (scored[0].pooled_mm - mean(&scored[0].run_means_mm[0])).abs() < 1e-12,
+        "{:?}",
+        scored[0]
+    );
+    assert_eq!(scored[1].calibration, soft);
+    assert!(scored[1].failed.is_none() && scored[1].pooled_mm.is_finite());
+    assert_ne!(scored[1].pooled_mm, scored[0].pooled_mm);
+    let mut sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    soft.apply(&mut sim).expect("apply");
+    assert_eq!(sim.sim.params.friction, 2.0);
     assert_eq!(e.strain_pct.len(), 3);
     // Interleaved and alone start from the ground truth: a percent-level strain gap after
     // one frame would be a bookkeeping error.

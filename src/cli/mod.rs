@@ -1,6 +1,7 @@
 //! Command-line interface: one module per command; each turns its arguments into library calls.
 
 mod bench;
+mod calibrate;
 mod convert;
 mod dataset;
 mod eval;
@@ -56,6 +57,10 @@ enum Command {
     /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
     /// alone and the corrector without interleaving.
     Rollout(rollout::Args),
+    /// Choose the coarse model (membrane compression, friction, wrinkle bending) that keeps
+    /// the coarse simulation alone closest to a scene's M_int, on its data sets, and write it
+    /// as a models folder's coarse.json.
+    Calibrate(calibrate::Args),
     /// The whole pipeline on a scene: coarse simulation, corrector, mesh super-resolution,
     /// fine garments to time-sampled USD.
     Run(run::Args),
@@ -95,6 +100,7 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Train(a) => train::run(a),
         Command::Rollout(a) => rollout::run(a),
         Command::Sr(a) => sr::run(a),
+        Command::Calibrate(a) => calibrate::run(a),
         Command::Run(a) => run::run(a),
         Command::Eval(a) => eval::run(a),
     }?;

@@ -21,6 +21,7 @@ use crate::scene::Scene;
 use crate::sim::driver::Simulation;
 use crate::sim::step::SimState;
 
+pub mod calibrate;
 mod run;
 use crate::transfer::Transfer;
 pub use run::{resume_path, run_to_files, Outputs, Preview, Progress, Report};
@@ -353,20 +354,7 @@ impl<'a> Pipeline<'a> {
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
-            (None, f) if f.is_some() || knee.is_some() => coarse
-                .sim
-                .model
-                .set_membrane_compression(f.unwrap_or(1.0), knee)?,
-            (None, _) => {}
-        }
-        if let (None, Some(mu)) = (&corrector, opts.coarse_friction) {
-            crate::corrector::training::set_friction(&mut coarse, mu)?;
-        }
-        if let (None, Some(g)) = (&corrector, wrinkles) {
-            coarse
-                .sim
-                .model
-                .set_wrinkle_bending(Some(crate::sim::WrinkleBending::with_gain(g)))?;
+            (None, _) => CoarseCalibration::of(&opts).apply(&mut coarse)?,
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {

@@ -1,0 +1,223 @@
+//! `clothsr calibrate --data DIR... -o MODELS/coarse.json`: the coarse model chosen on a
+//! scene's own data sets (see [`clothsr::pipeline::calibrate`]).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clothsr::corrector::rollout::jitter_directions;
+use clothsr::data::read_manifest;
+use clothsr::pipeline::calibrate::{best, score, CalibrationSet, Grid, Scored};
+use clothsr::pipeline::CoarseCalibration;
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Arguments of `calibrate`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Data set directory (`clothsr dataset`) of the scene to calibrate for; repeat it for
+    /// several drops (the candidates are ranked on all their frames pooled). Measure the choice
+    /// on a drop not given here.
+    #[arg(long, required = true)]
+    data: Vec<PathBuf>,
+    /// Where to write the chosen calibration: a models folder's `coarse.json`, read by
+    /// `clothsr run --models` when no corrector runs. Written only when every run is done.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Frames to run of every data set (default: all each has after its first).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Membrane compression factors to try, in (0, 1] (1: the simulator's).
+    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().compression)]
+    compression: Vec<f64>,
+    /// Compression knees to try with each factor below 1, shortenings (0: none).
+    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().compression_knee)]
+    compression_knee: Vec<f64>,
+    /// Coulomb friction coefficients against bodies to try; `scene` is the scene's own.
+    #[arg(long, value_delimiter = ',', default_value = "scene,1,2.5")]
+    friction: Vec<String>,
+    /// Wrinkle bending gains to try (0: off).
+    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().wrinkle_bending)]
+    wrinkle_bending: Vec<f64>,
+    /// Run every data set this many more times per candidate, each from its start moved
+    /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where
+    /// contact and folds make the coarse path chaotic, one start is one draw.
+    #[arg(long, default_value_t = 0)]
+    jitter: usize,
+    /// How far `--jitter` moves each start, mm.
+    #[arg(long, default_value_t = 0.1)]
+    jitter_mm: f64,
+    /// Write every candidate's errors as CSV here.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+}
+
+/// `--friction`'s values: `scene` as `None`, numbers checked.
+fn frictions(given: &[String]) -> anyhow::Result<Vec<Option<f64>>> {
+    given
+        .iter()
+        .map(|v| match v.trim() {
+            "scene" => Ok(None),
+            t => {
+                let mu: f64 = t.parse().with_context(|| {
+                    format!("--friction {t}: not a number (or 'scene' for the scene's own)")
+                })?;
+                clothsr::corrector::training::check_friction(mu)
+                    .map_err(|e| anyhow::anyhow!("--friction {t}: {e}"))?;
+                Ok(Some(mu))
+            }
+        })
+        .collect()
+}
+
+/// A candidate's settings as table cells: compression, knee, friction, gain.
+fn cells(c: &CoarseCalibration) -> [String; 4] {
+    let or = |v: Option<f64>, none: &str| v.map_or(none.to_string(), |v| v.to_string());
+    [
+        or(c.compression, "1"),
+        or(c.compression_knee, "-"),
+        or(c.friction, "scene"),
+        or(c.wrinkle_bending, "0"),
+    ]
+}
+
+/// Runs `calibrate`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.jitter_mm.is_finite() && args.jitter_mm > 0.0,
+        "--jitter-mm {}: the distance must be positive",
+        args.jitter_mm
+    );
+    anyhow::ensure!(
+        args.output.file_name().is_some() && !args.output.is_dir(),
+        "{}: the output must be a file (a models folder's {})",
+        args.output.display(),
+        CoarseCalibration::FILE
+    );
+    let grid = Grid {
+        compression: args.compression.clone(),
+        compression_knee: args.compression_knee.clone(),
+        friction: frictions(&args.friction)?,
+        wrinkle_bending: args.wrinkle_bending.clone(),
+    };
+    let candidates = grid
+        .candidates()
+        .map_err(|e| anyhow::anyhow!("the grid to search: {e}"))?;
+    // Every data set is loaded and checked before the first run.
+    let sets = args
+        .data
+        .iter()
+        .map(|dir| {
+            let m = read_manifest(dir)?;
+            let source = m.source.as_ref().with_context(|| {
+                format!(
+                    "{}: the data set does not record its scene files",
+                    dir.join("manifest.json").display()
+                )
+            })?;
+            Ok(CalibrationSet::load(source.load()?, dir, args.frames)?)
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let shifts: Vec<_> = match args.jitter {
+        0 => Vec::new(),
+        n => {
+            let g = sets[0].gravity_m_s2;
+            let d = jitter_directions(g, n);
+            anyhow::ensure!(
+                d.len() == n,
+                "--jitter: the scene has no gravity to jitter across"
+            );
+            d.into_iter().map(|d| d * (args.jitter_mm * 1e-3)).collect()
+        }
+    };
+    let runs = candidates.len() * sets.len() * (1 + shifts.len());
+    tracing::info!(
+        "{} candidates × {} data sets × {} starts = {runs} coarse runs",
+        candidates.len(),
+        sets.len(),
+        1 + shifts.len()
+    );
+    let bar = ProgressBar::new(runs as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} runs {per_sec} eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    // The bar is hidden where stderr is no terminal (a batch log): every tenth there.
+    let every = runs.div_ceil(10);
+    let scored = score(&sets, &candidates, &shifts, || {
+        bar.inc(1);
+        let done = bar.position() as usize;
+        if bar.is_hidden() && done.is_multiple_of(every) {
+            tracing::info!("{done}/{runs} runs");
+        }
+    })?;
+    bar.finish_and_clear();
+    report(&args, &scored)?;
+    let i = best(&scored).context("the simulator failed on every candidate")?;
+    let chosen = scored[i].calibration;
+    let text = serde_json::to_string_pretty(&chosen)? + "\n";
+    if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    clothsr::io::write_atomic(&args.output, text.as_bytes())?;
+    let own = scored[0].pooled_mm;
+    println!(
+        "chosen: {chosen}: {:.3} mm, {:.2}× the simulator's own model ({:.3} mm); written to {}",
+        scored[i].pooled_mm,
+        scored[i].pooled_mm / own,
+        own,
+        args.output.display()
+    );
+    Ok(())
+}
+
+/// Prints the candidates best first and writes `--csv`.
+fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
+    let own = scored[0].pooled_mm;
+    let names: Vec<String> = args
+        .data
+        .iter()
+        .map(|d| {
+            d.file_name()
+                .map_or(d.display().to_string(), |n| n.to_string_lossy().to_string())
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..scored.len()).collect();
+    order.sort_by(|&a, &b| scored[a].pooled_mm.total_cmp(&scored[b].pooled_mm));
+    println!(
+        "{:>11} {:>6} {:>8} {:>5} {:>9} {:>7}  per data set, mm",
+        "compression", "knee", "friction", "gain", "pooled mm", "/ own"
+    );
+    let mut csv = format!(
+        "compression,compression_knee,friction,wrinkle_bending,pooled_mm,ratio_to_own,{}\n",
+        names
+            .iter()
+            .map(|n| format!("{}_mm", n.replace(',', "_")))
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    for &i in &order {
+        let s = &scored[i];
+        let [c, k, f, g] = cells(&s.calibration);
+        let sets = s.set_means_mm();
+        let per: Vec<String> = sets.iter().map(|m| format!("{m:.3}")).collect();
+        let what = match &s.failed {
+            Some(why) => format!("failed: {why}"),
+            None => per.join(" "),
+        };
+        println!(
+            "{c:>11} {k:>6} {f:>8} {g:>5} {:>9.3} {:>6.2}×  {what}",
+            s.pooled_mm,
+            s.pooled_mm / own
+        );
+        csv += &format!(
+            "{c},{},{f},{g},{},{},{}\n",
+            s.calibration.compression_knee.unwrap_or(0.0),
+            s.pooled_mm,
+            s.pooled_mm / own,
+            per.join(",")
+        );
+    }
+    if let Some(path) = &args.csv {
+        clothsr::io::write_atomic(path, csv.as_bytes())?;
+    }
+    Ok(())
+}
