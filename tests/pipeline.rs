@@ -380,6 +380,23 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             let k = &p.coarse.sim.model.membrane_k;
             assert!(k.iter().all(|k| k.compression == 0.03), "{:?}", k.first());
         }
+        if ships_corrector {
+            // Without its corrector (`run --no-corrector`), the coarse model `clothsr
+            // calibrate` chose on the three balls' training drops.
+            let (opts, cal) = CoarseCalibration::for_run(&models, None, Options::default())
+                .expect("a valid coarse.json");
+            let chosen = CoarseCalibration {
+                compression: Some(0.01),
+                friction: Some(2.5),
+                wrinkle_bending: Some(1.0),
+                ..CoarseCalibration::default()
+            };
+            assert_eq!(cal, Some(chosen));
+            let alone = Pipeline::new(&scene, &isr, None, opts).expect("set up");
+            assert_eq!(alone.coarse.sim.params.friction, 2.5);
+            let k = &alone.coarse.sim.model.membrane_k;
+            assert!(k.iter().all(|k| k.compression == 0.01), "{:?}", k.first());
+        }
         assert_eq!(p.has_corrector(), ships_corrector);
         assert_eq!(p.fine.num_vertices(), 44_923, "{}", models.display());
         let first: Vec<Vector3<f64>> = p.super_resolve().expect("frame 0").to_vec();

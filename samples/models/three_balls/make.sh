@@ -2,7 +2,8 @@
 # Regenerates samples/models/three_balls/ (this folder) from this repository alone: training data from
 # our own fine simulations of samples/sheet_three_balls.usda (20 mm coarse / 2.5 mm fine), then
 # the ISR network and the corrector, each with its config, log and the data manifests it was
-# trained on. About 1.75 h on 2 CPU cores.
+# trained on, and the coarse model chosen for runs without the corrector. About 2 h on 2 CPU
+# cores.
 #
 # The two main drops are 150 frames (5 s: fall, impact, settling), four more for the corrector
 # 150 and 60 frames (two of each), the held-out one 300 frames (the 3000-step rollout). The
@@ -54,6 +55,12 @@ mkdir -p "$OUT"
   --steps 2000 --batch 2 --lr-start 1e-3 --lr-end 1e-5 --mp-steps 4 --rollout-iters 0 \
   --take-back 0.5 --smoothing 2 --seed 8 &
 wait
+
+# The coarse model `clothsr run --no-corrector` uses with this folder (coarse.json), chosen by
+# its simulation alone against M_int on the four 150-frame training drops (the default grid:
+# 24 candidates, about 17 min on 2 cores; session 32 in README.md).
+"$BIN" calibrate --data "$DATA/train_a" --data "$DATA/train_b" --data "$DATA/train_e" \
+  --data "$DATA/train_f" -o "$OUT/coarse.json" --csv "$DATA/calibration.csv"
 
 # What the models came from, and no training leftovers in the repository.
 for d in train_a train_b train_e train_f train_g train_h test; do
