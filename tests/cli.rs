@@ -235,12 +235,15 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         .collect();
     assert_eq!(rows.len(), 4, "{stdout}");
     // Best first; the simulator's own model is 1.00× itself.
-    assert!(rows.windows(2).all(|w| w[0][4] <= w[1][4]), "{rows:?}");
+    // Columns: compression, knee, friction, gain, bending, pooled mm, ratio to own, per set.
+    assert!(rows.iter().all(|r| r.len() == 8), "{rows:?}");
+    assert!(rows.windows(2).all(|w| w[0][5] <= w[1][5]), "{rows:?}");
     let own = rows
         .iter()
         .find(|r| r[0] == 1.0 && r[2] == -1.0)
         .expect("own");
-    assert!((own[5] - 1.0).abs() < 1e-12 && own[4] > 0.0, "{own:?}");
+    assert!((own[6] - 1.0).abs() < 1e-12 && own[5] > 0.0, "{own:?}");
+    assert!(rows.iter().all(|r| r[1] == 0.0 && r[4] == 1.0), "{rows:?}");
     let chosen: clothsr::pipeline::CoarseCalibration =
         serde_json::from_str(&std::fs::read_to_string(&cal_json).expect("coarse.json"))
             .expect("a calibration");

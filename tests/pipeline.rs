@@ -355,6 +355,13 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
                     },
                     "wrinkle bending",
                 ),
+                (
+                    Options {
+                        coarse_bending: Some(1.5),
+                        ..Options::default()
+                    },
+                    "bending stiffness",
+                ),
             ] {
                 let err = Pipeline::new(&scene, &isr, corrector, other)
                     .err()
@@ -463,7 +470,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
     let file = dir.path().join(CoarseCalibration::FILE);
     std::fs::write(
         &file,
-        r#"{"compression": 0.01, "friction": 2.5, "wrinkle_bending": 1}"#,
+        r#"{"compression": 0.01, "friction": 2.5, "wrinkle_bending": 1, "bending": 1.5}"#,
     )
     .expect("write");
     let cal = CoarseCalibration::load(dir.path())
@@ -471,7 +478,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
         .expect("present");
     assert_eq!(
         cal.to_string(),
-        "compression 0.01, friction 2.5, wrinkle bending 1"
+        "compression 0.01, friction 2.5, wrinkle bending 1, bending 1.5"
     );
     let given = Options {
         coarse_friction: Some(0.3),
@@ -482,6 +489,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
     assert_eq!(filled.coarse_compression_knee, None);
     assert_eq!(filled.coarse_friction, Some(0.3), "an option given wins");
     assert_eq!(filled.coarse_wrinkle_bending, Some(1.0));
+    assert_eq!(filled.coarse_bending, Some(1.5));
     assert_eq!(filled.coarse_edge_m, given.coarse_edge_m);
     // As a run takes it: filled without a corrector, untouched beside one.
     let (run_opts, used) = CoarseCalibration::for_run(dir.path(), None, given).expect("run");
@@ -512,6 +520,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
             r#"{"wrinkle_bending": -1}"#,
             "wrinkle_bending: the wrinkle bending gain",
         ),
+        (r#"{"bending": 0}"#, "bending must be a factor > 0, got 0"),
         (r#"{"compresion": 0.1}"#, "unknown field `compresion`"),
         ("0.03", "not a coarse calibration"),
     ] {

@@ -597,6 +597,59 @@ fn wrinkle_bending_stiffens_shortened_hinges_of_a_settled_sheet_only() {
 }
 
 #[test]
+fn the_bending_scale_sets_every_hinge_to_a_multiple_of_the_fabrics_with_wrinkles_on_top() {
+    use clothsr::sim::WrinkleBending;
+    let scene = sheet_scene(0.2, 1.0, Fabric::preset("cotton").expect("preset"));
+    let mut sim = Simulation::new(&scene, 0.04, |_| {}).expect("setup");
+    let weights =
+        |sim: &Simulation| -> Vec<f64> { sim.sim.model.hinges.iter().map(|h| h.weight).collect() };
+    let own = weights(&sim);
+    let assert_ratio = |sim: &Simulation, ratio: f64| {
+        for (w, o) in weights(sim).iter().zip(&own) {
+            assert!((w / o - ratio).abs() < 1e-12, "{w} {o} {ratio}");
+        }
+    };
+    assert_eq!(sim.sim.model.bending_scale(), 1.0);
+    // Set, not multiplied: setting 2 twice is 2, and 1 restores the fabric's.
+    for _ in 0..2 {
+        sim.sim.model.set_bending_scale(2.0).expect("valid");
+        assert_ratio(&sim, 2.0);
+    }
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(sim.sim.model.set_bending_scale(bad).is_err(), "{bad}");
+    }
+    assert_eq!(
+        sim.sim.model.bending_scale(),
+        2.0,
+        "a refused scale keeps the last"
+    );
+    // Wrinkle bending scales the scaled weights, and off again restores them …
+    let n = sim.state.x.len();
+    let still = vec![Vector3::zeros(); n];
+    let c = sim.state.x.iter().sum::<Vector3<f64>>() / n as f64;
+    let crushed: Vec<Vector3<f64>> = sim
+        .state
+        .x
+        .iter()
+        .map(|x| c + (x - c) * (1.0 - 2.0 * WrinkleBending::DEFAULT_STRAIN))
+        .collect();
+    sim.sim
+        .model
+        .set_wrinkle_bending(Some(WrinkleBending::with_gain(1.0)))
+        .expect("valid");
+    sim.sim.model.update_wrinkle_bending(&crushed, &still);
+    assert_ratio(&sim, 4.0);
+    // … and a scale set while it is on applies to its own weights too.
+    sim.sim.model.set_bending_scale(0.5).expect("valid");
+    sim.sim.model.update_wrinkle_bending(&crushed, &still);
+    assert_ratio(&sim, 1.0);
+    sim.sim.model.set_wrinkle_bending(None).expect("off");
+    assert_ratio(&sim, 0.5);
+    sim.sim.model.set_bending_scale(1.0).expect("valid");
+    assert_eq!(weights(&sim), own);
+}
+
+#[test]
 fn a_settled_compressed_sheet_steps_with_the_stiffened_hinges() {
     use clothsr::sim::WrinkleBending;
     // The simulator applies the stiffening itself at each step: a sheet at rest, shrunk by

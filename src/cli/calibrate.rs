@@ -37,6 +37,9 @@ pub struct Args {
     /// Wrinkle bending gains to try (0: off).
     #[arg(long, value_delimiter = ',', default_values_t = Grid::default().wrinkle_bending)]
     wrinkle_bending: Vec<f64>,
+    /// Bending stiffness factors to try (1: the fabric's).
+    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().bending)]
+    bending: Vec<f64>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where
     /// contact and folds make the coarse path chaotic, one start is one draw.
@@ -68,14 +71,15 @@ fn frictions(given: &[String]) -> anyhow::Result<Vec<Option<f64>>> {
         .collect()
 }
 
-/// A candidate's settings as table cells: compression, knee, friction, gain.
-fn cells(c: &CoarseCalibration) -> [String; 4] {
+/// A candidate's settings as table cells: compression, knee, friction, gain, bending.
+fn cells(c: &CoarseCalibration) -> [String; 5] {
     let or = |v: Option<f64>, none: &str| v.map_or(none.to_string(), |v| v.to_string());
     [
         or(c.compression, "1"),
-        or(c.compression_knee, "-"),
+        or(c.compression_knee, "0"),
         or(c.friction, "scene"),
         or(c.wrinkle_bending, "0"),
+        or(c.bending, "1"),
     ]
 }
 
@@ -97,6 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         compression_knee: args.compression_knee.clone(),
         friction: frictions(&args.friction)?,
         wrinkle_bending: args.wrinkle_bending.clone(),
+        bending: args.bending.clone(),
     };
     let candidates = grid
         .candidates()
@@ -183,11 +188,11 @@ fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].pooled_mm.total_cmp(&scored[b].pooled_mm));
     println!(
-        "{:>11} {:>6} {:>8} {:>5} {:>9} {:>7}  per data set, mm",
-        "compression", "knee", "friction", "gain", "pooled mm", "/ own"
+        "{:>11} {:>6} {:>8} {:>5} {:>7} {:>9} {:>7}  per data set, mm",
+        "compression", "knee", "friction", "gain", "bending", "pooled mm", "/ own"
     );
     let mut csv = format!(
-        "compression,compression_knee,friction,wrinkle_bending,pooled_mm,ratio_to_own,{}\n",
+        "compression,compression_knee,friction,wrinkle_bending,bending,pooled_mm,ratio_to_own,{}\n",
         names
             .iter()
             .map(|n| format!("{}_mm", n.replace(',', "_")))
@@ -196,7 +201,7 @@ fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
     );
     for &i in &order {
         let s = &scored[i];
-        let [c, k, f, g] = cells(&s.calibration);
+        let [c, k, f, g, b] = cells(&s.calibration);
         let sets = s.set_means_mm();
         let per: Vec<String> = sets.iter().map(|m| format!("{m:.3}")).collect();
         let what = match &s.failed {
@@ -204,13 +209,12 @@ fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
             None => per.join(" "),
         };
         println!(
-            "{c:>11} {k:>6} {f:>8} {g:>5} {:>9.3} {:>6.2}×  {what}",
+            "{c:>11} {k:>6} {f:>8} {g:>5} {b:>7} {:>9.3} {:>6.2}×  {what}",
             s.pooled_mm,
             s.pooled_mm / own
         );
         csv += &format!(
-            "{c},{},{f},{g},{},{},{}\n",
-            s.calibration.compression_knee.unwrap_or(0.0),
+            "{c},{k},{f},{g},{b},{},{},{}\n",
             s.pooled_mm,
             s.pooled_mm / own,
             per.join(",")

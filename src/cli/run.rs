@@ -116,6 +116,10 @@ pub struct Args {
     /// with another is an error)
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
+    /// The coarse hinges' bending stiffness as a factor of the fabric's, without a corrector
+    /// (default: `coarse.json`'s, else 1)
+    #[arg(long, value_name = "FACTOR")]
+    coarse_bending: Option<f64>,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -207,6 +211,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "--coarse-compression-knee must be a shortening > 0 (0: none), got {s}"
         );
     }
+    if let Some(b) = args.coarse_bending {
+        anyhow::ensure!(
+            b > 0.0 && b.is_finite(),
+            "--coarse-bending must be a factor > 0, got {b}"
+        );
+    }
     anyhow::ensure!(
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
@@ -240,6 +250,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coarse_compression_knee: args.coarse_compression_knee,
         coarse_friction: args.coarse_friction,
         coarse_wrinkle_bending: args.coarse_wrinkle_bending,
+        coarse_bending: args.coarse_bending,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
     let (opts, cal) = CoarseCalibration::for_run(&args.models, corrector, given)?;

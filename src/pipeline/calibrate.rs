@@ -32,6 +32,8 @@ pub struct Grid {
     pub friction: Vec<Option<f64>>,
     /// Wrinkle bending gains (0: off).
     pub wrinkle_bending: Vec<f64>,
+    /// Bending stiffness factors (1: the fabric's).
+    pub bending: Vec<f64>,
 }
 
 impl Default for Grid {
@@ -43,6 +45,7 @@ impl Default for Grid {
             compression_knee: vec![0.0],
             friction: vec![None, Some(1.0), Some(2.5)],
             wrinkle_bending: vec![0.0, 1.0],
+            bending: vec![1.0],
         }
     }
 }
@@ -51,7 +54,7 @@ impl Grid {
     /// Every combination, checked, without repeats, in the grid's order with the simulator's
     /// own model ([`CoarseCalibration::default`]) first whether or not the grid names it.
     /// A knee is combined with factors below 1 only (a stiff membrane has none to restore),
-    /// and the defaults are stored as `None` (factor 1, knee 0, gain 0).
+    /// and the defaults are stored as `None` (factors 1, knee 0, gain 0).
     pub fn candidates(&self) -> std::result::Result<Vec<CoarseCalibration>, String> {
         let mut out = vec![CoarseCalibration::default()];
         for &c in &self.compression {
@@ -61,15 +64,18 @@ impl Grid {
                 }
                 for &mu in &self.friction {
                     for &g in &self.wrinkle_bending {
-                        let cal = CoarseCalibration {
-                            compression: (c != 1.0).then_some(c),
-                            compression_knee: (k != 0.0).then_some(k),
-                            friction: mu,
-                            wrinkle_bending: (g != 0.0).then_some(g),
-                        };
-                        cal.check()?;
-                        if !out.contains(&cal) {
-                            out.push(cal);
+                        for &b in &self.bending {
+                            let cal = CoarseCalibration {
+                                compression: (c != 1.0).then_some(c),
+                                compression_knee: (k != 0.0).then_some(k),
+                                friction: mu,
+                                wrinkle_bending: (g != 0.0).then_some(g),
+                                bending: (b != 1.0).then_some(b),
+                            };
+                            cal.check()?;
+                            if !out.contains(&cal) {
+                                out.push(cal);
+                            }
                         }
                     }
                 }
@@ -91,6 +97,9 @@ impl CoarseCalibration {
         if let Some(mu) = self.friction {
             crate::corrector::training::set_friction(sim, mu)?;
         }
+        sim.sim
+            .model
+            .set_bending_scale(self.bending.unwrap_or(1.0))?;
         let gain = self.wrinkle_bending.filter(|&g| g != 0.0);
         sim.sim
             .model
@@ -291,6 +300,7 @@ mod tests {
             compression_knee: vec![0.0, 0.006],
             friction: vec![None, Some(2.5)],
             wrinkle_bending: vec![0.0],
+            bending: vec![1.0],
         };
         let c = grid.candidates().expect("valid grid");
         // The simulator's own first; then 0.03 × {no knee, knee} × {scene, 2.5}; then 1 ×

@@ -57,6 +57,10 @@ pub struct Options {
     /// 0: off; `None`: the corrector's, else off). A corrector trained with another is an
     /// error.
     pub coarse_wrinkle_bending: Option<f64>,
+    /// The coarse hinges' bending stiffness as a factor of the fabric's
+    /// ([`crate::sim::model::ClothModel::set_bending_scale`]; `None`: 1). Without a corrector
+    /// only: a corrector's coarse model is the one it was trained beside.
+    pub coarse_bending: Option<f64>,
 }
 
 impl Default for Options {
@@ -71,6 +75,7 @@ impl Default for Options {
             coarse_compression_knee: None,
             coarse_friction: None,
             coarse_wrinkle_bending: None,
+            coarse_bending: None,
         }
     }
 }
@@ -83,7 +88,8 @@ impl Default for Options {
 /// options override it.
 ///
 /// `{"compression": 0.03}` is the table's: [`Options::coarse_compression`]; likewise
-/// `compression_knee`, `friction` and `wrinkle_bending` (0: off).
+/// `compression_knee`, `friction`, `wrinkle_bending` (0: off) and `bending`. `clothsr
+/// calibrate` writes it ([`calibrate`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoarseCalibration {
@@ -99,6 +105,9 @@ pub struct CoarseCalibration {
     /// [`Options::coarse_wrinkle_bending`], ≥ 0 (0: off).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wrinkle_bending: Option<f64>,
+    /// [`Options::coarse_bending`], > 0 (1: the fabric's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bending: Option<f64>,
 }
 
 impl CoarseCalibration {
@@ -139,6 +148,11 @@ impl CoarseCalibration {
             crate::sim::WrinkleBending::gain_option(g)
                 .map_err(|m| format!("wrinkle_bending: {m}"))?;
         }
+        if let Some(b) = self.bending {
+            if !(b > 0.0 && b.is_finite()) {
+                return Err(format!("bending must be a factor > 0, got {b}"));
+            }
+        }
         Ok(())
     }
 
@@ -166,6 +180,7 @@ impl CoarseCalibration {
             compression_knee: opts.coarse_compression_knee,
             friction: opts.coarse_friction,
             wrinkle_bending: opts.coarse_wrinkle_bending,
+            bending: opts.coarse_bending,
         }
     }
 
@@ -176,6 +191,7 @@ impl CoarseCalibration {
             coarse_compression_knee: opts.coarse_compression_knee.or(self.compression_knee),
             coarse_friction: opts.coarse_friction.or(self.friction),
             coarse_wrinkle_bending: opts.coarse_wrinkle_bending.or(self.wrinkle_bending),
+            coarse_bending: opts.coarse_bending.or(self.bending),
             ..opts
         }
     }
@@ -188,6 +204,7 @@ impl std::fmt::Display for CoarseCalibration {
             ("compression knee", self.compression_knee),
             ("friction", self.friction),
             ("wrinkle bending", self.wrinkle_bending),
+            ("bending", self.bending),
         ]
         .iter()
         .filter_map(|(name, v)| v.map(|v| format!("{name} {v}")))
@@ -351,6 +368,14 @@ impl<'a> Pipeline<'a> {
                     c.dir.display(),
                     c.training.coarse_wrinkle_bending,
                     opts.coarse_wrinkle_bending
+                )));
+            }
+            (Some(c), _) if opts.coarse_bending.is_some_and(|b| b != 1.0) => {
+                return Err(Error::Invalid(format!(
+                    "the corrector in {} was trained beside the fabric's bending stiffness, \
+                     not {:?} times it",
+                    c.dir.display(),
+                    opts.coarse_bending
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,

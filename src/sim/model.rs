@@ -48,6 +48,8 @@ pub struct ClothModel {
     /// Bending stiffened where the membrane is compressed, once the cloth has settled
     /// ([`Self::set_wrinkle_bending`]; `None`: off), with each hinge's own weight.
     wrinkle_bending: Option<(WrinkleBending, Vec<f64>)>,
+    /// Every hinge's weight relative to the fabric's ([`Self::set_bending_scale`]).
+    bending_scale: f64,
 }
 
 /// A coarse mesh's stand-in for the stiffness that a fine cloth's wrinkles add to its bending
@@ -227,7 +229,33 @@ impl ClothModel {
             hinge_damping_s,
             edges,
             wrinkle_bending: None,
+            bending_scale: 1.0,
         })
+    }
+
+    /// Sets every hinge's bending stiffness to `factor` (> 0) times the fabric's (1: the
+    /// fabric's own; a coarse model's calibration, `clothsr calibrate`). With wrinkle bending on,
+    /// its own weights are scaled alike.
+    pub fn set_bending_scale(&mut self, factor: f64) -> Result<()> {
+        if !(factor > 0.0 && factor.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "bending scale must be finite and > 0, got {factor}"
+            )));
+        }
+        let r = factor / self.bending_scale;
+        for h in &mut self.hinges {
+            h.weight *= r;
+        }
+        if let Some((_, own)) = &mut self.wrinkle_bending {
+            own.iter_mut().for_each(|w| *w *= r);
+        }
+        self.bending_scale = factor;
+        Ok(())
+    }
+
+    /// Every hinge's weight relative to the fabric's ([`Self::set_bending_scale`]).
+    pub fn bending_scale(&self) -> f64 {
+        self.bending_scale
     }
 
     /// Turns on (or, with `None`, off) the wrinkles' bending stiffness ([`WrinkleBending`]);
