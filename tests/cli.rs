@@ -202,7 +202,28 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let bad = calibrate(&["--friction", "scene,grippy"]);
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("grippy"), "{err}");
+    let bad = calibrate(&["--bending", "0"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("--bending 0"),
+        "{err}"
+    );
     assert!(!cal_json.exists() && !cal_csv.exists());
+    // A CSV that could not be written is refused before any run.
+    let under_a_file = data.join("manifest.json").join("cal.csv");
+    let bad = clothsr()
+        .arg("calibrate")
+        .arg("--data")
+        .arg(&data)
+        .arg("-o")
+        .arg(&cal_json)
+        .arg("--csv")
+        .arg(&under_a_file)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("is a file"), "{err}");
+    assert!(!cal_json.exists());
     let out = calibrate(&[
         "--compression",
         "1,0.05",

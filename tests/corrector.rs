@@ -686,6 +686,10 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
     let mut sim = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
     soft.apply(&mut sim).expect("apply");
     assert_eq!(sim.sim.params.friction, 2.0);
+    let model = &sim.sim.model;
+    assert!(model.membrane_k.iter().all(|k| k.compression == 0.05));
+    assert_eq!(model.wrinkle_bending().map(|w| w.gain), Some(1.0));
+    assert_eq!(model.bending_scale(), 1.0);
     assert_eq!(e.strain_pct.len(), 3);
     // Interleaved and alone start from the ground truth: a percent-level strain gap after
     // one frame would be a bookkeeping error.

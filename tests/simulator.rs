@@ -610,11 +610,18 @@ fn the_bending_scale_sets_every_hinge_to_a_multiple_of_the_fabrics_with_wrinkles
         }
     };
     assert_eq!(sim.sim.model.bending_scale(), 1.0);
-    // Set, not multiplied: setting 2 twice is 2, and 1 restores the fabric's.
+    // Set, not multiplied: setting 2 twice is 2, and 1 restores the fabric's bit for bit
+    // after any others.
     for _ in 0..2 {
         sim.sim.model.set_bending_scale(2.0).expect("valid");
         assert_ratio(&sim, 2.0);
     }
+    for f in [0.3, 0.7, 1.1] {
+        sim.sim.model.set_bending_scale(f).expect("valid");
+    }
+    sim.sim.model.set_bending_scale(1.0).expect("valid");
+    assert_eq!(weights(&sim), own);
+    sim.sim.model.set_bending_scale(2.0).expect("valid");
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         assert!(sim.sim.model.set_bending_scale(bad).is_err(), "{bad}");
     }

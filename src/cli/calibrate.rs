@@ -1,13 +1,15 @@
 //! `clothsr calibrate --data DIR... -o MODELS/coarse.json`: the coarse model chosen on a
 //! scene's own data sets (see [`clothsr::pipeline::calibrate`]).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Context;
 use clothsr::corrector::rollout::jitter_directions;
 use clothsr::data::read_manifest;
 use clothsr::pipeline::calibrate::{best, score, CalibrationSet, Grid, Scored};
 use clothsr::pipeline::CoarseCalibration;
+use clothsr::sim::WrinkleBending;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `calibrate`.
@@ -83,6 +85,73 @@ fn cells(c: &CoarseCalibration) -> [String; 5] {
     ]
 }
 
+/// Checks each list of the grid on its own, naming its option.
+fn check_lists(args: &Args) -> anyhow::Result<()> {
+    for &c in &args.compression {
+        anyhow::ensure!(
+            c > 0.0 && c <= 1.0,
+            "--compression {c}: a factor must be in (0, 1]"
+        );
+    }
+    for &k in &args.compression_knee {
+        anyhow::ensure!(
+            k >= 0.0 && k.is_finite(),
+            "--compression-knee {k}: a knee must be a shortening > 0 (0: none)"
+        );
+    }
+    for &g in &args.wrinkle_bending {
+        WrinkleBending::gain_option(g)
+            .map_err(|e| anyhow::anyhow!("--wrinkle-bending {g}: {e}"))?;
+    }
+    for &b in &args.bending {
+        anyhow::ensure!(
+            b > 0.0 && b.is_finite(),
+            "--bending {b}: a factor must be > 0"
+        );
+    }
+    anyhow::ensure!(args.frames != Some(0), "--frames must be at least 1");
+    Ok(())
+}
+
+/// Checks that `path` can be written as a file: not a folder, and no file where its folder
+/// would be.
+fn check_writable(option: &str, path: &Path) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        path.file_name().is_some() && !path.is_dir(),
+        "{option} {}: not a file name",
+        path.display()
+    );
+    let mut dir = path.parent();
+    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
+        anyhow::ensure!(
+            !d.exists() || d.is_dir(),
+            "{option} {}: {} is a file, not a folder",
+            path.display(),
+            d.display()
+        );
+        dir = d.parent();
+    }
+    Ok(())
+}
+
+/// Writes `text` to `path` atomically, creating its folder.
+fn write(path: &Path, text: &str) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    clothsr::io::write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
+/// `x` as a ratio to the simulator's own model's error, or "n/a" where that failed.
+fn ratio(x: f64, own: f64) -> String {
+    if own.is_finite() && own > 0.0 {
+        format!("{:.2}×", x / own)
+    } else {
+        "n/a".to_string()
+    }
+}
+
 /// Runs `calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(
@@ -90,12 +159,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--jitter-mm {}: the distance must be positive",
         args.jitter_mm
     );
-    anyhow::ensure!(
-        args.output.file_name().is_some() && !args.output.is_dir(),
-        "{}: the output must be a file (a models folder's {})",
-        args.output.display(),
-        CoarseCalibration::FILE
-    );
+    check_writable("-o", &args.output)?;
+    if let Some(csv) = &args.csv {
+        check_writable("--csv", csv)?;
+    }
+    check_lists(&args)?;
     let grid = Grid {
         compression: args.compression.clone(),
         compression_knee: args.compression_knee.clone(),
@@ -146,43 +214,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     // The bar is hidden where stderr is no terminal (a batch log): every tenth there.
-    let every = runs.div_ceil(10);
+    let (every, done) = (runs.div_ceil(10), AtomicUsize::new(0));
     let scored = score(&sets, &candidates, &shifts, || {
         bar.inc(1);
-        let done = bar.position() as usize;
-        if bar.is_hidden() && done.is_multiple_of(every) {
-            tracing::info!("{done}/{runs} runs");
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        if bar.is_hidden() && n.is_multiple_of(every) {
+            tracing::info!("{n}/{runs} runs");
         }
     })?;
     bar.finish_and_clear();
-    report(&args, &scored)?;
+    let own = scored[0].pooled_mm;
+    if !own.is_finite() {
+        tracing::warn!("the simulator's own model failed on a run: no ratios to it");
+    }
+    let table = report(&args, &scored);
     let i = best(&scored).context("the simulator failed on every candidate")?;
     let chosen = scored[i].calibration;
-    let text = serde_json::to_string_pretty(&chosen)? + "\n";
-    if let Some(dir) = args.output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    write(
+        &args.output,
+        &(serde_json::to_string_pretty(&chosen)? + "\n"),
+    )?;
+    if let Some(path) = &args.csv {
+        write(path, &table)?;
     }
-    clothsr::io::write_atomic(&args.output, text.as_bytes())?;
-    let own = scored[0].pooled_mm;
     println!(
-        "chosen: {chosen}: {:.3} mm, {:.2}× the simulator's own model ({:.3} mm); written to {}",
+        "chosen: {chosen}: {:.3} mm, {} the simulator's own model ({:.3} mm); written to {}",
         scored[i].pooled_mm,
-        scored[i].pooled_mm / own,
+        ratio(scored[i].pooled_mm, own),
         own,
         args.output.display()
     );
     Ok(())
 }
 
-/// Prints the candidates best first and writes `--csv`.
-fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
+/// Prints the candidates best first; returns them as CSV.
+fn report(args: &Args, scored: &[Scored]) -> String {
     let own = scored[0].pooled_mm;
+    // Each data set's column is named by its folder, and by its whole path where two
+    // folders share a name.
+    let short = |d: &PathBuf| {
+        d.file_name()
+            .map_or(d.display().to_string(), |n| n.to_string_lossy().to_string())
+    };
     let names: Vec<String> = args
         .data
         .iter()
         .map(|d| {
-            d.file_name()
-                .map_or(d.display().to_string(), |n| n.to_string_lossy().to_string())
+            let shared = args.data.iter().filter(|e| short(e) == short(d)).count() > 1;
+            if shared {
+                d.display().to_string()
+            } else {
+                short(d)
+            }
         })
         .collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
@@ -195,7 +278,7 @@ fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
         "compression,compression_knee,friction,wrinkle_bending,bending,pooled_mm,ratio_to_own,{}\n",
         names
             .iter()
-            .map(|n| format!("{}_mm", n.replace(',', "_")))
+            .map(|n| format!("{}_mm", n.replace([',', '\n'], "_")))
             .collect::<Vec<_>>()
             .join(",")
     );
@@ -203,25 +286,30 @@ fn report(args: &Args, scored: &[Scored]) -> anyhow::Result<()> {
         let s = &scored[i];
         let [c, k, f, g, b] = cells(&s.calibration);
         let sets = s.set_means_mm();
-        let per: Vec<String> = sets.iter().map(|m| format!("{m:.3}")).collect();
         let what = match &s.failed {
             Some(why) => format!("failed: {why}"),
-            None => per.join(" "),
+            None => sets
+                .iter()
+                .map(|m| format!("{m:.3}"))
+                .collect::<Vec<_>>()
+                .join(" "),
         };
         println!(
-            "{c:>11} {k:>6} {f:>8} {g:>5} {b:>7} {:>9.3} {:>6.2}×  {what}",
+            "{c:>11} {k:>6} {f:>8} {g:>5} {b:>7} {:>9.3} {:>7}  {what}",
             s.pooled_mm,
-            s.pooled_mm / own
+            ratio(s.pooled_mm, own)
         );
+        let r = if own.is_finite() {
+            s.pooled_mm / own
+        } else {
+            f64::NAN
+        };
+        let per: Vec<String> = sets.iter().map(f64::to_string).collect();
         csv += &format!(
-            "{c},{k},{f},{g},{b},{},{},{}\n",
+            "{c},{k},{f},{g},{b},{},{r},{}\n",
             s.pooled_mm,
-            s.pooled_mm / own,
             per.join(",")
         );
     }
-    if let Some(path) = &args.csv {
-        clothsr::io::write_atomic(path, csv.as_bytes())?;
-    }
-    Ok(())
+    csv
 }

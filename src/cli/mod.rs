@@ -57,7 +57,8 @@ enum Command {
     /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
     /// alone and the corrector without interleaving.
     Rollout(rollout::Args),
-    /// Choose the coarse model (membrane compression, friction, wrinkle bending) that keeps
+    /// Choose the coarse model (membrane compression and its knee, friction, wrinkle bending,
+    /// bending stiffness) that keeps
     /// the coarse simulation alone closest to a scene's M_int, on its data sets, and write it
     /// as a models folder's coarse.json.
     Calibrate(calibrate::Args),

@@ -116,8 +116,9 @@ pub struct Args {
     /// with another is an error)
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
-    /// The coarse hinges' bending stiffness as a factor of the fabric's, without a corrector
-    /// (default: `coarse.json`'s, else 1)
+    /// The coarse hinges' bending stiffness as a factor of the fabric's (default:
+    /// `coarse.json`'s, else 1; beside a corrector, which was trained with the fabric's, any
+    /// other is an error)
     #[arg(long, value_name = "FACTOR")]
     coarse_bending: Option<f64>,
     /// Write text USD even for a .usd file.

@@ -87,7 +87,8 @@ impl Grid {
 
 impl CoarseCalibration {
     /// Sets a coarse simulation's model to this calibration (unset fields: the simulator's own
-    /// model; friction unset: the scene's, as the simulation has it).
+    /// model), but for an unset friction, which leaves the simulation's as it is (a fresh
+    /// simulation's: the scene's).
     pub fn apply(&self, sim: &mut Simulation) -> Result<()> {
         self.check().map_err(Error::Invalid)?;
         let knee = self.compression_knee.filter(|&k| k != 0.0);

@@ -373,9 +373,9 @@ impl<'a> Pipeline<'a> {
             (Some(c), _) if opts.coarse_bending.is_some_and(|b| b != 1.0) => {
                 return Err(Error::Invalid(format!(
                     "the corrector in {} was trained beside the fabric's bending stiffness, \
-                     not {:?} times it",
+                     not {} times it",
                     c.dir.display(),
-                    opts.coarse_bending
+                    opts.coarse_bending.unwrap_or(1.0)
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,

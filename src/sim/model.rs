@@ -48,8 +48,9 @@ pub struct ClothModel {
     /// Bending stiffened where the membrane is compressed, once the cloth has settled
     /// ([`Self::set_wrinkle_bending`]; `None`: off), with each hinge's own weight.
     wrinkle_bending: Option<(WrinkleBending, Vec<f64>)>,
-    /// Every hinge's weight relative to the fabric's ([`Self::set_bending_scale`]).
-    bending_scale: f64,
+    /// Every hinge's weight relative to the fabric's, and the fabric's weights once a scale
+    /// other than 1 was set ([`Self::set_bending_scale`]).
+    bending_scale: (f64, Option<Vec<f64>>),
 }
 
 /// A coarse mesh's stand-in for the stiffness that a fine cloth's wrinkles add to its bending
@@ -229,7 +230,7 @@ impl ClothModel {
             hinge_damping_s,
             edges,
             wrinkle_bending: None,
-            bending_scale: 1.0,
+            bending_scale: (1.0, None),
         })
     }
 
@@ -242,20 +243,38 @@ impl ClothModel {
                 "bending scale must be finite and > 0, got {factor}"
             )));
         }
-        let r = factor / self.bending_scale;
-        for h in &mut self.hinges {
-            h.weight *= r;
+        // The hinges' own weights: wrinkle bending's record of them while it is on.
+        let own: Vec<f64> = match &self.wrinkle_bending {
+            Some((_, own)) => own.clone(),
+            None => self.hinges.iter().map(|h| h.weight).collect(),
+        };
+        let fabric = self.bending_scale.1.get_or_insert(own.clone());
+        let scaled: Vec<f64> = fabric.iter().map(|w| w * factor).collect();
+        match &mut self.wrinkle_bending {
+            // The stiffened weights keep their factor over the own ones until the next step.
+            Some((_, own_w)) => {
+                for ((h, new), old) in self.hinges.iter_mut().zip(&scaled).zip(&own) {
+                    h.weight = if *old > 0.0 {
+                        h.weight * new / old
+                    } else {
+                        *new
+                    };
+                }
+                *own_w = scaled;
+            }
+            None => {
+                for (h, new) in self.hinges.iter_mut().zip(&scaled) {
+                    h.weight = *new;
+                }
+            }
         }
-        if let Some((_, own)) = &mut self.wrinkle_bending {
-            own.iter_mut().for_each(|w| *w *= r);
-        }
-        self.bending_scale = factor;
+        self.bending_scale.0 = factor;
         Ok(())
     }
 
     /// Every hinge's weight relative to the fabric's ([`Self::set_bending_scale`]).
     pub fn bending_scale(&self) -> f64 {
-        self.bending_scale
+        self.bending_scale.0
     }
 
     /// Turns on (or, with `None`, off) the wrinkles' bending stiffness ([`WrinkleBending`]);
