@@ -27,20 +27,21 @@ pub struct Args {
     /// Frames to run of every data set (default: all each has after its first).
     #[arg(long)]
     frames: Option<usize>,
+    // The lists' defaults are `Grid::default()`'s (a test checks).
     /// Membrane compression factors to try, in (0, 1] (1: the simulator's).
-    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().compression)]
+    #[arg(long, value_delimiter = ',', default_value = "1,0.1,0.03,0.01")]
     compression: Vec<f64>,
     /// Compression knees to try with each factor below 1, shortenings (0: none).
-    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().compression_knee)]
+    #[arg(long, value_delimiter = ',', default_value = "0")]
     compression_knee: Vec<f64>,
     /// Coulomb friction coefficients against bodies to try; `scene` is the scene's own.
     #[arg(long, value_delimiter = ',', default_value = "scene,1,2.5")]
     friction: Vec<String>,
     /// Wrinkle bending gains to try (0: off).
-    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().wrinkle_bending)]
+    #[arg(long, value_delimiter = ',', default_value = "0,1")]
     wrinkle_bending: Vec<f64>,
     /// Bending stiffness factors to try (1: the fabric's).
-    #[arg(long, value_delimiter = ',', default_values_t = Grid::default().bending)]
+    #[arg(long, value_delimiter = ',', default_value = "1")]
     bending: Vec<f64>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where
@@ -312,4 +313,46 @@ fn report(args: &Args, scored: &[Scored]) -> String {
         );
     }
     csv
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn the_default_lists_are_the_library_grid() {
+        let cli =
+            Cli::try_parse_from(["calibrate", "--data", "d", "-o", "c.json"]).expect("parses");
+        let a = cli.args;
+        let grid = Grid {
+            compression: a.compression.clone(),
+            compression_knee: a.compression_knee.clone(),
+            friction: frictions(&a.friction).expect("frictions"),
+            wrinkle_bending: a.wrinkle_bending.clone(),
+            bending: a.bending.clone(),
+        };
+        assert_eq!(grid, Grid::default());
+        let cli = Cli::try_parse_from([
+            "calibrate",
+            "--data",
+            "d",
+            "-o",
+            "c.json",
+            "--friction",
+            "0.2,scene",
+        ])
+        .expect("parses");
+        assert_eq!(
+            frictions(&cli.args.friction).expect("frictions"),
+            vec![Some(0.2), None]
+        );
+        assert!(frictions(&["-1".to_string()]).is_err());
+    }
 }
