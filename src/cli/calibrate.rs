@@ -9,7 +9,6 @@ use clothsr::corrector::rollout::jitter_directions;
 use clothsr::data::read_manifest;
 use clothsr::pipeline::calibrate::{best, score, CalibrationSet, Grid, Scored};
 use clothsr::pipeline::CoarseCalibration;
-use clothsr::sim::WrinkleBending;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `calibrate`.
@@ -86,29 +85,44 @@ fn cells(c: &CoarseCalibration) -> [String; 5] {
     ]
 }
 
-/// Checks each list of the grid on its own, naming its option.
+/// Checks each list of the grid on its own, as a calibration of that one setting would be
+/// checked, naming its option.
 fn check_lists(args: &Args) -> anyhow::Result<()> {
-    for &c in &args.compression {
-        anyhow::ensure!(
-            c > 0.0 && c <= 1.0,
-            "--compression {c}: a factor must be in (0, 1]"
-        );
-    }
-    for &k in &args.compression_knee {
-        anyhow::ensure!(
-            k >= 0.0 && k.is_finite(),
-            "--compression-knee {k}: a knee must be a shortening > 0 (0: none)"
-        );
-    }
-    for &g in &args.wrinkle_bending {
-        WrinkleBending::gain_option(g)
-            .map_err(|e| anyhow::anyhow!("--wrinkle-bending {g}: {e}"))?;
-    }
-    for &b in &args.bending {
-        anyhow::ensure!(
-            b > 0.0 && b.is_finite(),
-            "--bending {b}: a factor must be > 0"
-        );
+    let d = CoarseCalibration::default;
+    let each = args
+        .compression
+        .iter()
+        .map(|&v| {
+            let cal = CoarseCalibration {
+                compression: Some(v),
+                ..d()
+            };
+            ("--compression", v, cal)
+        })
+        .chain(args.compression_knee.iter().map(|&v| {
+            let cal = CoarseCalibration {
+                compression_knee: Some(v),
+                ..d()
+            };
+            ("--compression-knee", v, cal)
+        }))
+        .chain(args.wrinkle_bending.iter().map(|&v| {
+            let cal = CoarseCalibration {
+                wrinkle_bending: Some(v),
+                ..d()
+            };
+            ("--wrinkle-bending", v, cal)
+        }))
+        .chain(args.bending.iter().map(|&v| {
+            let cal = CoarseCalibration {
+                bending: Some(v),
+                ..d()
+            };
+            ("--bending", v, cal)
+        }));
+    for (option, v, cal) in each {
+        cal.check()
+            .map_err(|e| anyhow::anyhow!("{option} {v}: {e}"))?;
     }
     anyhow::ensure!(args.frames != Some(0), "--frames must be at least 1");
     Ok(())

@@ -481,6 +481,19 @@ pub fn interleaved_errors(
     corrector: &Corrector,
     frames: usize,
 ) -> Result<Option<Vec<f64>>> {
+    check_frames(seq, frames)?;
+    let s = seq.manifest.steps_per_frame;
+    let mut errors = Vec::with_capacity(frames);
+    let done = interleaved_run(seq, sim, t0_s, corrector, frames * s, |i, state| {
+        if (i + 1).is_multiple_of(s) {
+            errors.push(mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x)));
+        }
+    })?;
+    Ok(done.then_some(errors))
+}
+
+/// Fails unless `seq` holds `frames` frames of steps after its first step.
+pub fn check_frames(seq: &Sequence, frames: usize) -> Result<()> {
     let s = seq.manifest.steps_per_frame;
     if frames * s + 1 > seq.steps.len() {
         return Err(Error::bad_input(
@@ -492,13 +505,7 @@ pub fn interleaved_errors(
             ),
         ));
     }
-    let mut errors = Vec::with_capacity(frames);
-    let done = interleaved_run(seq, sim, t0_s, corrector, frames * s, |i, state| {
-        if (i + 1).is_multiple_of(s) {
-            errors.push(mean_distance_mm(&state.x, &vectors(&seq.steps[i].int_x)));
-        }
-    })?;
-    Ok(done.then_some(errors))
+    Ok(())
 }
 
 /// Runs the interleaved simulation (as [`interleaved_errors`]) for at most `steps` steps of

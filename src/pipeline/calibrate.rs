@@ -16,7 +16,7 @@ use rayon::prelude::*;
 
 use super::CoarseCalibration;
 use crate::corrector::data::{vectors, Sequence};
-use crate::corrector::rollout::mean_distance_mm;
+use crate::corrector::rollout::{check_frames, mean_distance_mm};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use crate::sim::driver::Simulation;
@@ -119,18 +119,9 @@ pub fn sim_alone_errors(
     frames: usize,
     shift: Vector3<f64>,
 ) -> Result<Vec<f64>> {
+    check_frames(seq, frames)?;
     let s = seq.manifest.steps_per_frame;
     let steps = frames * s;
-    if steps + 1 > seq.steps.len() {
-        return Err(Error::bad_input(
-            &seq.dir,
-            format!(
-                "{frames} frames asked for, the loaded sequence has {} steps after its first \
-                 ({s} a frame)",
-                seq.steps.len().saturating_sub(1)
-            ),
-        ));
-    }
     let mut state = seq.int_state(0, t0_s);
     state.x.iter_mut().for_each(|x| *x += shift);
     let mut errors = Vec::with_capacity(frames);

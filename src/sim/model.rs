@@ -236,40 +236,25 @@ impl ClothModel {
 
     /// Sets every hinge's bending stiffness to `factor` (> 0) times the fabric's (1: the
     /// fabric's own; a coarse model's calibration, `clothsr calibrate`). With wrinkle bending on,
-    /// its own weights are scaled alike.
+    /// the scaled weights become its own, which each step stiffens anew.
     pub fn set_bending_scale(&mut self, factor: f64) -> Result<()> {
         if !(factor > 0.0 && factor.is_finite()) {
             return Err(Error::Invalid(format!(
                 "bending scale must be finite and > 0, got {factor}"
             )));
         }
-        // The hinges' own weights: wrinkle bending's record of them while it is on.
-        let own: Vec<f64> = match &self.wrinkle_bending {
-            Some((_, own)) => own.clone(),
-            None => self.hinges.iter().map(|h| h.weight).collect(),
-        };
-        let fabric = self.bending_scale.1.get_or_insert(own.clone());
-        let scaled: Vec<f64> = fabric.iter().map(|w| w * factor).collect();
-        match &mut self.wrinkle_bending {
-            // The stiffened weights keep their factor over the own ones until the next step.
-            Some((_, own_w)) => {
-                for ((h, new), old) in self.hinges.iter_mut().zip(&scaled).zip(&own) {
-                    h.weight = if *old > 0.0 {
-                        h.weight * new / old
-                    } else {
-                        *new
-                    };
-                }
-                *own_w = scaled;
-            }
-            None => {
-                for (h, new) in self.hinges.iter_mut().zip(&scaled) {
-                    h.weight = *new;
-                }
-            }
+        // Wrinkle bending off for the change puts the hinges back at their own weights.
+        let wrinkles = self.wrinkle_bending();
+        self.set_wrinkle_bending(None)?;
+        let fabric = self
+            .bending_scale
+            .1
+            .get_or_insert_with(|| self.hinges.iter().map(|h| h.weight).collect());
+        for (h, w) in self.hinges.iter_mut().zip(fabric.iter()) {
+            h.weight = w * factor;
         }
         self.bending_scale.0 = factor;
-        Ok(())
+        self.set_wrinkle_bending(wrinkles)
     }
 
     /// Every hinge's weight relative to the fabric's ([`Self::set_bending_scale`]).
