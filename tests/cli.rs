@@ -734,7 +734,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let rec = clothsr::viz::read_rrd(&eval_rrd).expect("a valid recording");
     assert!(rec.entities.contains("world/prediction"), "{rec:?}");
     assert!(rec.entities.contains("world/upsampled"), "{rec:?}");
-    // The data set as the ground truth and its fork as a baseline: the fork's distance from
+    // The data set as the ground truth and its fork as its twin: the fork's distance from
     // it, the predictability floor, is about the 1 mm it was moved by at the end of frame 1.
     let table = run(vec![
         "eval".into(),
@@ -743,7 +743,9 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "--pred".into(),
         usd.clone().into(),
         "--baseline".into(),
-        format!("floor={}", forked.display()).into(),
+        format!("upsampled={}", up.display()).into(),
+        "--floor".into(),
+        forked.clone().into(),
     ]);
     // Column `k` (0: frames, 1: mean mm) of the table's row for a series.
     let cell = |row: &str, k: usize| -> f64 {
@@ -762,6 +764,37 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(table.contains("prediction / floor"), "{table}");
     // Over the prediction's frames only (the fork has one more).
     assert_eq!(cell("floor ", 0), cell("prediction ", 0), "{table}");
+    // Half the floor is the least any prediction averages over the two ground truths; the
+    // prediction's two errors average above it, and the bound is set beside the baseline.
+    let number_after = |prefix: &str| -> f64 {
+        table
+            .lines()
+            .find_map(|l| l.split_once(prefix))
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .and_then(|v| v.trim_end_matches(['×', ',', ';']).parse().ok())
+            .unwrap_or_else(|| panic!("no {prefix:?} in {table}"))
+    };
+    let least = number_after("least possible over both: ");
+    assert!(
+        (number_after("ground truths apart: ") - floor_mm).abs() < 2e-3,
+        "{table}"
+    );
+    assert!((least - 0.5 * floor_mm).abs() < 2e-3, "{table}");
+    let both = number_after("mean over both: ");
+    assert!(both >= least, "{table}");
+    assert!(
+        (both - 0.5 * (number_after("against the twin: ") + cell("prediction ", 1))).abs() < 2e-3,
+        "{table}"
+    );
+    assert!(
+        number_after("prediction over both / least: ") >= 1.0,
+        "{table}"
+    );
+    let upsampled = cell("upsampled ", 1);
+    assert!(
+        (number_after("least / upsampled: ") - least / upsampled).abs() < 2e-3,
+        "{table}"
+    );
     // Without the corrector `run` takes the models folder's coarse.json; a bad one is refused
     // before anything is written, naming the file.
     let calibration = dir.path().join("models").join("coarse.json");

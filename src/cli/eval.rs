@@ -5,7 +5,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clothsr::eval::{compare, plot, summarise, vertex_errors, write_csv, Animation, FrameMetrics};
+use clothsr::eval::{
+    compare, floor_bound, plot, summarise, vertex_errors, write_csv, Animation, FrameMetrics,
+};
 use clothsr::viz::{colours, Recorder};
 
 /// Arguments of `eval`.
@@ -26,6 +28,13 @@ pub struct Args {
     /// up to the fork count as zero). Every baseline is measured over the prediction's frames.
     #[arg(long)]
     baseline: Vec<String>,
+    /// The ground truth's twin: a `clothsr fork` of its data set (or another fine simulation
+    /// whose start differs by a fraction of a millimetre). Adds the two ground truths' distance
+    /// (the scene's predictability floor) as the series `floor`, the prediction's error against
+    /// the twin, and the least error any prediction from their shared start can average over
+    /// the two: half the floor (the triangle inequality), also as a share of each baseline.
+    #[arg(long)]
+    floor: Option<PathBuf>,
     /// Per-frame metrics of every series as CSV.
     #[arg(long)]
     csv: Option<PathBuf>,
@@ -77,6 +86,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.pred.display()
     ))];
     inputs.extend(args.baseline.iter().map(|b| label_and_path(b)));
+    if let Some(twin) = &args.floor {
+        anyhow::ensure!(
+            inputs.iter().all(|(name, _)| name != "floor"),
+            "--floor names the series `floor`: give the baseline of that name another"
+        );
+        inputs.push(("floor".to_string(), twin.clone()));
+    }
     let mut series: Vec<(String, Vec<FrameMetrics>)> = Vec::new();
     let mut anims: Vec<Animation> = Vec::new();
     let mut pred_anim = Some(pred_anim);
@@ -120,6 +136,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let b = summarise(m).mean_mm;
         if b > 0.0 {
             println!("prediction / {name}: {:.3}×", pred_mean / b);
+        }
+    }
+    if let Some(twin_path) = &args.floor {
+        let twin = anims.last().context("the twin was read")?;
+        let b = floor_bound(&gt, twin, twin_path, &anims[0], &args.pred)?;
+        println!(
+            "the two ground truths apart: {:.3} mm over {} frames",
+            b.floor_mm, b.frames
+        );
+        println!(
+            "prediction against the twin: {:.3} mm; mean over both: {:.3} mm",
+            b.against_twin_mm,
+            b.two_truths_mm()
+        );
+        println!(
+            "least possible over both: {:.3} mm (half the floor: no prediction from the shared \
+             start averages less over the two ground truths)",
+            b.least_mm()
+        );
+        if b.least_mm() > 0.0 {
+            println!(
+                "prediction over both / least: {:.2}×",
+                b.two_truths_mm() / b.least_mm()
+            );
+        }
+        for (name, m) in series.iter().skip(1) {
+            let base = summarise(m).mean_mm;
+            if name != "floor" && base > 0.0 {
+                println!("least / {name}: {:.3}×", b.least_mm() / base);
+            }
         }
     }
     if let Some(path) = &args.csv {

@@ -265,6 +265,74 @@ pub fn compare(gt: &Animation, pred: &Animation, pred_path: &Path) -> Result<Vec
         .collect())
 }
 
+/// A prediction measured against two ground truths that share a start: a fine simulation and
+/// its twin (`clothsr fork`: the same simulation continued from one of its frames with the
+/// garment moved a fraction of a millimetre). Neither is more right than the other, so no
+/// prediction made from their shared start can be closer to both than half their distance on
+/// average: per vertex and frame |a − p| + |p − b| ≥ |a − b| (the triangle inequality).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FloorBound {
+    /// Frames measured: the prediction's frames that both ground truths have.
+    pub frames: usize,
+    /// The two ground truths' mean vertex distance over those frames (the floor), mm.
+    pub floor_mm: f64,
+    /// The prediction's mean vertex error against the ground truth, mm.
+    pub against_gt_mm: f64,
+    /// The same against the twin, mm.
+    pub against_twin_mm: f64,
+}
+
+impl FloorBound {
+    /// The least mean error, over the two ground truths, of any prediction: half the floor, mm.
+    pub fn least_mm(&self) -> f64 {
+        0.5 * self.floor_mm
+    }
+
+    /// The prediction's mean error over the two ground truths, mm (never below
+    /// [`FloorBound::least_mm`], but for rounding).
+    pub fn two_truths_mm(&self) -> f64 {
+        0.5 * (self.against_gt_mm + self.against_twin_mm)
+    }
+}
+
+/// The floor of `gt` and its `twin` and `pred`'s errors against both, over the prediction's
+/// frames that both have ([`FloorBound`]). Fails, naming the file, when the twin or the
+/// prediction is another cloth or no frame is shared.
+pub fn floor_bound(
+    gt: &Animation,
+    twin: &Animation,
+    twin_path: &Path,
+    pred: &Animation,
+    pred_path: &Path,
+) -> Result<FloorBound> {
+    gt.check_same_cloth(twin, twin_path)?;
+    gt.check_same_cloth(pred, pred_path)?;
+    let shared: Vec<(usize, usize, usize)> = pred
+        .time_codes
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &t)| Some((gt.frame_at(t)?, twin.frame_at(t)?, j)))
+        .collect();
+    if shared.is_empty() {
+        return Err(Error::bad_input(
+            twin_path,
+            "no frame of the prediction is in both the ground truth and this twin",
+        ));
+    }
+    let mean_mm =
+        |a: &[Vector3<f64>], b: &[Vector3<f64>]| mean_max_std(&vertex_errors(a, b)).0 * 1e3;
+    let n = shared.len() as f64;
+    let avg = |f: &dyn Fn(usize, usize, usize) -> f64| {
+        shared.iter().map(|&(i, k, j)| f(i, k, j)).sum::<f64>() / n
+    };
+    Ok(FloorBound {
+        frames: shared.len(),
+        floor_mm: avg(&|i, k, _| mean_mm(&gt.frames[i], &twin.frames[k])),
+        against_gt_mm: avg(&|i, _, j| mean_mm(&gt.frames[i], &pred.frames[j])),
+        against_twin_mm: avg(&|_, k, j| mean_mm(&twin.frames[k], &pred.frames[j])),
+    })
+}
+
 /// Averages over frames of one series.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Summary {
@@ -409,5 +477,62 @@ mod tests {
         assert!((s.mean_mm - 2.0).abs() < 1e-12);
         assert!((s.max_mm - 6.0).abs() < 1e-12);
         assert!((s.jitter_mm - 0.2).abs() < 1e-12 && (s.gt_jitter_mm - 0.4).abs() < 1e-12);
+    }
+
+    #[test]
+    fn no_prediction_is_closer_to_two_twins_than_half_their_distance() {
+        let anim = |frames: Vec<Vec<Vector3<f64>>>, t0: f64| Animation {
+            parts: vec![("/cloth".into(), 0..3)],
+            triangles: vec![[0, 1, 2]],
+            time_codes: (0..frames.len()).map(|k| t0 + k as f64).collect(),
+            frames,
+        };
+        let base = [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+        ];
+        let moved = |d: Vector3<f64>| -> Vec<Vector3<f64>> { base.iter().map(|p| p + d).collect() };
+        // Frames 1..=4; the twin is the ground truth moved 4 mm along x from frame 2 on (frame
+        // 1 shared), and has no frame 4.
+        let gt = anim((0..4).map(|_| moved(Vector3::zeros())).collect(), 1.0);
+        let twin = anim(
+            (0..3)
+                .map(|k| moved(Vector3::new(if k == 0 { 0.0 } else { 0.004 }, 0.0, 0.0)))
+                .collect(),
+            1.0,
+        );
+        // A prediction halfway between them, and frames 0..=4 (frame 0 in neither).
+        let half = anim(
+            (0..5)
+                .map(|_| moved(Vector3::new(0.002, 0.0, 0.0)))
+                .collect(),
+            0.0,
+        );
+        let (p, q) = (Path::new("twin"), Path::new("pred"));
+        let b = floor_bound(&gt, &twin, p, &half, q).expect("shared frames");
+        // Frames 1, 2, 3: the floor 0, 4, 4 mm.
+        assert_eq!(b.frames, 3);
+        assert!((b.floor_mm - 8.0 / 3.0).abs() < 1e-9, "{b:?}");
+        assert!((b.least_mm() - 4.0 / 3.0).abs() < 1e-9);
+        // Halfway is 2 mm from each where they differ, and meets the bound there; on the shared
+        // frame it is 2 mm from both where the bound is 0.
+        assert!((b.against_gt_mm - 2.0).abs() < 1e-9 && (b.against_twin_mm - 2.0).abs() < 1e-9);
+        assert!(b.two_truths_mm() >= b.least_mm());
+        // Predictions off the line between them, or nearer one truth, stay above the bound.
+        for d in [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(0.004, 0.0, 0.0),
+            Vector3::new(0.001, 0.003, -0.002),
+            Vector3::new(-0.01, 0.0, 0.0),
+        ] {
+            let pred = anim((0..4).map(|_| moved(d)).collect(), 1.0);
+            let b = floor_bound(&gt, &twin, p, &pred, q).expect("shared frames");
+            assert!(b.two_truths_mm() >= b.least_mm() - 1e-12, "{d:?}: {b:?}");
+        }
+        // Nothing shared: refused, naming the twin.
+        let late = anim(vec![moved(Vector3::zeros())], 9.0);
+        let err = floor_bound(&gt, &late, p, &half, q).expect_err("no shared frame");
+        assert!(err.to_string().contains("twin"), "{err}");
     }
 }
