@@ -1439,11 +1439,29 @@ impl Simulator {
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
             contacts = self.contacts(&x, colliders);
-            if it == 0 && self.restart_inside_vertices(&mut x, x_n) {
-                // Found again where those vertices now start, and their move measured from
-                // there.
-                contacts = self.contacts(&x, colliders);
-                x_start.clone_from(&x);
+            if it == 0 {
+                let restarted = self.restart_inside_vertices(&mut x, x_n);
+                if !restarted.is_empty() {
+                    // Found again where those vertices now start. Where the step's start is
+                    // deeper still (a body that moved into the cloth), the inertial start
+                    // stays: the restart is never deeper than the start it replaces.
+                    let guess_depths: Vec<f64> =
+                        restarted.iter().map(|&(_, depth)| depth).collect();
+                    contacts = self.contacts(&x, colliders);
+                    let depths = self.detector.vertex_depths();
+                    let mut kept = false;
+                    for (&(i, _), &guess_depth) in restarted.iter().zip(&guess_depths) {
+                        if depths.get(i).is_some_and(|&d| d > guess_depth) {
+                            x[i] = x_start[i];
+                            kept = true;
+                        }
+                    }
+                    if kept {
+                        contacts = self.contacts(&x, colliders);
+                    }
+                    // Their move is measured from where they now start.
+                    x_start.clone_from(&x);
+                }
             }
             if it == 0 {
                 damping.friction = self.friction_points(x_n, &contacts, motion);
@@ -1631,26 +1649,33 @@ impl Simulator {
     }
 
     /// Moves every free vertex that the last detection found inside a collider back to where
-    /// it began the step (`x_n`); returns whether any moved. The Newton start `xₙ + h vₙ`
-    /// carries cloth that lands on a body through its surface, and an inside vertex is pushed
-    /// out through the face nearest to it: near a sharp edge that is the wrong face. A sheet
-    /// landing flat on a table with a fifth of it over the edge (0.7 m/s) had its vertices
-    /// within 1.7 mm of the edge (a step's fall past the top) pushed out through the table's
-    /// side, and the membrane carried that push to the whole sheet: it slid towards the edge
-    /// at 0.36 m/s, more than twice what the overhang's momentum could give it, and ended 4 mm
-    /// further over. From `x_n` (outside, or as deep as the last step left it) the top face is
-    /// found and the move towards it is limited as any approach is ([`ClosingPair`]).
-    fn restart_inside_vertices(&self, x: &mut [Vector3<f64>], x_n: &[Vector3<f64>]) -> bool {
+    /// it began the step (`x_n`). Returns each moved vertex with its depth at the inertial
+    /// start.
+    ///
+    /// The Newton start `xₙ + h vₙ` carries cloth that lands on a body through its surface, and
+    /// an inside vertex is pushed out through the face nearest to it: near a sharp edge, the
+    /// wrong face. The held-out table drop at 2.5 mm (a fifth of the sheet over the edge,
+    /// landing at 0.72 m/s) had its vertices within 1.7 mm of the edge (a step's fall past the
+    /// top) pushed out through the table's side, and the membrane carried that push to the
+    /// whole sheet: it slid towards the edge at up to 0.38 m/s, two and a half times what the
+    /// overhang's momentum could give it, and ended 4 mm further over. From `x_n` (outside, or
+    /// as deep as the last step left it) the top face is found, and the move towards it is
+    /// limited as any approach is ([`ClosingPair`]).
+    fn restart_inside_vertices(
+        &self,
+        x: &mut [Vector3<f64>],
+        x_n: &[Vector3<f64>],
+    ) -> Vec<(usize, f64)> {
         let depths = self.detector.vertex_depths();
         if depths.len() != x.len() || !depths.iter().any(|&d| d > 0.0) {
-            return false;
+            return Vec::new();
         }
         let pinned: std::collections::HashSet<u32> = self.pins.iter().map(|p| p.v).collect();
-        let mut moved = false;
+        let mut moved = Vec::new();
         for (i, (&d, xi)) in depths.iter().zip(x.iter_mut()).enumerate() {
             if d > 0.0 && !pinned.contains(&(i as u32)) && *xi != x_n[i] {
                 *xi = x_n[i];
-                moved = true;
+                moved.push((i, d));
             }
         }
         moved
