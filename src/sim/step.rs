@@ -1372,6 +1372,17 @@ impl Simulator {
             .map(|i| x_n[i] + state.v[i] * h + g * (h * h))
             .collect();
         // Start from the inertial prediction without gravity: free flight is then one step away.
+        // Known artefact (session 33): cloth landing on a body is carried through its surface by
+        // this start, and an inside vertex is pushed out through its nearest face, which near a
+        // sharp edge is the wrong one. The held-out table drop at 2.5 mm (a fifth of the sheet
+        // over the edge, landing at 0.72 m/s) has its vertices near the edge pushed out through
+        // the table's side: the whole sheet slides towards the edge at up to 0.38 m/s (the
+        // overhang's momentum bounds it near 0.15) and rests 4 mm further over, and two such
+        // drops 0.1 mm apart end 5.6 mm apart on average. Restarting those vertices from x_n
+        // removes the slide (0.007 m/s; the drops' twins 1.9 mm apart) but makes the flap that
+        // hangs against the table's side jitter 4–9 mm a frame, with one more Newton iteration
+        // too; restarting only those deeper than d̂ leaves a third of the slide and some of the
+        // jitter. Not fixed yet.
         let mut x: Vec<Vector3<f64>> = (0..n).map(|i| x_n[i] + state.v[i] * h).collect();
         if self.params.collision.self_collision {
             // That start is a move like any Newton step's, and must not carry cloth through
@@ -1427,7 +1438,7 @@ impl Simulator {
             .collision
             .self_collision
             .then_some((0.5 * self.params.detection_margin_m).min(cap));
-        let mut x_start = x.clone();
+        let x_start = x.clone();
         let mut contacts = Vec::new();
         let mut energy = f64::NAN;
         // Each step's solve starts from zero. Starting from the last step's displacement cut
@@ -1439,30 +1450,6 @@ impl Simulator {
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
             contacts = self.contacts(&x, colliders);
-            if it == 0 {
-                let restarted = self.restart_inside_vertices(&mut x, x_n);
-                if !restarted.is_empty() {
-                    // Found again where those vertices now start. Where the step's start is
-                    // deeper still (a body that moved into the cloth), the inertial start
-                    // stays: the restart is never deeper than the start it replaces.
-                    let guess_depths: Vec<f64> =
-                        restarted.iter().map(|&(_, depth)| depth).collect();
-                    contacts = self.contacts(&x, colliders);
-                    let depths = self.detector.vertex_depths();
-                    let mut kept = false;
-                    for (&(i, _), &guess_depth) in restarted.iter().zip(&guess_depths) {
-                        if depths.get(i).is_some_and(|&d| d > guess_depth) {
-                            x[i] = x_start[i];
-                            kept = true;
-                        }
-                    }
-                    if kept {
-                        contacts = self.contacts(&x, colliders);
-                    }
-                    // Their move is measured from where they now start.
-                    x_start.clone_from(&x);
-                }
-            }
             if it == 0 {
                 damping.friction = self.friction_points(x_n, &contacts, motion);
             }
@@ -1646,39 +1633,6 @@ impl Simulator {
             v,
             t_s: state.t_s + h,
         })
-    }
-
-    /// Moves every free vertex that the last detection found inside a collider back to where
-    /// it began the step (`x_n`). Returns each moved vertex with its depth at the inertial
-    /// start.
-    ///
-    /// The Newton start `xₙ + h vₙ` carries cloth that lands on a body through its surface, and
-    /// an inside vertex is pushed out through the face nearest to it: near a sharp edge, the
-    /// wrong face. The held-out table drop at 2.5 mm (a fifth of the sheet over the edge,
-    /// landing at 0.72 m/s) had its vertices within 1.7 mm of the edge (a step's fall past the
-    /// top) pushed out through the table's side, and the membrane carried that push to the
-    /// whole sheet: it slid towards the edge at up to 0.38 m/s, two and a half times what the
-    /// overhang's momentum could give it, and ended 4 mm further over. From `x_n` (outside, or
-    /// as deep as the last step left it) the top face is found, and the move towards it is
-    /// limited as any approach is ([`ClosingPair`]).
-    fn restart_inside_vertices(
-        &self,
-        x: &mut [Vector3<f64>],
-        x_n: &[Vector3<f64>],
-    ) -> Vec<(usize, f64)> {
-        let depths = self.detector.vertex_depths();
-        if depths.len() != x.len() || !depths.iter().any(|&d| d > 0.0) {
-            return Vec::new();
-        }
-        let pinned: std::collections::HashSet<u32> = self.pins.iter().map(|p| p.v).collect();
-        let mut moved = Vec::new();
-        for (i, (&d, xi)) in depths.iter().zip(x.iter_mut()).enumerate() {
-            if d > 0.0 && !pinned.contains(&(i as u32)) && *xi != x_n[i] {
-                *xi = x_n[i];
-                moved.push((i, d));
-            }
-        }
-        moved
     }
 
     /// The lagged friction of a step ([`FrictionPoint`]): one per free cloth vertex touching a
