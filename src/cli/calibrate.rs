@@ -88,41 +88,26 @@ fn cells(c: &CoarseCalibration) -> [String; 5] {
 /// Checks each list of the grid on its own, as a calibration of that one setting would be
 /// checked, naming its option.
 fn check_lists(args: &Args) -> anyhow::Result<()> {
-    let d = CoarseCalibration::default;
-    let each = args
-        .compression
-        .iter()
-        .map(|&v| {
-            let cal = CoarseCalibration {
-                compression: Some(v),
-                ..d()
-            };
-            ("--compression", v, cal)
-        })
-        .chain(args.compression_knee.iter().map(|&v| {
-            let cal = CoarseCalibration {
-                compression_knee: Some(v),
-                ..d()
-            };
-            ("--compression-knee", v, cal)
-        }))
-        .chain(args.wrinkle_bending.iter().map(|&v| {
-            let cal = CoarseCalibration {
-                wrinkle_bending: Some(v),
-                ..d()
-            };
-            ("--wrinkle-bending", v, cal)
-        }))
-        .chain(args.bending.iter().map(|&v| {
-            let cal = CoarseCalibration {
-                bending: Some(v),
-                ..d()
-            };
-            ("--bending", v, cal)
-        }));
-    for (option, v, cal) in each {
-        cal.check()
-            .map_err(|e| anyhow::anyhow!("{option} {v}: {e}"))?;
+    type Set = fn(&mut CoarseCalibration, f64);
+    let lists: [(&str, &[f64], Set); 4] = [
+        ("--compression", &args.compression, |c, v| {
+            c.compression = Some(v)
+        }),
+        ("--compression-knee", &args.compression_knee, |c, v| {
+            c.compression_knee = Some(v)
+        }),
+        ("--wrinkle-bending", &args.wrinkle_bending, |c, v| {
+            c.wrinkle_bending = Some(v)
+        }),
+        ("--bending", &args.bending, |c, v| c.bending = Some(v)),
+    ];
+    for (option, values, set) in lists {
+        for &v in values {
+            let mut cal = CoarseCalibration::default();
+            set(&mut cal, v);
+            cal.check()
+                .map_err(|e| anyhow::anyhow!("{option} {v}: {e}"))?;
+        }
     }
     anyhow::ensure!(args.frames != Some(0), "--frames must be at least 1");
     Ok(())
