@@ -7,6 +7,7 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 
+use crate::corrector::rollout::mean_distance_mm;
 use crate::error::{Error, Result};
 use crate::io::usd::{read_usd, MeshRole};
 use crate::transfer::vertex_normals;
@@ -319,17 +320,15 @@ pub fn floor_bound(
             "no frame of the prediction is in both the ground truth and this twin",
         ));
     }
-    let mean_mm =
-        |a: &[Vector3<f64>], b: &[Vector3<f64>]| mean_max_std(&vertex_errors(a, b)).0 * 1e3;
     let n = shared.len() as f64;
     let avg = |f: &dyn Fn(usize, usize, usize) -> f64| {
         shared.iter().map(|&(i, k, j)| f(i, k, j)).sum::<f64>() / n
     };
     Ok(FloorBound {
         frames: shared.len(),
-        floor_mm: avg(&|i, k, _| mean_mm(&gt.frames[i], &twin.frames[k])),
-        against_gt_mm: avg(&|i, _, j| mean_mm(&gt.frames[i], &pred.frames[j])),
-        against_twin_mm: avg(&|_, k, j| mean_mm(&twin.frames[k], &pred.frames[j])),
+        floor_mm: avg(&|i, k, _| mean_distance_mm(&gt.frames[i], &twin.frames[k])),
+        against_gt_mm: avg(&|i, _, j| mean_distance_mm(&gt.frames[i], &pred.frames[j])),
+        against_twin_mm: avg(&|_, k, j| mean_distance_mm(&twin.frames[k], &pred.frames[j])),
     })
 }
 
