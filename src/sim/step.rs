@@ -1306,14 +1306,21 @@ impl Simulator {
         });
     }
 
-    fn contacts(&mut self, x: &[Vector3<f64>], colliders: &[ColliderFrame<'_>]) -> Vec<Contact> {
+    /// The contacts at `x` of cloth that began the step at `x_n`.
+    fn contacts(
+        &mut self,
+        x: &[Vector3<f64>],
+        x_n: &[Vector3<f64>],
+        colliders: &[ColliderFrame<'_>],
+    ) -> Vec<Contact> {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
         let mut params = self.params.collision;
         let self_margin = self.self_margin_m();
         params.dhat_m += self_margin;
         self.detector.obstacle_extra_m = (self.obstacle_margin_m - self_margin).max(0.0);
-        let mut contacts = self.detector.find_contacts(
+        let mut contacts = self.detector.find_contacts_since(
             x,
+            x_n,
             &self.model.mesh.triangles,
             &self.model.edges,
             &bodies,
@@ -1372,17 +1379,10 @@ impl Simulator {
             .map(|i| x_n[i] + state.v[i] * h + g * (h * h))
             .collect();
         // Start from the inertial prediction without gravity: free flight is then one step away.
-        // Known artefact (session 33): cloth landing on a body is carried through its surface by
-        // this start, and an inside vertex is pushed out through its nearest face, which near a
-        // sharp edge is the wrong one. The held-out table drop at 2.5 mm (a fifth of the sheet
-        // over the edge, landing at 0.72 m/s) has its vertices near the edge pushed out through
-        // the table's side: the whole sheet slides towards the edge at up to 0.38 m/s (the
-        // overhang's momentum bounds it near 0.15) and rests 4 mm further over, and two such
-        // drops 0.1 mm apart end 5.6 mm apart on average. Restarting those vertices from x_n
-        // removes the slide (0.007 m/s; the drops' twins 1.9 mm apart) but makes the flap that
-        // hangs against the table's side jitter 4–9 mm a frame, with one more Newton iteration
-        // too; restarting only those deeper than d̂ leaves a third of the slide and some of the
-        // jitter. Not fixed yet.
+        // Cloth landing on a body is carried through its surface by this start; contacts are
+        // found knowing where each vertex began the step, so that one that came in through a
+        // table's top near its edge is pushed back out through the top, not through the side
+        // nearest to it ([`CollisionDetector::find_contacts_since`]).
         let mut x: Vec<Vector3<f64>> = (0..n).map(|i| x_n[i] + state.v[i] * h).collect();
         if self.params.collision.self_collision {
             // That start is a move like any Newton step's, and must not carry cloth through
@@ -1449,7 +1449,7 @@ impl Simulator {
         let t_newton = std::time::Instant::now();
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
-            contacts = self.contacts(&x, colliders);
+            contacts = self.contacts(&x, x_n, colliders);
             if it == 0 {
                 damping.friction = self.friction_points(x_n, &contacts, motion);
             }

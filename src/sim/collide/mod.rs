@@ -22,7 +22,15 @@
 //!   within d̂ whose plane it is above (n·(p − a) ≥ 0). An *inside* vertex (penetration depth
 //!   δ = distance to the nearest face) gets a contact with every face within δ + d̂ that it
 //!   projects into and is below: the signed distance is then negative and the repulsion pushes
-//!   it out along +n. Vertices deeper than [`OBSTACLE_SEARCH_M`] are not found (and not pushed).
+//!   it out along +n. Near a sharp edge those faces can be the wrong ones: a vertex that came
+//!   in through a table's top within a step's travel of its edge is near the side too, or
+//!   nearer it. When the detector knows where the vertex began the step
+//!   ([`CollisionDetector::find_contacts_since`]), the first face its path from there crossed
+//!   (the entry face) decides: faces at more than [`SHARP_EDGE_DEG`] to it get no contact, and
+//!   when the nearest face is one of those, the depth and the search are measured from the
+//!   entry face's plane, so the vertex goes back out the way it came. On smooth bodies, whose
+//!   neighbouring faces meet at less than that, nothing changes. Vertices deeper than
+//!   [`OBSTACLE_SEARCH_M`] are not found (and not pushed).
 //!   Only cloth vertices are tested against collider faces (no collider-vertex/edge against
 //!   cloth face/edge contacts).
 //! * **Self** (cloth against cloth, unsigned distance): vertex–triangle pairs (vertex not in the
@@ -211,7 +219,18 @@ pub fn max_penetration(cloth_x: &[Vector3<f64>], colliders: &[Collider<'_>]) -> 
             bvhs.iter()
                 .zip(colliders)
                 .map(|(bvh, (pts, tris))| {
-                    classify_vertex(p, pts, tris, bvh, 0.0, OBSTACLE_SEARCH_M, scratch, |_| {}).0
+                    classify_vertex(
+                        p,
+                        None,
+                        pts,
+                        tris,
+                        bvh,
+                        0.0,
+                        OBSTACLE_SEARCH_M,
+                        scratch,
+                        |_| {},
+                    )
+                    .0
                 })
                 .fold(0.0, f64::max)
         })
@@ -272,8 +291,9 @@ fn segment_crosses_triangle(
     (0.0..=1.0).contains(&u) && v >= 0.0 && u + v <= 1.0 && (0.0..=1.0).contains(&w)
 }
 
-/// Boxes of edges, inflated by `r`.
-/// Collider edges whose two faces meet at more than this angle (degrees) get edge contacts.
+/// Collider edges whose two faces meet at more than this angle (degrees) get edge contacts,
+/// and no face at more than this angle to the one an inside vertex came in through pushes
+/// it out ([`CollisionDetector::find_contacts_since`]).
 pub const SHARP_EDGE_DEG: f64 = 30.0;
 
 /// Edges of a triangle mesh whose adjacent face normals differ by more than `angle_deg`, plus
@@ -338,6 +358,7 @@ fn sharp_edges_of(
         .collect()
 }
 
+/// Boxes of edges, inflated by `r`.
 fn edge_boxes(pts: &[Vector3<f64>], edges: &[[u32; 2]], r: f64) -> Vec<Aabb> {
     edges
         .par_iter()
@@ -356,12 +377,42 @@ fn corner_angle(x: &[Vector3<f64>; 3], k: usize) -> f64 {
     e1.angle(&e2)
 }
 
+/// The face of a collider through which the path `start` → `p` first enters it: its unit
+/// normal, and how far `p` is below its plane. A face counts where `start` is on or
+/// above its plane, `p` below it, and the path passes through the triangle.
+fn entry_face(
+    start: &Vector3<f64>,
+    p: &Vector3<f64>,
+    pts: &[Vector3<f64>],
+    tris: &[[u32; 3]],
+    bvh: &Bvh,
+) -> Option<(Vector3<f64>, f64)> {
+    let mut first: Option<(f64, Vector3<f64>, f64)> = None;
+    bvh.query(&Aabb::from_points([start, p]), |t| {
+        let [a, b, c] = tri_points(pts, &tris[t as usize]);
+        let Some(n) = (b - a).cross(&(c - a)).try_normalize(0.0) else {
+            return;
+        };
+        let (above, below) = (n.dot(&(start - a)), -n.dot(&(p - a)));
+        if above < 0.0 || below <= 0.0 || !segment_crosses_triangle(start, p, &a, &b, &c) {
+            return;
+        }
+        let at = above / (above + below);
+        if first.is_none_or(|f| at < f.0) {
+            first = Some((at, n, below));
+        }
+    });
+    first.map(|(_, n, below)| (n, below))
+}
+
 /// Classifies cloth point `p` against one collider and calls `emit(face)` for each contact
-/// face (module docs); `cands` is scratch space. Returns the penetration depth (0 when outside
-/// or farther than `search`).
+/// face (module docs); `start`, where `p` began the step, gives the face an inside point came
+/// in through. `cands` is scratch space. Returns the penetration depth (0
+/// when outside or farther than `search`) and the clearance (0 when inside).
 #[allow(clippy::too_many_arguments)]
 fn classify_vertex(
     p: &Vector3<f64>,
+    start: Option<&Vector3<f64>>,
     pts: &[Vector3<f64>],
     tris: &[[u32; 3]],
     bvh: &Bvh,
@@ -435,15 +486,49 @@ fn classify_vertex(
     }
     let inside = umin > 0.0 && q.is_some_and(|q| (p - q).dot(&pseudo) < 0.0);
     if inside {
-        if rho < umin + dhat {
-            gather(umin + dhat, cands);
+        // Where it is known, the face the vertex came in through decides which faces push it
+        // out: those that meet it at a sharp angle do not (a vertex that came in through a
+        // table's top near its edge is not pushed sideways by the side, nor one that came in
+        // through the side upwards by the top). When even its nearest face is one of those,
+        // it goes out the way it came, through the entry face's plane.
+        let cos_sharp = SHARP_EDGE_DEG.to_radians().cos();
+        let entry = start
+            .filter(|s| *s != p)
+            .and_then(|s| entry_face(s, p, pts, tris, bvh));
+        let turned = entry.filter(|(n0, _)| {
+            pseudo
+                .try_normalize(0.0)
+                .is_some_and(|m| m.dot(n0) < cos_sharp)
+        });
+        let (depth, reach) = match turned {
+            Some((_, below)) => (below, below + dhat),
+            None => (umin, umin + dhat),
+        };
+        if rho < reach {
+            gather(reach, cands);
         }
+        let mut found = false;
         for (t, e) in cands.iter() {
-            if e.projects_inside && e.signed_plane < 0.0 {
+            let aligned =
+                entry.is_none_or(|(n0, _)| e.normal.is_some_and(|n| n.dot(&n0) >= cos_sharp));
+            if e.projects_inside && e.signed_plane < 0.0 && aligned {
                 emit(*t);
+                found = true;
             }
         }
-        (umin, 0.0)
+        if !found && entry.is_some() {
+            // No face in line with the entry lies over it: the nearest faces, as without one.
+            if rho.max(reach) < umin + dhat {
+                gather(umin + dhat, cands);
+            }
+            for (t, e) in cands.iter() {
+                if e.projects_inside && e.signed_plane < 0.0 {
+                    emit(*t);
+                }
+            }
+            return (umin, 0.0);
+        }
+        (depth, 0.0)
     } else {
         for (t, e) in cands.iter() {
             if e.signed_plane >= 0.0 && e.closest.dist < dhat {
@@ -631,6 +716,36 @@ impl CollisionDetector {
         colliders: &[Collider<'_>],
         params: &CollisionParams,
     ) -> Vec<Contact> {
+        self.find_contacts_impl(cloth_x, None, cloth_tris, cloth_edges, colliders, params)
+    }
+
+    /// As [`CollisionDetector::find_contacts`], knowing where each cloth vertex began the step
+    /// (`cloth_start`, as long as `cloth_x`): a vertex inside a collider is pushed out only by
+    /// faces in line with the one it came in through, back out the way it came (module
+    /// docs). The path is taken against the colliders where they are now: a body that moved
+    /// into the cloth leaves the path starting inside, and the nearest face holds as before.
+    pub fn find_contacts_since(
+        &mut self,
+        cloth_x: &[Vector3<f64>],
+        cloth_start: &[Vector3<f64>],
+        cloth_tris: &[[u32; 3]],
+        cloth_edges: &[[u32; 2]],
+        colliders: &[Collider<'_>],
+        params: &CollisionParams,
+    ) -> Vec<Contact> {
+        let start = (cloth_start.len() == cloth_x.len()).then_some(cloth_start);
+        self.find_contacts_impl(cloth_x, start, cloth_tris, cloth_edges, colliders, params)
+    }
+
+    fn find_contacts_impl(
+        &mut self,
+        cloth_x: &[Vector3<f64>],
+        cloth_start: Option<&[Vector3<f64>]>,
+        cloth_tris: &[[u32; 3]],
+        cloth_edges: &[[u32; 2]],
+        colliders: &[Collider<'_>],
+        params: &CollisionParams,
+    ) -> Vec<Contact> {
         let dhat = params.dhat_m.max(0.0);
         let obstacle_dhat = dhat + self.obstacle_extra_m.max(0.0);
         let search = OBSTACLE_SEARCH_M.max(obstacle_dhat);
@@ -668,17 +783,27 @@ impl CollisionDetector {
                     return (0.0, Vec::new(), None);
                 }
                 let mut out = Vec::new();
+                let start = cloth_start.map(|s| &s[v]);
                 let (mut depth, mut clear): (f64, f64) = (0.0, f64::INFINITY);
                 for (k, (cache, (pts, tris))) in caches.iter().zip(colliders).enumerate() {
                     let bvh = &cache.bvh;
-                    let (d, u) =
-                        classify_vertex(p, pts, tris, bvh, obstacle_dhat, search, scratch, |t| {
+                    let (d, u) = classify_vertex(
+                        p,
+                        start,
+                        pts,
+                        tris,
+                        bvh,
+                        obstacle_dhat,
+                        search,
+                        scratch,
+                        |t| {
                             out.push(Contact::VertexObstacle {
                                 v: v as u32,
                                 tri: tri_points(pts, &tris[t as usize]),
                                 face: [k as u32, t],
                             })
-                        });
+                        },
+                    );
                     depth = depth.max(d);
                     clear = clear.min(u);
                 }
@@ -1150,9 +1275,8 @@ mod tests {
         (want, deepest)
     }
 
-    #[test]
-    fn cube_edges_and_corners_match_brute_force() {
-        // A cube [−0.1, 0.1]³, two counter-clockwise triangles per face.
+    /// A cube [−0.1, 0.1]³, two counter-clockwise triangles per face.
+    fn cube() -> (Vec<Vector3<f64>>, Vec<[u32; 3]>) {
         let pts: Vec<Vector3<f64>> = (0..8)
             .map(|i| {
                 let c = |b: usize| if i & b != 0 { 0.1 } else { -0.1 };
@@ -1171,6 +1295,128 @@ mod tests {
             .iter()
             .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
             .collect();
+        (pts, tris)
+    }
+
+    /// A vertex that a step carried 1.7 mm through a cube's top, 0.5 mm in from its side, is
+    /// nearer the side: found alone it is pushed out sideways (a sheet landing on a table slid
+    /// off it so). Knowing where it began the step, it goes back out through the top, and
+    /// vertices whose nearest face is the one they came in by, or that began inside, are found
+    /// as before.
+    #[test]
+    fn a_vertex_that_came_in_through_the_top_near_an_edge_goes_back_out_through_it() {
+        let (pts, tris) = cube();
+        let params = CollisionParams {
+            dhat_m: 0.001,
+            kappa: 1e3,
+            self_collision: false,
+        };
+        let bodies = [(pts.as_slice(), tris.as_slice())];
+        let normals = |contacts: &[Contact]| -> Vec<Vector3<f64>> {
+            contacts
+                .iter()
+                .map(|c| match c {
+                    Contact::VertexObstacle { tri: [a, b, c], .. } => {
+                        (b - a).cross(&(c - a)).normalize()
+                    }
+                    other => panic!("not a vertex–obstacle contact: {other:?}"),
+                })
+                .collect()
+        };
+        let faces = |contacts: &[Contact]| -> Vec<[u32; 2]> {
+            contacts
+                .iter()
+                .filter_map(|c| match c {
+                    Contact::VertexObstacle { face, .. } => Some(*face),
+                    _ => None,
+                })
+                .collect()
+        };
+        let mut det = CollisionDetector::new();
+        let p = Vector3::new(0.0995, 0.0983, 0.02);
+        let above = Vector3::new(0.098, 0.1004, 0.021);
+        let alone = det.find_contacts(&[p], &[], &[], &bodies, &params);
+        assert!(!alone.is_empty());
+        for n in normals(&alone) {
+            assert!((n - Vector3::x()).norm() < 1e-12, "nearest face {n}");
+        }
+        assert!((det.vertex_depths()[0] - 0.0005).abs() < 1e-12);
+
+        let since = det.find_contacts_since(&[p], &[above], &[], &[], &bodies, &params);
+        assert!(!since.is_empty());
+        for n in normals(&since) {
+            assert!((n - Vector3::y()).norm() < 1e-12, "entry face {n}");
+        }
+        assert!((det.vertex_depths()[0] - 0.0017).abs() < 1e-12);
+        // Pushed up, not sideways: the repulsion's force on the vertex is along +y.
+        let force: Vector3<f64> = since
+            .iter()
+            .map(|c| {
+                let (_, g, _) = c.energy_gradient_hessian(&[p], &params);
+                -Vector3::new(g[0], g[1], g[2])
+            })
+            .sum();
+        assert!(
+            force.y > 0.0 && force.x.abs() < 1e-9 * force.y,
+            "force {force}"
+        );
+
+        // Came in through the side: its nearest face, as before.
+        let beside = Vector3::new(0.1004, 0.0983, 0.02);
+        let side = det.find_contacts_since(&[p], &[beside], &[], &[], &bodies, &params);
+        assert_eq!(faces(&side), faces(&alone));
+        // Began inside (a body that moved onto it): as before.
+        let inside = Vector3::new(0.0990, 0.0990, 0.02);
+        let began_in = det.find_contacts_since(&[p], &[inside], &[], &[], &bodies, &params);
+        assert_eq!(faces(&began_in), faces(&alone));
+        // Deep in the cube's middle, from above: the top is both nearest and entry.
+        let q = Vector3::new(0.0, 0.098, 0.0);
+        let middle = det.find_contacts_since(
+            &[q],
+            &[q + Vector3::y() * 0.003],
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
+        assert_eq!(
+            faces(&middle),
+            faces(&det.find_contacts(&[q], &[], &[], &bodies, &params))
+        );
+        // A start of another length than the positions is not used.
+        let wrong = det.find_contacts_since(&[p], &[above, above], &[], &[], &bodies, &params);
+        assert_eq!(faces(&wrong), faces(&alone));
+        // Nearer the top it came in by, but within reach of the side: found alone, the side
+        // pushes it too; knowing where it came from, only the top does.
+        let r = Vector3::new(0.0985, 0.0990, 0.02);
+        let alone = det.find_contacts(&[r], &[], &[], &bodies, &params);
+        assert!(normals(&alone)
+            .iter()
+            .any(|n| (n - Vector3::x()).norm() < 1e-12));
+        let since = det.find_contacts_since(&[r], &[above], &[], &[], &bodies, &params);
+        assert!(!since.is_empty());
+        for n in normals(&since) {
+            assert!((n - Vector3::y()).norm() < 1e-12, "entry face {n}");
+        }
+        assert!((det.vertex_depths()[0] - 0.001).abs() < 1e-12);
+        // A faceted sphere: whichever way a vertex came in, the same contacts as alone.
+        let (spts, stris) = sphere(Vector3::zeros(), 0.1, 8);
+        let ball = [(spts.as_slice(), stris.as_slice())];
+        let mut rng = Lcg(5);
+        for _ in 0..200 {
+            let dir = rng.v3(1.0).normalize();
+            let p = dir * (0.099 - 0.002 * rng.next());
+            let from = p + rng.v3(0.004) + dir * 0.004;
+            let alone = det.find_contacts(&[p], &[], &[], &ball, &params);
+            let since = det.find_contacts_since(&[p], &[from], &[], &[], &ball, &params);
+            assert!(!alone.is_empty());
+            assert_eq!(faces(&since), faces(&alone), "at {p} from {from}");
+        }
+    }
+
+    #[test]
+    fn cube_edges_and_corners_match_brute_force() {
+        let (pts, tris) = cube();
         for t in &tris {
             let [a, b, c] = tri_points(&pts, t);
             assert!(
