@@ -21,7 +21,7 @@ use rayon::prelude::*;
 use super::collide::distance::{point_triangle, segment_segment};
 use super::collide::repulsion::vertex_obstacle_jet;
 use super::collide::{
-    edge_triangle_crossings, Collider, CollisionDetector, CollisionParams, Contact,
+    edge_triangle_crossings, Collider, CollisionDetector, CollisionParams, Contact, StepStart,
 };
 use super::energy::bending::{self, BendingHessian};
 use super::energy::{sewing, Mat12, Vec12, Vec9};
@@ -1306,11 +1306,11 @@ impl Simulator {
         });
     }
 
-    /// The contacts at `x` of cloth that began the step at `x_n`.
+    /// The contacts at `x` of cloth that began the step at `x_n` ([`StepStart`]).
     fn contacts(
         &mut self,
         x: &[Vector3<f64>],
-        x_n: &[Vector3<f64>],
+        since: StepStart<'_>,
         colliders: &[ColliderFrame<'_>],
     ) -> Vec<Contact> {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
@@ -1320,7 +1320,7 @@ impl Simulator {
         self.detector.obstacle_extra_m = (self.obstacle_margin_m - self_margin).max(0.0);
         let mut contacts = self.detector.find_contacts_since(
             x,
-            x_n,
+            since,
             &self.model.mesh.triangles,
             &self.model.edges,
             &bodies,
@@ -1381,9 +1381,12 @@ impl Simulator {
         // Start from the inertial prediction without gravity: free flight is then one step away.
         // Cloth landing on a body is carried through its surface by this start; contacts are
         // found knowing where each vertex began the step, so that one that came in through a
-        // table's top near its edge is pushed back out through the top, not through the side
-        // nearest to it ([`CollisionDetector::find_contacts_since`]).
+        // still table's top near its edge is pushed back out through the top, not through the
+        // side nearest to it ([`CollisionDetector::find_contacts_since`]).
         let mut x: Vec<Vector3<f64>> = (0..n).map(|i| x_n[i] + state.v[i] * h).collect();
+        let still: Vec<bool> = (motion.start.iter().zip(motion.end))
+            .map(|(a, b)| a.points == b.points)
+            .collect();
         if self.params.collision.self_collision {
             // That start is a move like any Newton step's, and must not carry cloth through
             // cloth: layers closing faster than their gap per step crossed in the initial
@@ -1449,7 +1452,14 @@ impl Simulator {
         let t_newton = std::time::Instant::now();
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
-            contacts = self.contacts(&x, x_n, colliders);
+            contacts = self.contacts(
+                &x,
+                StepStart {
+                    x: x_n,
+                    still: &still,
+                },
+                colliders,
+            );
             if it == 0 {
                 damping.friction = self.friction_points(x_n, &contacts, motion);
             }

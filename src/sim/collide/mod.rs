@@ -24,13 +24,15 @@
 //!   projects into and is below: the signed distance is then negative and the repulsion pushes
 //!   it out along +n. Near a sharp edge those faces can be the wrong ones: a vertex that came
 //!   in through a table's top within a step's travel of its edge is near the side too, or
-//!   nearer it. When the detector knows where the vertex began the step
-//!   ([`CollisionDetector::find_contacts_since`]), the first face its path from there crossed
-//!   (the entry face) decides: faces at more than [`SHARP_EDGE_DEG`] to it get no contact, and
-//!   when the nearest face is one of those, the depth and the search are measured from the
-//!   entry face's plane, so the vertex goes back out the way it came. On smooth bodies, whose
-//!   neighbouring faces meet at less than that, nothing changes. Vertices deeper than
-//!   [`OBSTACLE_SEARCH_M`] are not found (and not pushed).
+//!   nearer it. When the detector knows where the vertex began the step and the collider held
+//!   still ([`CollisionDetector::find_contacts_since`]), the last face its path from there
+//!   went in through (the entry face) decides: faces at more than [`SHARP_EDGE_DEG`] to it get
+//!   no contact, and when the nearest face is one of those, depth and reach are measured from
+//!   the entry face's plane, so the vertex goes back out the way it came (if no face in line
+//!   with the entry lies over it, the rule above holds). Where every face within reach lies
+//!   within that angle of the entry face (a finely tessellated smooth body) nothing changes;
+//!   against a moving body the rule above holds, as the path would have to be taken in the
+//!   body's frame. Vertices deeper than [`OBSTACLE_SEARCH_M`] are not found (and not pushed).
 //!   Only cloth vertices are tested against collider faces (no collider-vertex/edge against
 //!   cloth face/edge contacts).
 //! * **Self** (cloth against cloth, unsigned distance): vertex–triangle pairs (vertex not in the
@@ -64,6 +66,16 @@ pub const OBSTACLE_SEARCH_M: f64 = 0.05;
 /// A collider at the current time: its points and its triangles (counter-clockwise seen from
 /// outside).
 pub type Collider<'a> = (&'a [Vector3<f64>], &'a [[u32; 3]]);
+
+/// Where each cloth vertex began the step ([`CollisionDetector::find_contacts_since`]), and
+/// which colliders held still over it (their points the same at its start and end).
+#[derive(Debug, Clone, Copy)]
+pub struct StepStart<'a> {
+    /// Cloth positions at the start of the step, as many as the cloth's.
+    pub x: &'a [Vector3<f64>],
+    /// Per collider: whether it held still.
+    pub still: &'a [bool],
+}
 
 /// One active contact. Cloth vertices are indices into the cloth's positions; collider points
 /// are copied in.
@@ -377,9 +389,11 @@ fn corner_angle(x: &[Vector3<f64>; 3], k: usize) -> f64 {
     e1.angle(&e2)
 }
 
-/// The face of a collider through which the path `start` → `p` first enters it: its unit
-/// normal, and how far `p` is below its plane. A face counts where `start` is on or
-/// above its plane, `p` below it, and the path passes through the triangle.
+/// The face of a collider through which the path `start` → `p` last went in: its unit
+/// normal, and how far `p` is below its plane. A face counts where `start` is on or above its
+/// plane, `p` below it, and the path passes through the triangle; of several (a path in, out
+/// and in again), the last is the one the region `p` is in was entered by. Slivers, whose
+/// normals are noise, do not count.
 fn entry_face(
     start: &Vector3<f64>,
     p: &Vector3<f64>,
@@ -387,28 +401,37 @@ fn entry_face(
     tris: &[[u32; 3]],
     bvh: &Bvh,
 ) -> Option<(Vector3<f64>, f64)> {
-    let mut first: Option<(f64, Vector3<f64>, f64)> = None;
+    let mut last: Option<(f64, Vector3<f64>, f64)> = None;
     bvh.query(&Aabb::from_points([start, p]), |t| {
         let [a, b, c] = tri_points(pts, &tris[t as usize]);
-        let Some(n) = (b - a).cross(&(c - a)).try_normalize(0.0) else {
+        let nrm = (b - a).cross(&(c - a));
+        let emax = (b - a)
+            .norm_squared()
+            .max((c - a).norm_squared())
+            .max((c - b).norm_squared());
+        let n2 = nrm.norm_squared();
+        // As `obstacle_eval_with`, which gives such faces no normal (and so no contact).
+        if n2.is_nan() || n2 <= 1e-14 * emax * emax {
             return;
-        };
+        }
+        let n = nrm / n2.sqrt();
         let (above, below) = (n.dot(&(start - a)), -n.dot(&(p - a)));
         if above < 0.0 || below <= 0.0 || !segment_crosses_triangle(start, p, &a, &b, &c) {
             return;
         }
         let at = above / (above + below);
-        if first.is_none_or(|f| at < f.0) {
-            first = Some((at, n, below));
+        if last.is_none_or(|f| at > f.0) {
+            last = Some((at, n, below));
         }
     });
-    first.map(|(_, n, below)| (n, below))
+    last.map(|(_, n, below)| (n, below))
 }
 
 /// Classifies cloth point `p` against one collider and calls `emit(face)` for each contact
-/// face (module docs); `start`, where `p` began the step, gives the face an inside point came
-/// in through. `cands` is scratch space. Returns the penetration depth (0
-/// when outside or farther than `search`) and the clearance (0 when inside).
+/// face (module docs); `start`, where `p` began the step against this collider (`None`: not
+/// known), gives the face an inside point came in through. `cands` is scratch space. Returns
+/// the penetration depth (0 when outside or farther than `search`; below the entry face's
+/// plane when the nearest face is turned away from it) and the clearance (0 when inside).
 #[allow(clippy::too_many_arguments)]
 fn classify_vertex(
     p: &Vector3<f64>,
@@ -490,7 +513,7 @@ fn classify_vertex(
         // out: those that meet it at a sharp angle do not (a vertex that came in through a
         // table's top near its edge is not pushed sideways by the side, nor one that came in
         // through the side upwards by the top). When even its nearest face is one of those,
-        // it goes out the way it came, through the entry face's plane.
+        // it goes out the way it came: depth and reach are measured from the entry plane.
         let cos_sharp = SHARP_EDGE_DEG.to_radians().cos();
         let entry = start
             .filter(|s| *s != p)
@@ -500,35 +523,43 @@ fn classify_vertex(
                 .try_normalize(0.0)
                 .is_some_and(|m| m.dot(n0) < cos_sharp)
         });
+        // Without an entry face: every face within the nearest one's distance plus d̂ (or the
+        // faces already gathered, if further) that the vertex projects into and is below.
+        let nearest_reach = rho.max(umin + dhat);
         let (depth, reach) = match turned {
             Some((_, below)) => (below, below + dhat),
-            None => (umin, umin + dhat),
+            None => (umin, nearest_reach),
         };
-        if rho < reach {
+        let mut gathered = rho;
+        if gathered < reach {
             gather(reach, cands);
+            gathered = reach;
         }
+        let pushes = |e: &ObstacleEval, r: f64| {
+            e.projects_inside && e.signed_plane < 0.0 && e.closest.dist <= r
+        };
         let mut found = false;
         for (t, e) in cands.iter() {
             let aligned =
                 entry.is_none_or(|(n0, _)| e.normal.is_some_and(|n| n.dot(&n0) >= cos_sharp));
-            if e.projects_inside && e.signed_plane < 0.0 && aligned {
+            if pushes(e, reach) && aligned {
                 emit(*t);
                 found = true;
             }
         }
-        if !found && entry.is_some() {
-            // No face in line with the entry lies over it: the nearest faces, as without one.
-            if rho.max(reach) < umin + dhat {
-                gather(umin + dhat, cands);
-            }
-            for (t, e) in cands.iter() {
-                if e.projects_inside && e.signed_plane < 0.0 {
-                    emit(*t);
-                }
-            }
-            return (umin, 0.0);
+        if found || entry.is_none() {
+            return (depth, 0.0);
         }
-        (depth, 0.0)
+        // No face in line with the entry lies over it: the faces it would have without one.
+        if gathered < nearest_reach {
+            gather(nearest_reach, cands);
+        }
+        for (t, e) in cands.iter() {
+            if pushes(e, nearest_reach) {
+                emit(*t);
+            }
+        }
+        (umin, 0.0)
     } else {
         for (t, e) in cands.iter() {
             if e.signed_plane >= 0.0 && e.closest.dist < dhat {
@@ -639,7 +670,8 @@ impl CollisionDetector {
     }
 
     /// The deepest collider penetration seen by the last [`CollisionDetector::find_contacts`]
-    /// (as [`max_penetration`], searched to max(d̂, [`OBSTACLE_SEARCH_M`])).
+    /// or [`CollisionDetector::find_contacts_since`] (as [`max_penetration`], searched to
+    /// max(d̂, [`OBSTACLE_SEARCH_M`]); below the entry face's plane where that decided).
     pub fn max_penetration(&self) -> f64 {
         self.depth.iter().copied().fold(0.0, f64::max)
     }
@@ -720,27 +752,25 @@ impl CollisionDetector {
     }
 
     /// As [`CollisionDetector::find_contacts`], knowing where each cloth vertex began the step
-    /// (`cloth_start`, as long as `cloth_x`): a vertex inside a collider is pushed out only by
-    /// faces in line with the one it came in through, back out the way it came (module
-    /// docs). The path is taken against the colliders where they are now: a body that moved
-    /// into the cloth leaves the path starting inside, and the nearest face holds as before.
+    /// ([`StepStart`]): a vertex inside a collider that held still is pushed out only by faces
+    /// in line with the one it came in through, back out the way it came (module docs).
     pub fn find_contacts_since(
         &mut self,
         cloth_x: &[Vector3<f64>],
-        cloth_start: &[Vector3<f64>],
+        since: StepStart<'_>,
         cloth_tris: &[[u32; 3]],
         cloth_edges: &[[u32; 2]],
         colliders: &[Collider<'_>],
         params: &CollisionParams,
     ) -> Vec<Contact> {
-        let start = (cloth_start.len() == cloth_x.len()).then_some(cloth_start);
-        self.find_contacts_impl(cloth_x, start, cloth_tris, cloth_edges, colliders, params)
+        let since = (since.x.len() == cloth_x.len()).then_some(since);
+        self.find_contacts_impl(cloth_x, since, cloth_tris, cloth_edges, colliders, params)
     }
 
     fn find_contacts_impl(
         &mut self,
         cloth_x: &[Vector3<f64>],
-        cloth_start: Option<&[Vector3<f64>]>,
+        since: Option<StepStart<'_>>,
         cloth_tris: &[[u32; 3]],
         cloth_edges: &[[u32; 2]],
         colliders: &[Collider<'_>],
@@ -783,10 +813,14 @@ impl CollisionDetector {
                     return (0.0, Vec::new(), None);
                 }
                 let mut out = Vec::new();
-                let start = cloth_start.map(|s| &s[v]);
                 let (mut depth, mut clear): (f64, f64) = (0.0, f64::INFINITY);
                 for (k, (cache, (pts, tris))) in caches.iter().zip(colliders).enumerate() {
                     let bvh = &cache.bvh;
+                    // Only against a body that held still: against a moving one the path
+                    // would have to be taken in the body's own frame.
+                    let start = since
+                        .filter(|st| st.still.get(k).copied().unwrap_or(false))
+                        .map(|st| &st.x[v]);
                     let (d, u) = classify_vertex(
                         p,
                         start,
@@ -1342,7 +1376,17 @@ mod tests {
         }
         assert!((det.vertex_depths()[0] - 0.0005).abs() < 1e-12);
 
-        let since = det.find_contacts_since(&[p], &[above], &[], &[], &bodies, &params);
+        let since = det.find_contacts_since(
+            &[p],
+            StepStart {
+                x: &[above],
+                still: &[true],
+            },
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
         assert!(!since.is_empty());
         for n in normals(&since) {
             assert!((n - Vector3::y()).norm() < 1e-12, "entry face {n}");
@@ -1363,17 +1407,40 @@ mod tests {
 
         // Came in through the side: its nearest face, as before.
         let beside = Vector3::new(0.1004, 0.0983, 0.02);
-        let side = det.find_contacts_since(&[p], &[beside], &[], &[], &bodies, &params);
+        let side = det.find_contacts_since(
+            &[p],
+            StepStart {
+                x: &[beside],
+                still: &[true],
+            },
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
         assert_eq!(faces(&side), faces(&alone));
         // Began inside (a body that moved onto it): as before.
         let inside = Vector3::new(0.0990, 0.0990, 0.02);
-        let began_in = det.find_contacts_since(&[p], &[inside], &[], &[], &bodies, &params);
+        let began_in = det.find_contacts_since(
+            &[p],
+            StepStart {
+                x: &[inside],
+                still: &[true],
+            },
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
         assert_eq!(faces(&began_in), faces(&alone));
         // Deep in the cube's middle, from above: the top is both nearest and entry.
         let q = Vector3::new(0.0, 0.098, 0.0);
         let middle = det.find_contacts_since(
             &[q],
-            &[q + Vector3::y() * 0.003],
+            StepStart {
+                x: &[q + Vector3::y() * 0.003],
+                still: &[true],
+            },
             &[],
             &[],
             &bodies,
@@ -1384,7 +1451,17 @@ mod tests {
             faces(&det.find_contacts(&[q], &[], &[], &bodies, &params))
         );
         // A start of another length than the positions is not used.
-        let wrong = det.find_contacts_since(&[p], &[above, above], &[], &[], &bodies, &params);
+        let wrong = det.find_contacts_since(
+            &[p],
+            StepStart {
+                x: &[above, above],
+                still: &[true],
+            },
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
         assert_eq!(faces(&wrong), faces(&alone));
         // Nearer the top it came in by, but within reach of the side: found alone, the side
         // pushes it too; knowing where it came from, only the top does.
@@ -1393,24 +1470,64 @@ mod tests {
         assert!(normals(&alone)
             .iter()
             .any(|n| (n - Vector3::x()).norm() < 1e-12));
-        let since = det.find_contacts_since(&[r], &[above], &[], &[], &bodies, &params);
+        let since = det.find_contacts_since(
+            &[r],
+            StepStart {
+                x: &[above],
+                still: &[true],
+            },
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
         assert!(!since.is_empty());
         for n in normals(&since) {
             assert!((n - Vector3::y()).norm() < 1e-12, "entry face {n}");
         }
         assert!((det.vertex_depths()[0] - 0.001).abs() < 1e-12);
-        // A faceted sphere: whichever way a vertex came in, the same contacts as alone.
+        // A moving cube (held still: false): the nearest face, as alone.
+        let moving = det.find_contacts_since(
+            &[p],
+            StepStart {
+                x: &[above],
+                still: &[false],
+            },
+            &[],
+            &[],
+            &bodies,
+            &params,
+        );
+        assert_eq!(
+            faces(&moving),
+            faces(&det.find_contacts(&[p], &[], &[], &bodies, &params))
+        );
+        // A faceted sphere (neighbouring faces 6–12° apart): from wherever outside a vertex
+        // came in, the same contacts and depth as alone.
         let (spts, stris) = sphere(Vector3::zeros(), 0.1, 8);
         let ball = [(spts.as_slice(), stris.as_slice())];
         let mut rng = Lcg(5);
         for _ in 0..200 {
             let dir = rng.v3(1.0).normalize();
-            let p = dir * (0.099 - 0.002 * rng.next());
-            let from = p + rng.v3(0.004) + dir * 0.004;
+            let p = dir * (0.097 - 0.002 * rng.next());
+            let from = p + dir * 0.012 + rng.v3(0.003);
+            assert!(from.norm() > 0.1, "starts outside");
             let alone = det.find_contacts(&[p], &[], &[], &ball, &params);
-            let since = det.find_contacts_since(&[p], &[from], &[], &[], &ball, &params);
-            assert!(!alone.is_empty());
+            let depth = det.vertex_depths()[0];
+            let since = det.find_contacts_since(
+                &[p],
+                StepStart {
+                    x: &[from],
+                    still: &[true],
+                },
+                &[],
+                &[],
+                &ball,
+                &params,
+            );
+            assert!(!alone.is_empty() && depth > 0.0);
             assert_eq!(faces(&since), faces(&alone), "at {p} from {from}");
+            assert_eq!(det.vertex_depths()[0], depth);
         }
     }
 
