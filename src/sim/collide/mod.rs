@@ -55,8 +55,8 @@ use crate::sim::energy::{Mat12, Vec12};
 use bvh::{Aabb, Bvh};
 use distance::{point_triangle, segment_segment, TriangleFeature};
 use repulsion::{
-    edge_edge_jet, obstacle_eval, obstacle_eval_with, penalty, penalty_energy, vertex_obstacle_jet,
-    vertex_triangle_jet, DistanceJet, HessianKind, ObstacleEval,
+    edge_edge_jet, face_normal, obstacle_eval, obstacle_eval_with, penalty, penalty_energy,
+    vertex_obstacle_jet, vertex_triangle_jet, DistanceJet, HessianKind, ObstacleEval,
 };
 
 /// How deep (metres) a cloth vertex may be inside a collider and still be found and pushed out;
@@ -404,16 +404,10 @@ fn entry_face(
     let mut last: Option<(f64, Vector3<f64>, f64)> = None;
     bvh.query(&Aabb::from_points([start, p]), |t| {
         let [a, b, c] = tri_points(pts, &tris[t as usize]);
-        let nrm = (b - a).cross(&(c - a));
-        let emax = (b - a)
-            .norm_squared()
-            .max((c - a).norm_squared())
-            .max((c - b).norm_squared());
-        let n2 = nrm.norm_squared();
-        // As `obstacle_eval_with`, which gives such faces no normal (and so no contact).
-        if n2.is_nan() || n2 <= 1e-14 * emax * emax {
+        // Slivers get no normal from `obstacle_eval_with` either (and so no contact).
+        let Some((nrm, n2)) = face_normal(&a, &b, &c) else {
             return;
-        }
+        };
         let n = nrm / n2.sqrt();
         let (above, below) = (n.dot(&(start - a)), -n.dot(&(p - a)));
         if above < 0.0 || below <= 0.0 || !segment_crosses_triangle(start, p, &a, &b, &c) {
@@ -1332,6 +1326,23 @@ mod tests {
         (pts, tris)
     }
 
+    /// The contacts of one cloth vertex at `p` that began the step at `from` (a slice: one
+    /// of another length is tested too) against one collider, held still or not.
+    fn contacts_since(
+        det: &mut CollisionDetector,
+        p: Vector3<f64>,
+        from: &[Vector3<f64>],
+        still: bool,
+        body: Collider<'_>,
+        params: &CollisionParams,
+    ) -> Vec<Contact> {
+        let since = StepStart {
+            x: from,
+            still: &[still],
+        };
+        det.find_contacts_since(&[p], since, &[], &[], &[body], params)
+    }
+
     /// A vertex that a step carried 1.7 mm through a cube's top, 0.5 mm in from its side, is
     /// nearer the side: found alone it is pushed out sideways (a sheet landing on a table slid
     /// off it so). Knowing where it began the step, it goes back out through the top, and
@@ -1376,17 +1387,7 @@ mod tests {
         }
         assert!((det.vertex_depths()[0] - 0.0005).abs() < 1e-12);
 
-        let since = det.find_contacts_since(
-            &[p],
-            StepStart {
-                x: &[above],
-                still: &[true],
-            },
-            &[],
-            &[],
-            &bodies,
-            &params,
-        );
+        let since = contacts_since(&mut det, p, &[above], true, bodies[0], &params);
         assert!(!since.is_empty());
         for n in normals(&since) {
             assert!((n - Vector3::y()).norm() < 1e-12, "entry face {n}");
@@ -1407,43 +1408,20 @@ mod tests {
 
         // Came in through the side: its nearest face, as before.
         let beside = Vector3::new(0.1004, 0.0983, 0.02);
-        let side = det.find_contacts_since(
-            &[p],
-            StepStart {
-                x: &[beside],
-                still: &[true],
-            },
-            &[],
-            &[],
-            &bodies,
-            &params,
-        );
+        let side = contacts_since(&mut det, p, &[beside], true, bodies[0], &params);
         assert_eq!(faces(&side), faces(&alone));
         // Began inside (a body that moved onto it): as before.
         let inside = Vector3::new(0.0990, 0.0990, 0.02);
-        let began_in = det.find_contacts_since(
-            &[p],
-            StepStart {
-                x: &[inside],
-                still: &[true],
-            },
-            &[],
-            &[],
-            &bodies,
-            &params,
-        );
+        let began_in = contacts_since(&mut det, p, &[inside], true, bodies[0], &params);
         assert_eq!(faces(&began_in), faces(&alone));
         // Deep in the cube's middle, from above: the top is both nearest and entry.
         let q = Vector3::new(0.0, 0.098, 0.0);
-        let middle = det.find_contacts_since(
-            &[q],
-            StepStart {
-                x: &[q + Vector3::y() * 0.003],
-                still: &[true],
-            },
-            &[],
-            &[],
-            &bodies,
+        let middle = contacts_since(
+            &mut det,
+            q,
+            &[q + Vector3::y() * 0.003],
+            true,
+            bodies[0],
             &params,
         );
         assert_eq!(
@@ -1451,17 +1429,7 @@ mod tests {
             faces(&det.find_contacts(&[q], &[], &[], &bodies, &params))
         );
         // A start of another length than the positions is not used.
-        let wrong = det.find_contacts_since(
-            &[p],
-            StepStart {
-                x: &[above, above],
-                still: &[true],
-            },
-            &[],
-            &[],
-            &bodies,
-            &params,
-        );
+        let wrong = contacts_since(&mut det, p, &[above, above], true, bodies[0], &params);
         assert_eq!(faces(&wrong), faces(&alone));
         // Nearer the top it came in by, but within reach of the side: found alone, the side
         // pushes it too; knowing where it came from, only the top does.
@@ -1470,34 +1438,14 @@ mod tests {
         assert!(normals(&alone)
             .iter()
             .any(|n| (n - Vector3::x()).norm() < 1e-12));
-        let since = det.find_contacts_since(
-            &[r],
-            StepStart {
-                x: &[above],
-                still: &[true],
-            },
-            &[],
-            &[],
-            &bodies,
-            &params,
-        );
+        let since = contacts_since(&mut det, r, &[above], true, bodies[0], &params);
         assert!(!since.is_empty());
         for n in normals(&since) {
             assert!((n - Vector3::y()).norm() < 1e-12, "entry face {n}");
         }
         assert!((det.vertex_depths()[0] - 0.001).abs() < 1e-12);
         // A moving cube (held still: false): the nearest face, as alone.
-        let moving = det.find_contacts_since(
-            &[p],
-            StepStart {
-                x: &[above],
-                still: &[false],
-            },
-            &[],
-            &[],
-            &bodies,
-            &params,
-        );
+        let moving = contacts_since(&mut det, p, &[above], false, bodies[0], &params);
         assert_eq!(
             faces(&moving),
             faces(&det.find_contacts(&[p], &[], &[], &bodies, &params))
@@ -1514,17 +1462,7 @@ mod tests {
             assert!(from.norm() > 0.1, "starts outside");
             let alone = det.find_contacts(&[p], &[], &[], &ball, &params);
             let depth = det.vertex_depths()[0];
-            let since = det.find_contacts_since(
-                &[p],
-                StepStart {
-                    x: &[from],
-                    still: &[true],
-                },
-                &[],
-                &[],
-                &ball,
-                &params,
-            );
+            let since = contacts_since(&mut det, p, &[from], true, ball[0], &params);
             assert!(!alone.is_empty() && depth > 0.0);
             assert_eq!(faces(&since), faces(&alone), "at {p} from {from}");
             assert_eq!(det.vertex_depths()[0], depth);

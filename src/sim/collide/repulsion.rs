@@ -247,6 +247,24 @@ pub fn obstacle_eval(
     obstacle_eval_with(p, a, b, c, point_triangle(p, a, b, c))
 }
 
+/// The normal (b − a) × (c − a) of triangle a, b, c, not normalised, and its squared length;
+/// `None` for a sliver (squared length below 1e-14 times the longest edge's fourth power, or
+/// not a number), whose normal is noise.
+pub fn face_normal(
+    a: &Vector3<f64>,
+    b: &Vector3<f64>,
+    c: &Vector3<f64>,
+) -> Option<(Vector3<f64>, f64)> {
+    let nrm = (b - a).cross(&(c - a));
+    let n2 = nrm.norm_squared();
+    let emax = (b - a)
+        .norm_squared()
+        .max((c - a).norm_squared())
+        .max((c - b).norm_squared());
+    let sliver = n2.is_nan() || n2 <= 1e-14 * emax * emax;
+    (!sliver).then_some((nrm, n2))
+}
+
 /// As [`obstacle_eval`], given the already computed `closest = point_triangle(p, a, b, c)`.
 pub fn obstacle_eval_with(
     p: &Vector3<f64>,
@@ -255,13 +273,7 @@ pub fn obstacle_eval_with(
     c: &Vector3<f64>,
     closest: PointTriangle,
 ) -> ObstacleEval {
-    let nrm = (b - a).cross(&(c - a));
-    let n2 = nrm.norm_squared();
-    let emax = (b - a)
-        .norm_squared()
-        .max((c - a).norm_squared())
-        .max((c - b).norm_squared());
-    if n2.is_nan() || n2 <= 1e-14 * emax * emax {
+    let Some((nrm, n2)) = face_normal(a, b, c) else {
         return ObstacleEval {
             closest,
             normal: None,
@@ -269,7 +281,7 @@ pub fn obstacle_eval_with(
             proj_bary: closest.bary,
             projects_inside: false,
         };
-    }
+    };
     // Signed sub-areas (invariant to moving p along the normal).
     let la = nrm.dot(&(b - p).cross(&(c - p))) / n2;
     let lb = nrm.dot(&(c - p).cross(&(a - p))) / n2;
