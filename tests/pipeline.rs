@@ -362,6 +362,13 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
                     },
                     "bending stiffness",
                 ),
+                (
+                    Options {
+                        coarse_crease_contacts: Some(false),
+                        ..Options::default()
+                    },
+                    "crease contacts",
+                ),
             ] {
                 let err = Pipeline::new(&scene, &isr, corrector, other)
                     .err()
@@ -470,7 +477,8 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
     let file = dir.path().join(CoarseCalibration::FILE);
     std::fs::write(
         &file,
-        r#"{"compression": 0.01, "friction": 2.5, "wrinkle_bending": 1, "bending": 1.5}"#,
+        r#"{"compression": 0.01, "friction": 2.5, "wrinkle_bending": 1, "bending": 1.5,
+            "crease_contacts": false}"#,
     )
     .expect("write");
     let cal = CoarseCalibration::load(dir.path())
@@ -478,7 +486,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
         .expect("present");
     assert_eq!(
         cal.to_string(),
-        "compression 0.01, friction 2.5, wrinkle bending 1, bending 1.5"
+        "compression 0.01, friction 2.5, wrinkle bending 1, bending 1.5, no crease contacts"
     );
     let given = Options {
         coarse_friction: Some(0.3),
@@ -490,6 +498,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
     assert_eq!(filled.coarse_friction, Some(0.3), "an option given wins");
     assert_eq!(filled.coarse_wrinkle_bending, Some(1.0));
     assert_eq!(filled.coarse_bending, Some(1.5));
+    assert_eq!(filled.coarse_crease_contacts, Some(false));
     assert_eq!(filled.coarse_edge_m, given.coarse_edge_m);
     // As a run takes it: filled without a corrector, untouched beside one.
     let (run_opts, used) = CoarseCalibration::for_run(dir.path(), None, given).expect("run");

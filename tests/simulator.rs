@@ -717,3 +717,57 @@ fn a_settled_compressed_sheet_steps_with_the_stiffened_hinges() {
     }
     assert!(sim.state.x.iter().all(|x| x.iter().all(|c| c.is_finite())));
 }
+
+/// How far inside the table of `samples/sheet_table.usda` (the box x ∈ [−0.4, 0.2],
+/// y ∈ [0, 0.5], z ∈ [−0.4, 0.4]) a point is, m (0 outside).
+fn inside_table(p: &Vector3<f64>) -> f64 {
+    let d = [p.x + 0.4, 0.2 - p.x, p.y, 0.5 - p.y, p.z + 0.4, 0.4 - p.z];
+    d.iter().copied().fold(f64::INFINITY, f64::min).max(0.0)
+}
+
+/// A 20 mm sheet dropped over the table's edge with the fine (2.5 mm) simulation's contact
+/// thickness, as `clothsr run` sets up the coarse one. With crease contacts (the default)
+/// coarse edges that span the table's edge tunnel past it within a step and are then held by
+/// it from inside: the part on the table slides 3.8 mm towards the edge at the landing.
+/// Without them (`CollisionDetector::crease_contacts`, `clothsr run
+/// --coarse-no-crease-contacts`) only vertices meet the table: they all stay outside, the part
+/// on the table stays where it landed (0.6 mm), and an edge between a vertex on the top and
+/// one down the side cuts the table's corner, as the downsampled fine cloth's do.
+#[test]
+fn without_crease_contacts_coarse_edges_cut_the_tables_corner_and_the_sheet_stays_put() {
+    let scene = clothsr::scene::samples::sample("sheet_table").expect("sample");
+    let mut sim =
+        clothsr::data::new_simulation(&scene, 0.02, false, true, Some(4e-4)).expect("setup");
+    sim.sim.detector_mut().crease_contacts = false;
+    // The part that lands on the table, away from its edge (x = 0.2 m).
+    let inner: Vec<usize> = (0..sim.state.x.len())
+        .filter(|&i| sim.state.x[i].x < 0.1)
+        .collect();
+    let mean_x =
+        |s: &Simulation| inner.iter().map(|&i| s.state.x[i].x).sum::<f64>() / inner.len() as f64;
+    let x0 = mean_x(&sim);
+    let mut slide = 0.0f64;
+    for _ in 0..20 {
+        for _ in 0..sim.steps_per_frame {
+            sim.step().expect("step");
+        }
+        slide = slide.max((mean_x(&sim) - x0).abs());
+    }
+    let x = &sim.state.x;
+    let vertex_depth = x.iter().map(inside_table).fold(0.0, f64::max);
+    // The deepest point along any edge (nine points each).
+    let edge_depth = (sim.sim.model.edges.iter())
+        .flat_map(|&[a, b]| {
+            let (a, b) = (x[a as usize], x[b as usize]);
+            (1..10).map(move |k| inside_table(&a.lerp(&b, k as f64 / 10.0)))
+        })
+        .fold(0.0, f64::max);
+    let hanging = x.iter().filter(|p| p.y < 0.47).count();
+    assert!(hanging > 50, "{hanging} vertices hang over the edge");
+    assert!(vertex_depth < 1e-4, "a vertex is {vertex_depth} m inside");
+    assert!(
+        edge_depth > 2e-3,
+        "the deepest edge point is {edge_depth} m inside: no edge cuts the corner"
+    );
+    assert!(slide < 1e-3, "the sheet on the table slid {slide} m");
+}

@@ -42,6 +42,10 @@ pub struct Args {
     /// Bending stiffness factors to try (1: the fabric's).
     #[arg(long, value_delimiter = ',', default_value = "1")]
     bending: Vec<f64>,
+    /// Crease contacts to try: `on` (the simulator's) and or `off` (coarse edges may cut the
+    /// colliders' sharp edges, as M_int's do).
+    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = on_off)]
+    crease_contacts: Vec<bool>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where
     /// contact and folds make the coarse path chaotic, one start is one draw.
@@ -53,6 +57,15 @@ pub struct Args {
     /// Write every candidate's errors as CSV here.
     #[arg(long)]
     csv: Option<PathBuf>,
+}
+
+/// `on` or `off`.
+fn on_off(v: &str) -> Result<bool, String> {
+    match v.trim() {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        t => Err(format!("{t}: 'on' or 'off'")),
+    }
 }
 
 /// `--friction`'s values: `scene` as `None`, numbers checked.
@@ -73,8 +86,8 @@ fn frictions(given: &[String]) -> anyhow::Result<Vec<Option<f64>>> {
         .collect()
 }
 
-/// A candidate's settings as table cells: compression, knee, friction, gain, bending.
-fn cells(c: &CoarseCalibration) -> [String; 5] {
+/// A candidate's settings as table cells: compression, knee, friction, gain, bending, creases.
+fn cells(c: &CoarseCalibration) -> [String; 6] {
     let or = |v: Option<f64>, none: &str| v.map_or(none.to_string(), |v| v.to_string());
     [
         or(c.compression, "1"),
@@ -82,6 +95,12 @@ fn cells(c: &CoarseCalibration) -> [String; 5] {
         or(c.friction, "scene"),
         or(c.wrinkle_bending, "0"),
         or(c.bending, "1"),
+        if c.crease_contacts == Some(false) {
+            "off"
+        } else {
+            "on"
+        }
+        .to_string(),
     ]
 }
 
@@ -170,6 +189,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         friction: frictions(&args.friction)?,
         wrinkle_bending: args.wrinkle_bending.clone(),
         bending: args.bending.clone(),
+        crease_contacts: args.crease_contacts.clone(),
     };
     let candidates = grid
         .candidates()
@@ -271,11 +291,11 @@ fn report(args: &Args, scored: &[Scored]) -> String {
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].pooled_mm.total_cmp(&scored[b].pooled_mm));
     println!(
-        "{:>11} {:>6} {:>8} {:>5} {:>7} {:>9} {:>7}  per data set, mm",
-        "compression", "knee", "friction", "gain", "bending", "pooled mm", "/ own"
+        "{:>11} {:>6} {:>8} {:>5} {:>7} {:>7} {:>9} {:>7}  per data set, mm",
+        "compression", "knee", "friction", "gain", "bending", "creases", "pooled mm", "/ own"
     );
     let mut csv = format!(
-        "compression,compression_knee,friction,wrinkle_bending,bending,pooled_mm,ratio_to_own,{}\n",
+        "compression,compression_knee,friction,wrinkle_bending,bending,crease_contacts,pooled_mm,ratio_to_own,{}\n",
         names
             .iter()
             .map(|n| format!("{}_mm", n.replace([',', '\n'], "_")))
@@ -284,7 +304,7 @@ fn report(args: &Args, scored: &[Scored]) -> String {
     );
     for &i in &order {
         let s = &scored[i];
-        let [c, k, f, g, b] = cells(&s.calibration);
+        let [c, k, f, g, b, e] = cells(&s.calibration);
         let sets = s.set_means_mm();
         let what = match &s.failed {
             Some(why) => format!("failed: {why}"),
@@ -295,7 +315,7 @@ fn report(args: &Args, scored: &[Scored]) -> String {
                 .join(" "),
         };
         println!(
-            "{c:>11} {k:>6} {f:>8} {g:>5} {b:>7} {:>9.3} {:>7}  {what}",
+            "{c:>11} {k:>6} {f:>8} {g:>5} {b:>7} {e:>7} {:>9.3} {:>7}  {what}",
             s.pooled_mm,
             ratio(s.pooled_mm, own)
         );
@@ -306,7 +326,7 @@ fn report(args: &Args, scored: &[Scored]) -> String {
         };
         let per: Vec<String> = sets.iter().map(f64::to_string).collect();
         csv += &format!(
-            "{c},{k},{f},{g},{b},{},{r},{}\n",
+            "{c},{k},{f},{g},{b},{e},{},{r},{}\n",
             s.pooled_mm,
             per.join(",")
         );
@@ -336,6 +356,7 @@ mod tests {
             friction: frictions(&a.friction).expect("frictions"),
             wrinkle_bending: a.wrinkle_bending.clone(),
             bending: a.bending.clone(),
+            crease_contacts: a.crease_contacts.clone(),
         };
         assert_eq!(grid, Grid::default());
         let cli = Cli::try_parse_from([
@@ -353,5 +374,19 @@ mod tests {
             vec![Some(0.2), None]
         );
         assert!(frictions(&["-1".to_string()]).is_err());
+        let creases = |v: &str| {
+            Cli::try_parse_from([
+                "calibrate",
+                "--data",
+                "d",
+                "-o",
+                "c.json",
+                "--crease-contacts",
+                v,
+            ])
+            .map(|c| c.args.crease_contacts)
+        };
+        assert_eq!(creases("on,off").expect("parses"), vec![true, false]);
+        assert!(creases("maybe").is_err());
     }
 }

@@ -121,6 +121,11 @@ pub struct Args {
     /// other is an error)
     #[arg(long, value_name = "FACTOR")]
     coarse_bending: Option<f64>,
+    /// Let coarse cloth edges cut the colliders' sharp edges (a table's corner), as the
+    /// downsampled fine cloth's do: only coarse vertices meet colliders (default:
+    /// `coarse.json`'s, else crease contacts on; beside a corrector, an error)
+    #[arg(long)]
+    coarse_no_crease_contacts: bool,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -252,6 +257,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coarse_friction: args.coarse_friction,
         coarse_wrinkle_bending: args.coarse_wrinkle_bending,
         coarse_bending: args.coarse_bending,
+        coarse_crease_contacts: args.coarse_no_crease_contacts.then_some(false),
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
     let (opts, cal) = CoarseCalibration::for_run(&args.models, corrector, given)?;

@@ -34,6 +34,8 @@ pub struct Grid {
     pub wrinkle_bending: Vec<f64>,
     /// Bending stiffness factors (1: the fabric's).
     pub bending: Vec<f64>,
+    /// Crease contacts on or off (true: the simulator's).
+    pub crease_contacts: Vec<bool>,
 }
 
 impl Default for Grid {
@@ -46,6 +48,7 @@ impl Default for Grid {
             friction: vec![None, Some(1.0), Some(2.5)],
             wrinkle_bending: vec![0.0, 1.0],
             bending: vec![1.0],
+            crease_contacts: vec![true],
         }
     }
 }
@@ -65,16 +68,19 @@ impl Grid {
                 for &mu in &self.friction {
                     for &g in &self.wrinkle_bending {
                         for &b in &self.bending {
-                            let cal = CoarseCalibration {
-                                compression: (c != 1.0).then_some(c),
-                                compression_knee: (k != 0.0).then_some(k),
-                                friction: mu,
-                                wrinkle_bending: (g != 0.0).then_some(g),
-                                bending: (b != 1.0).then_some(b),
-                            };
-                            cal.check()?;
-                            if !out.contains(&cal) {
-                                out.push(cal);
+                            for &e in &self.crease_contacts {
+                                let cal = CoarseCalibration {
+                                    compression: (c != 1.0).then_some(c),
+                                    compression_knee: (k != 0.0).then_some(k),
+                                    friction: mu,
+                                    wrinkle_bending: (g != 0.0).then_some(g),
+                                    bending: (b != 1.0).then_some(b),
+                                    crease_contacts: (!e).then_some(false),
+                                };
+                                cal.check()?;
+                                if !out.contains(&cal) {
+                                    out.push(cal);
+                                }
                             }
                         }
                     }
@@ -101,6 +107,7 @@ impl CoarseCalibration {
         sim.sim
             .model
             .set_bending_scale(self.bending.unwrap_or(1.0))?;
+        sim.sim.detector_mut().crease_contacts = self.crease_contacts.unwrap_or(true);
         let gain = self.wrinkle_bending.filter(|&g| g != 0.0);
         sim.sim
             .model
@@ -293,6 +300,7 @@ mod tests {
             friction: vec![None, Some(2.5)],
             wrinkle_bending: vec![0.0],
             bending: vec![1.0],
+            crease_contacts: vec![true],
         };
         let c = grid.candidates().expect("valid grid");
         // The simulator's own first; then 0.03 × {no knee, knee} × {scene, 2.5}; then 1 ×
@@ -318,6 +326,20 @@ mod tests {
         let e = bad.candidates().expect_err("factor above 1");
         assert!(e.contains("compression"), "{e}");
         assert_eq!(Grid::default().candidates().map(|c| c.len()), Ok(24));
+        // Crease contacts off doubles the grid; on is stored as unset.
+        let both = Grid {
+            crease_contacts: vec![true, false],
+            ..Grid::default()
+        };
+        let c = both.candidates().expect("valid grid");
+        assert_eq!(c.len(), 48);
+        assert_eq!(
+            c.iter()
+                .filter(|k| k.crease_contacts == Some(false))
+                .count(),
+            24
+        );
+        assert!(c.iter().all(|k| k.crease_contacts != Some(true)));
     }
 
     #[test]

@@ -61,6 +61,10 @@ pub struct Options {
     /// ([`crate::sim::model::ClothModel::set_bending_scale`]; `None`: 1). Without a corrector
     /// only: a corrector's coarse model is the one it was trained beside.
     pub coarse_bending: Option<f64>,
+    /// Whether coarse cloth edges meet the colliders' sharp edges
+    /// ([`crate::sim::collide::CollisionDetector::crease_contacts`]; `None`: yes). Off, a
+    /// 20 mm edge may cut a table's corner as M_int's does. Without a corrector only.
+    pub coarse_crease_contacts: Option<bool>,
 }
 
 impl Default for Options {
@@ -76,6 +80,7 @@ impl Default for Options {
             coarse_friction: None,
             coarse_wrinkle_bending: None,
             coarse_bending: None,
+            coarse_crease_contacts: None,
         }
     }
 }
@@ -88,8 +93,8 @@ impl Default for Options {
 /// options override it.
 ///
 /// `{"compression": 0.03}` is the table's: [`Options::coarse_compression`]; likewise
-/// `compression_knee`, `friction`, `wrinkle_bending` (0: off) and `bending`. `clothsr
-/// calibrate` writes it ([`calibrate`]).
+/// `compression_knee`, `friction`, `wrinkle_bending` (0: off), `bending` and
+/// `crease_contacts`. `clothsr calibrate` writes it ([`calibrate`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoarseCalibration {
@@ -108,6 +113,9 @@ pub struct CoarseCalibration {
     /// [`Options::coarse_bending`], > 0 (1: the fabric's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bending: Option<f64>,
+    /// [`Options::coarse_crease_contacts`] (`false`: coarse edges may cut colliders' creases).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crease_contacts: Option<bool>,
 }
 
 impl CoarseCalibration {
@@ -181,6 +189,7 @@ impl CoarseCalibration {
             friction: opts.coarse_friction,
             wrinkle_bending: opts.coarse_wrinkle_bending,
             bending: opts.coarse_bending,
+            crease_contacts: opts.coarse_crease_contacts,
         }
     }
 
@@ -192,6 +201,7 @@ impl CoarseCalibration {
             coarse_friction: opts.coarse_friction.or(self.friction),
             coarse_wrinkle_bending: opts.coarse_wrinkle_bending.or(self.wrinkle_bending),
             coarse_bending: opts.coarse_bending.or(self.bending),
+            coarse_crease_contacts: opts.coarse_crease_contacts.or(self.crease_contacts),
             ..opts
         }
     }
@@ -208,6 +218,7 @@ impl std::fmt::Display for CoarseCalibration {
         ]
         .iter()
         .filter_map(|(name, v)| v.map(|v| format!("{name} {v}")))
+        .chain((self.crease_contacts == Some(false)).then(|| "no crease contacts".to_string()))
         .collect();
         if parts.is_empty() {
             f.write_str("the simulator's")
@@ -376,6 +387,13 @@ impl<'a> Pipeline<'a> {
                      not {} times it",
                     c.dir.display(),
                     opts.coarse_bending.unwrap_or(1.0)
+                )));
+            }
+            (Some(c), _) if opts.coarse_crease_contacts == Some(false) => {
+                return Err(Error::Invalid(format!(
+                    "the corrector in {} was trained beside crease contacts; they cannot be \
+                     turned off under it",
+                    c.dir.display()
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,

@@ -625,6 +625,12 @@ pub struct CollisionDetector {
     /// [`Clearance`]. Off, every vertex is classified on every call: the contacts are the
     /// same, only slower (tests compare the two).
     pub skip_clear_vertices: bool,
+    /// Report cloth edges against sharp collider edges ([`Contact::EdgeObstacle`]; default
+    /// true). Off, only cloth vertices meet colliders, so a cloth edge may cut across a crease
+    /// as the downsampled fine cloth does: a 20 mm coarse edge between a vertex on a table's
+    /// top and one down its side passes through the table's corner in M_int, where the crease
+    /// contact holds the coarse sheet out from the side.
+    pub crease_contacts: bool,
     colliders: Vec<CachedBvh>,
     clearance: Vec<Clearance>,
     clearance_x: Vec<Vector3<f64>>,
@@ -651,6 +657,7 @@ impl CollisionDetector {
             rebuild_every: 16,
             obstacle_extra_m: 0.0,
             skip_clear_vertices: true,
+            crease_contacts: true,
             colliders: Vec::new(),
             clearance: Vec::new(),
             clearance_x: Vec::new(),
@@ -853,7 +860,11 @@ impl CollisionDetector {
         let mut contacts: Vec<Contact> = per_vertex.into_iter().flat_map(|p| p.1).collect();
 
         // Sharp collider edges (creases) against cloth edges.
-        if dhat > 0.0 && !cloth_edges.is_empty() && colliders.iter().any(|(_, t)| !t.is_empty()) {
+        if self.crease_contacts
+            && dhat > 0.0
+            && !cloth_edges.is_empty()
+            && colliders.iter().any(|(_, t)| !t.is_empty())
+        {
             let mut cloth_edge_bvh: Option<Bvh> = None;
             for (cache, (pts, tris)) in self.colliders.iter_mut().zip(colliders) {
                 let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
@@ -1126,6 +1137,11 @@ mod edge_obstacle_tests {
         // Far away: no contact.
         let far: Vec<Vector3<f64>> = x.iter().map(|p| p + Vector3::new(0.0, 0.1, 0.1)).collect();
         assert!(find_contacts(&far, &[], &[[0, 1]], &[(&pts, &tris)], &params).is_empty());
+        // With crease contacts off the edge may cut the crease: nothing is reported.
+        let mut det = CollisionDetector::new();
+        det.crease_contacts = false;
+        let off = det.find_contacts(&lifted, &[], &[[0, 1]], &[(&pts, &tris)], &params);
+        assert!(off.is_empty(), "{off:?}");
     }
 }
 
