@@ -384,15 +384,24 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             };
             assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
         }
-        // Without a corrector, the folder's own coarse model (the table's: c = 0.03), as
-        // `clothsr run` and `clothsr bench` take it.
+        // Without a corrector, the folder's own coarse model (the table's, chosen by
+        // `clothsr calibrate` on its training drops: c = 0.03, wrinkle bending 1, half the
+        // fabric's bending, no crease contacts), as `clothsr run` and `clothsr bench` take it.
         let (opts, cal) = CoarseCalibration::for_run(&models, corrector, Options::default())
             .expect("a valid coarse.json, if any");
         let mut p = Pipeline::new(&scene, &isr, corrector, opts).expect("set up");
         if !ships_corrector {
-            assert_eq!(cal.and_then(|c| c.compression), Some(0.03));
+            let table = CoarseCalibration {
+                compression: Some(0.03),
+                wrinkle_bending: Some(1.0),
+                bending: Some(0.5),
+                crease_contacts: Some(false),
+                ..CoarseCalibration::default()
+            };
+            assert_eq!(cal, Some(table));
             let k = &p.coarse.sim.model.membrane_k;
             assert!(k.iter().all(|k| k.compression == 0.03), "{:?}", k.first());
+            assert!(!p.coarse.sim.detector().crease_contacts);
         }
         if ships_corrector {
             // Without its corrector (`run --no-corrector`), the coarse model `clothsr
