@@ -244,27 +244,30 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         .skip(1)
         .map(|l| {
             l.split(',')
-                .map(|c| {
-                    if c == "scene" {
-                        -1.0
-                    } else {
-                        c.parse().expect("number")
-                    }
+                .map(|c| match c {
+                    "scene" => -1.0,
+                    "on" => 1.0,
+                    "off" => 0.0,
+                    _ => c.parse().expect("number"),
                 })
                 .collect()
         })
         .collect();
     assert_eq!(rows.len(), 4, "{stdout}");
     // Best first; the simulator's own model is 1.00× itself.
-    // Columns: compression, knee, friction, gain, bending, pooled mm, ratio to own, per set.
-    assert!(rows.iter().all(|r| r.len() == 8), "{rows:?}");
-    assert!(rows.windows(2).all(|w| w[0][5] <= w[1][5]), "{rows:?}");
+    // Columns: compression, knee, friction, gain, bending, crease contacts (on: 1), pooled mm,
+    // ratio to own, per set.
+    assert!(rows.iter().all(|r| r.len() == 9), "{rows:?}");
+    assert!(rows.windows(2).all(|w| w[0][6] <= w[1][6]), "{rows:?}");
     let own = rows
         .iter()
         .find(|r| r[0] == 1.0 && r[2] == -1.0)
         .expect("own");
-    assert!((own[6] - 1.0).abs() < 1e-12 && own[5] > 0.0, "{own:?}");
-    assert!(rows.iter().all(|r| r[1] == 0.0 && r[4] == 1.0), "{rows:?}");
+    assert!((own[7] - 1.0).abs() < 1e-12 && own[6] > 0.0, "{own:?}");
+    assert!(
+        rows.iter().all(|r| r[1] == 0.0 && r[4] == 1.0 && r[5] == 1.0),
+        "{rows:?}"
+    );
     let chosen: clothsr::pipeline::CoarseCalibration =
         serde_json::from_str(&std::fs::read_to_string(&cal_json).expect("coarse.json"))
             .expect("a calibration");
