@@ -265,7 +265,8 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         .expect("own");
     assert!((own[7] - 1.0).abs() < 1e-12 && own[6] > 0.0, "{own:?}");
     assert!(
-        rows.iter().all(|r| r[1] == 0.0 && r[4] == 1.0 && r[5] == 1.0),
+        rows.iter()
+            .all(|r| r[1] == 0.0 && r[4] == 1.0 && r[5] == 1.0),
         "{rows:?}"
     );
     let chosen: clothsr::pipeline::CoarseCalibration =
@@ -339,6 +340,20 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "{err}"
     );
     assert!(!tuned.exists());
+    // The coarse model must be the one the network was trained beside: with crease contacts
+    // and the fabric's bending.
+    for other in [
+        vec!["--coarse-no-crease-contacts"],
+        vec!["--coarse-bending", "0.5"],
+    ] {
+        let out = tune(&other);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains("coarse bending None and crease contacts None"),
+            "{err}"
+        );
+        assert!(!tuned.exists());
+    }
     // Every window a drift window (DAgger).
     // A wrinkle bending gain of 0 is none, as the model was trained.
     let out = tune(&["--drift-share", "1", "--coarse-wrinkle-bending", "0"]);
@@ -351,7 +366,9 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(
         config.contains("\"latent\": 8")
             && config.contains("\"init_from\"")
-            && config.contains("\"coarse_wrinkle_bending\": null"),
+            && config.contains("\"coarse_wrinkle_bending\": null")
+            && config.contains("\"coarse_bending\": null")
+            && config.contains("\"coarse_crease_contacts\": null"),
         "{config}"
     );
     let log = String::from_utf8_lossy(&out.stderr);

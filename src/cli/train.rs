@@ -239,6 +239,15 @@ pub struct CorrectorArgs {
     /// (0: off). [default: off, or the `--init` model's]
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
+    /// The coarse hinges' bending stiffness as a factor of the fabric's; saved with the model,
+    /// which then runs with it. [default: 1, or the `--init` model's]
+    #[arg(long, value_name = "FACTOR")]
+    coarse_bending: Option<f64>,
+    /// Train beside a coarse simulation without crease contacts (coarse cloth edges may cut
+    /// the colliders' sharp edges, as M_int's do); saved with the model, which then runs so.
+    /// [default: with them, or as the `--init` model was trained]
+    #[arg(long)]
+    coarse_no_crease_contacts: bool,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -362,6 +371,16 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
             // 0 is none (and an `--init` model trained with a gain is then refused).
             Some(_) => wrinkles,
             None => init.as_ref().and_then(|c| c.coarse_wrinkle_bending),
+        })
+        .with_coarse_bending(
+            a.coarse_bending
+                .or_else(|| init.as_ref().and_then(|c| c.coarse_bending))
+                .filter(|&b| b != 1.0),
+        )
+        .with_coarse_crease_contacts(if a.coarse_no_crease_contacts {
+            Some(false)
+        } else {
+            init.as_ref().and_then(|c| c.coarse_crease_contacts)
         })
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)

@@ -133,6 +133,15 @@ pub struct TrainingConfig {
     /// the coarse membrane is shortened, once the cloth has settled; `None`: off). Optional so
     /// that models saved before it load.
     pub coarse_wrinkle_bending: Option<f64>,
+    /// The coarse hinges' bending stiffness as a factor of the fabric's the corrector is
+    /// trained beside, and so must run with
+    /// ([`crate::sim::model::ClothModel::set_bending_scale`]; `None`: 1). Optional so that
+    /// models saved before it load.
+    pub coarse_bending: Option<f64>,
+    /// Whether the coarse simulation the corrector is trained beside has crease contacts
+    /// ([`crate::sim::collide::CollisionDetector::crease_contacts`]; `None`: yes). Optional so
+    /// that models saved before it load.
+    pub coarse_crease_contacts: Option<bool>,
     /// Validate every this many phase-2 windows, and at the end of each phase (a warm start's
     /// model before phase 2 too: [`Self::init_from`]), on the held-out
     /// [`ValidationSet`]s given to [`train`]: the interleaved rollout's mean distance to M_int
@@ -210,6 +219,10 @@ impl TrainingConfig {
         sim.sim
             .model
             .set_wrinkle_bending(self.coarse_wrinkle_bending.map(WrinkleBending::with_gain))?;
+        sim.sim
+            .model
+            .set_bending_scale(self.coarse_bending.unwrap_or(1.0))?;
+        sim.sim.detector_mut().crease_contacts = self.coarse_crease_contacts.unwrap_or(true);
         sim.sim
             .model
             .set_membrane_compression(self.compression_factor(), self.coarse_compression_knee)
@@ -487,6 +500,12 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
         return bad(&format!("coarse: {e}"));
     }
     if cfg
+        .coarse_bending
+        .is_some_and(|b| !(b > 0.0 && b.is_finite()))
+    {
+        return bad("coarse_bending must be a factor > 0");
+    }
+    if cfg
         .rollout_tau_steps
         .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
     {
@@ -573,6 +592,21 @@ fn warm_start(
                 "the network to start from was trained beside a coarse friction coefficient \
                  of {:?}, the training asks for {:?} (None: the simulator's)",
                 old.coarse_friction, cfg.coarse_friction
+            ),
+        ));
+    }
+    if old.coarse_bending.unwrap_or(1.0) != cfg.coarse_bending.unwrap_or(1.0)
+        || old.coarse_crease_contacts.unwrap_or(true) != cfg.coarse_crease_contacts.unwrap_or(true)
+    {
+        return Err(Error::bad_input(
+            &config_path,
+            format!(
+                "the network to start from was trained beside coarse bending {:?} and crease \
+                 contacts {:?}, the training asks for {:?} and {:?} (None: the fabric's, on)",
+                old.coarse_bending,
+                old.coarse_crease_contacts,
+                cfg.coarse_bending,
+                cfg.coarse_crease_contacts
             ),
         ));
     }
@@ -695,6 +729,9 @@ pub fn train(
     mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Summary> {
     check(cfg, sets, validation)?;
+    // A run refused before it trained (an `--init` model it cannot start from) leaves no
+    // folder it made behind.
+    let made_out = !out.exists();
     std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
     let config_path = out.join(CONFIG_FILE);
     let state_path = out.join(CHECKPOINT_DIR).join("state.json");
@@ -722,7 +759,16 @@ pub fn train(
     let start = if resuming {
         None
     } else {
-        warm_start(cfg, &device)?
+        match warm_start(cfg, &device) {
+            Ok(start) => start,
+            Err(e) => {
+                if made_out {
+                    // Best effort: the refusal is the error to report.
+                    let _ = std::fs::remove_dir_all(out);
+                }
+                return Err(e);
+            }
+        }
     };
     let norm = if resuming {
         read_json(&norm_path)?

@@ -58,12 +58,13 @@ pub struct Options {
     /// error.
     pub coarse_wrinkle_bending: Option<f64>,
     /// The coarse hinges' bending stiffness as a factor of the fabric's
-    /// ([`crate::sim::model::ClothModel::set_bending_scale`]; `None`: 1). Without a corrector
-    /// only: a corrector's coarse model is the one it was trained beside.
+    /// ([`crate::sim::model::ClothModel::set_bending_scale`]; `None`: the corrector's, else
+    /// 1). A corrector trained with another is an error.
     pub coarse_bending: Option<f64>,
     /// Whether coarse cloth edges meet the colliders' sharp edges
     /// ([`crate::sim::collide::CollisionDetector::crease_contacts`]; `None`: yes). Off, a
-    /// 20 mm edge may cut a table's corner as M_int's does. Without a corrector only.
+    /// 20 mm edge may cut a table's corner as M_int's does. `None`: the corrector's, else on;
+    /// a corrector trained with the other is an error.
     pub coarse_crease_contacts: Option<bool>,
 }
 
@@ -381,19 +382,37 @@ impl<'a> Pipeline<'a> {
                     opts.coarse_wrinkle_bending
                 )));
             }
-            (Some(c), _) if opts.coarse_bending.is_some_and(|b| b != 1.0) => {
+            (Some(c), _)
+                if opts
+                    .coarse_bending
+                    .is_some_and(|b| b != c.training.coarse_bending.unwrap_or(1.0)) =>
+            {
                 return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside the fabric's bending stiffness, \
-                     not {} times it",
+                    "the corrector in {} was trained beside {} times the fabric's bending \
+                     stiffness, not {} times it",
                     c.dir.display(),
+                    c.training.coarse_bending.unwrap_or(1.0),
                     opts.coarse_bending.unwrap_or(1.0)
                 )));
             }
-            (Some(c), _) if opts.coarse_crease_contacts == Some(false) => {
+            (Some(c), _)
+                if opts
+                    .coarse_crease_contacts
+                    .is_some_and(|e| e != c.training.coarse_crease_contacts.unwrap_or(true)) =>
+            {
                 return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside crease contacts; they cannot be \
-                     turned off under it",
-                    c.dir.display()
+                    "the corrector in {} was trained with crease contacts {}, not {}",
+                    c.dir.display(),
+                    if c.training.coarse_crease_contacts.unwrap_or(true) {
+                        "on"
+                    } else {
+                        "off"
+                    },
+                    if opts.coarse_crease_contacts.unwrap_or(true) {
+                        "on"
+                    } else {
+                        "off"
+                    }
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
