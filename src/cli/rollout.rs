@@ -440,13 +440,22 @@ fn short_horizons(
 }
 
 /// The coarse simulator's settings a corrector runs beside: its membrane's compression factor,
-/// its friction coefficient against bodies and, when on, its wrinkle bending gain.
+/// its friction coefficient against bodies and, when not the simulator's, its wrinkle bending
+/// gain, bending factor and crease contacts.
 fn coarse_setup(t: &clothsr::corrector::training::TrainingConfig) -> String {
     let wrinkles = t
         .coarse_wrinkle_bending
         .map_or_else(String::new, |g| format!(", wrinkle bending {g}"));
+    let bending = t
+        .coarse_bending
+        .map_or_else(String::new, |b| format!(", bending {b}"));
+    let creases = if t.coarse_crease_contacts == Some(false) {
+        ", no crease contacts"
+    } else {
+        ""
+    };
     format!(
-        "coarse membrane compression {}, friction {}{wrinkles}",
+        "coarse membrane compression {}, friction {}{wrinkles}{bending}{creases}",
         t.compression_factor(),
         t.friction_label()
     )
