@@ -116,14 +116,15 @@ pub struct Args {
     /// with another is an error)
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
-    /// The coarse hinges' bending stiffness as a factor of the fabric's (default:
-    /// `coarse.json`'s, else 1; beside a corrector, which was trained with the fabric's, any
-    /// other is an error)
+    /// The coarse hinges' bending stiffness as a factor of the fabric's (default: the
+    /// corrector's, else `coarse.json`'s, else 1; beside a corrector trained with another, an
+    /// error)
     #[arg(long, value_name = "FACTOR")]
     coarse_bending: Option<f64>,
     /// Let coarse cloth edges cut the colliders' sharp edges (a table's corner), as the
-    /// downsampled fine cloth's do: only coarse vertices meet colliders (default:
-    /// `coarse.json`'s, else crease contacts on; beside a corrector, an error)
+    /// downsampled fine cloth's do: only coarse vertices meet colliders (default: the
+    /// corrector's, else `coarse.json`'s, else crease contacts on; beside a corrector trained
+    /// with them, an error)
     #[arg(long)]
     coarse_no_crease_contacts: bool,
     /// Write text USD even for a .usd file.

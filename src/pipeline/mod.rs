@@ -62,9 +62,9 @@ pub struct Options {
     /// 1). A corrector trained with another is an error.
     pub coarse_bending: Option<f64>,
     /// Whether coarse cloth edges meet the colliders' sharp edges
-    /// ([`crate::sim::collide::CollisionDetector::crease_contacts`]; `None`: yes). Off, a
-    /// 20 mm edge may cut a table's corner as M_int's does. `None`: the corrector's, else on;
-    /// a corrector trained with the other is an error.
+    /// ([`crate::sim::collide::CollisionDetector::crease_contacts`]; `None`: the corrector's,
+    /// else yes). Off, a 20 mm edge may cut a table's corner as M_int's does. A corrector
+    /// trained with the other is an error.
     pub coarse_crease_contacts: Option<bool>,
 }
 
