@@ -342,18 +342,27 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(!tuned.exists());
     // The coarse model must be the one the network was trained beside: with crease contacts
     // and the fabric's bending.
-    for other in [
-        vec!["--coarse-no-crease-contacts"],
-        vec!["--coarse-bending", "0.5"],
+    for (other, why) in [
+        (
+            ["--coarse-crease-contacts", "off"],
+            "trained with crease contacts on, the training asks for off",
+        ),
+        (
+            ["--coarse-bending", "0.5"],
+            "trained beside 1 times the fabric's bending stiffness, the training asks for 0.5",
+        ),
     ] {
         let out = tune(&other);
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            !out.status.success() && err.contains("coarse bending None and crease contacts None"),
-            "{err}"
-        );
+        assert!(!out.status.success() && err.contains(why), "{err}");
         assert!(!tuned.exists());
     }
+    let out = tune(&["--coarse-bending", "0"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--coarse-bending must be a factor > 0"),
+        "{err}"
+    );
     // Every window a drift window (DAgger).
     // A wrinkle bending gain of 0 is none, as the model was trained.
     let out = tune(&["--drift-share", "1", "--coarse-wrinkle-bending", "0"]);

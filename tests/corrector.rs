@@ -647,6 +647,18 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
         .expect("not diverged");
     assert_eq!(only, e.interleaved_mm);
     assert!(interleaved_errors(&seq, &mut fresh, t0, &corrector, 4).is_err());
+    // A corrector trained beside half the fabric's bending and no crease contacts sets its
+    // coarse simulation up so; by default it leaves both as the simulator's.
+    let mut trained = TrainingConfig::new(CorrectorConfig::new());
+    let mut beside = coarse_simulation(&scene(), &dir, 1).expect("coarse simulation");
+    trained.prepare_coarse(&mut beside).expect("default");
+    assert_eq!(beside.sim.model.bending_scale(), 1.0);
+    assert!(beside.sim.detector().crease_contacts);
+    trained.coarse_bending = Some(0.5);
+    trained.coarse_crease_contacts = Some(false);
+    trained.prepare_coarse(&mut beside).expect("calibrated");
+    assert_eq!(beside.sim.model.bending_scale(), 0.5);
+    assert!(!beside.sim.detector().crease_contacts);
     // `clothsr calibrate` scores a coarse model by the simulation alone: the simulator's own
     // model gives evaluate's sim-alone column bit for bit; a compression-soft membrane, a
     // grip or wrinkle bending set through `CoarseCalibration::apply` changes it.

@@ -730,7 +730,7 @@ fn inside_table(p: &Vector3<f64>) -> f64 {
 /// coarse edges that span the table's edge tunnel past it within a step and are then held by
 /// it from inside: the part on the table slides 3.8 mm towards the edge at the landing.
 /// Without them (`CollisionDetector::crease_contacts`, `clothsr run
-/// --coarse-no-crease-contacts`) only vertices meet the table: they all stay outside, the part
+/// --coarse-crease-contacts off`) only vertices meet the table: they all stay outside, the part
 /// on the table stays where it landed (0.6 mm), and an edge between a vertex on the top and
 /// one down the side cuts the table's corner, as the downsampled fine cloth's do.
 #[test]

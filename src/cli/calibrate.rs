@@ -59,8 +59,8 @@ pub struct Args {
     csv: Option<PathBuf>,
 }
 
-/// `on` or `off`.
-fn on_off(v: &str) -> Result<bool, String> {
+/// `on` or `off` (a clap value parser).
+pub(crate) fn on_off(v: &str) -> Result<bool, String> {
     match v.trim() {
         "on" => Ok(true),
         "off" => Ok(false),

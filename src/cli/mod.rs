@@ -58,7 +58,7 @@ enum Command {
     /// alone and the corrector without interleaving.
     Rollout(rollout::Args),
     /// Choose the coarse model (membrane compression and its knee, friction, wrinkle bending,
-    /// bending stiffness) that keeps
+    /// bending stiffness, crease contacts) that keeps
     /// the coarse simulation alone closest to a scene's M_int, on its data sets, and write it
     /// as a models folder's coarse.json.
     Calibrate(calibrate::Args),

@@ -81,6 +81,14 @@ pub struct Args {
     /// 0: off), for every variant, in place of the corrector's
     #[arg(long, value_name = "GAIN")]
     coarse_wrinkle_bending: Option<f64>,
+    /// The coarse hinges' bending stiffness as a factor of the fabric's, for every variant, in
+    /// place of the corrector's.
+    #[arg(long, value_name = "FACTOR")]
+    coarse_bending: Option<f64>,
+    /// Crease contacts (`on` or `off`) of the coarse simulation, for every variant, in place
+    /// of the corrector's.
+    #[arg(long, value_name = "on|off", value_parser = super::calibrate::on_off)]
+    coarse_crease_contacts: Option<bool>,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
     /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
@@ -133,6 +141,16 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     if let Some(g) = args.coarse_wrinkle_bending {
         corrector.training.coarse_wrinkle_bending = clothsr::sim::WrinkleBending::gain_option(g)
             .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?;
+    }
+    if let Some(b) = args.coarse_bending {
+        anyhow::ensure!(
+            b > 0.0 && b.is_finite(),
+            "--coarse-bending {b}: the factor must be > 0"
+        );
+        corrector.training.coarse_bending = (b != 1.0).then_some(b);
+    }
+    if let Some(on) = args.coarse_crease_contacts {
+        corrector.training.coarse_crease_contacts = (!on).then_some(false);
     }
     Ok(corrector)
 }

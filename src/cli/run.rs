@@ -121,12 +121,12 @@ pub struct Args {
     /// error)
     #[arg(long, value_name = "FACTOR")]
     coarse_bending: Option<f64>,
-    /// Let coarse cloth edges cut the colliders' sharp edges (a table's corner), as the
-    /// downsampled fine cloth's do: only coarse vertices meet colliders (default: the
-    /// corrector's, else `coarse.json`'s, else crease contacts on; beside a corrector trained
-    /// with them, an error)
-    #[arg(long)]
-    coarse_no_crease_contacts: bool,
+    /// Coarse cloth edges against the colliders' sharp edges, `on` or `off`; off, they may cut
+    /// a table's corner as the downsampled fine cloth's do, and only coarse vertices meet
+    /// colliders (default: the corrector's, else `coarse.json`'s, else on; beside a corrector
+    /// trained with the other, an error)
+    #[arg(long, value_name = "on|off", value_parser = super::calibrate::on_off)]
+    coarse_crease_contacts: Option<bool>,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -258,7 +258,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         coarse_friction: args.coarse_friction,
         coarse_wrinkle_bending: args.coarse_wrinkle_bending,
         coarse_bending: args.coarse_bending,
-        coarse_crease_contacts: args.coarse_no_crease_contacts.then_some(false),
+        coarse_crease_contacts: args.coarse_crease_contacts,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
     let (opts, cal) = CoarseCalibration::for_run(&args.models, corrector, given)?;

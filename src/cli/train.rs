@@ -243,11 +243,11 @@ pub struct CorrectorArgs {
     /// which then runs with it. [default: 1, or the `--init` model's]
     #[arg(long, value_name = "FACTOR")]
     coarse_bending: Option<f64>,
-    /// Train beside a coarse simulation without crease contacts (coarse cloth edges may cut
-    /// the colliders' sharp edges, as M_int's do); saved with the model, which then runs so.
-    /// [default: with them, or as the `--init` model was trained]
-    #[arg(long)]
-    coarse_no_crease_contacts: bool,
+    /// Crease contacts of the coarse simulation trained beside, `on` or `off` (off: coarse
+    /// cloth edges may cut the colliders' sharp edges, as M_int's do); saved with the model,
+    /// which then runs so. [default: on, or as the `--init` model was trained]
+    #[arg(long, value_name = "on|off", value_parser = super::calibrate::on_off)]
+    coarse_crease_contacts: Option<bool>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -334,6 +334,12 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         );
         model = model.with_share_min((m != 0.0).then_some(m));
     }
+    if let Some(b) = a.coarse_bending {
+        anyhow::ensure!(
+            b > 0.0 && b.is_finite(),
+            "--coarse-bending must be a factor > 0, got {b}"
+        );
+    }
     let wrinkles = a
         .coarse_wrinkle_bending
         .map(clothsr::sim::WrinkleBending::gain_option)
@@ -377,11 +383,11 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
                 .or_else(|| init.as_ref().and_then(|c| c.coarse_bending))
                 .filter(|&b| b != 1.0),
         )
-        .with_coarse_crease_contacts(if a.coarse_no_crease_contacts {
-            Some(false)
-        } else {
-            init.as_ref().and_then(|c| c.coarse_crease_contacts)
-        })
+        .with_coarse_crease_contacts(
+            a.coarse_crease_contacts
+                .or_else(|| init.as_ref().and_then(|c| c.coarse_crease_contacts))
+                .filter(|&on| !on),
+        )
         .with_init_from(a.init.clone())
         .with_average_from(a.average_from)
         .with_rollout_as_inference(a.rollout_as_inference.then_some(true))

@@ -156,7 +156,8 @@ pub struct TrainingConfig {
     /// from, instead of fresh weights and statistics fitted to the training data: fine-tuning,
     /// typically more phase-2 windows (`steps` 0) or new sequences. Its network must have
     /// [`Self::model`]'s sizes and decoder, and it must have been trained beside the same
-    /// coarse membrane. Optional so that older configs load.
+    /// coarse model (membrane, friction, wrinkle bending, bending, crease contacts). Optional
+    /// so that older configs load.
     pub init_from: Option<PathBuf>,
     /// Phase-2 window after which the saved network is the running mean of the weights after
     /// every later window (stochastic weight averaging, Izmailov et al. 2018) instead of the
@@ -595,18 +596,28 @@ fn warm_start(
             ),
         ));
     }
-    if old.coarse_bending.unwrap_or(1.0) != cfg.coarse_bending.unwrap_or(1.0)
-        || old.coarse_crease_contacts.unwrap_or(true) != cfg.coarse_crease_contacts.unwrap_or(true)
-    {
+    let (old_b, new_b) = (
+        old.coarse_bending.unwrap_or(1.0),
+        cfg.coarse_bending.unwrap_or(1.0),
+    );
+    if old_b != new_b {
         return Err(Error::bad_input(
             &config_path,
             format!(
-                "the network to start from was trained beside coarse bending {:?} and crease \
-                 contacts {:?}, the training asks for {:?} and {:?} (None: the fabric's, on)",
-                old.coarse_bending,
-                old.coarse_crease_contacts,
-                cfg.coarse_bending,
-                cfg.coarse_crease_contacts
+                "the network to start from was trained beside {old_b} times the fabric's \
+                 bending stiffness, the training asks for {new_b}"
+            ),
+        ));
+    }
+    let on_off = |c: Option<bool>| if c.unwrap_or(true) { "on" } else { "off" };
+    if on_off(old.coarse_crease_contacts) != on_off(cfg.coarse_crease_contacts) {
+        return Err(Error::bad_input(
+            &config_path,
+            format!(
+                "the network to start from was trained with crease contacts {}, the training \
+                 asks for {}",
+                on_off(old.coarse_crease_contacts),
+                on_off(cfg.coarse_crease_contacts)
             ),
         ));
     }
