@@ -44,7 +44,7 @@ pub struct Args {
     bending: Vec<f64>,
     /// Crease contacts to try: `on` (the simulator's) and or `off` (coarse edges may cut the
     /// colliders' sharp edges, as M_int's do).
-    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = on_off)]
+    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = super::on_off)]
     crease_contacts: Vec<bool>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where
@@ -57,15 +57,6 @@ pub struct Args {
     /// Write every candidate's errors as CSV here.
     #[arg(long)]
     csv: Option<PathBuf>,
-}
-
-/// `on` or `off` (a clap value parser).
-pub(crate) fn on_off(v: &str) -> Result<bool, String> {
-    match v.trim() {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        t => Err(format!("{t}: 'on' or 'off'")),
-    }
 }
 
 /// `--friction`'s values: `scene` as `None`, numbers checked.
@@ -95,12 +86,7 @@ fn cells(c: &CoarseCalibration) -> [String; 6] {
         or(c.friction, "scene"),
         or(c.wrinkle_bending, "0"),
         or(c.bending, "1"),
-        if c.crease_contacts == Some(false) {
-            "off"
-        } else {
-            "on"
-        }
-        .to_string(),
+        clothsr::pipeline::crease_label(c.crease_contacts).to_string(),
     ]
 }
 

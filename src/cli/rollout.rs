@@ -87,7 +87,7 @@ pub struct Args {
     coarse_bending: Option<f64>,
     /// Crease contacts (`on` or `off`) of the coarse simulation, for every variant, in place
     /// of the corrector's.
-    #[arg(long, value_name = "on|off", value_parser = super::calibrate::on_off)]
+    #[arg(long, value_name = "on|off", value_parser = super::on_off)]
     coarse_crease_contacts: Option<bool>,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool

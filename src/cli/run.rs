@@ -125,7 +125,7 @@ pub struct Args {
     /// a table's corner as the downsampled fine cloth's do, and only coarse vertices meet
     /// colliders (default: the corrector's, else `coarse.json`'s, else on; beside a corrector
     /// trained with the other, an error)
-    #[arg(long, value_name = "on|off", value_parser = super::calibrate::on_off)]
+    #[arg(long, value_name = "on|off", value_parser = super::on_off)]
     coarse_crease_contacts: Option<bool>,
     /// Write text USD even for a .usd file.
     #[arg(long)]

@@ -246,7 +246,7 @@ pub struct CorrectorArgs {
     /// Crease contacts of the coarse simulation trained beside, `on` or `off` (off: coarse
     /// cloth edges may cut the colliders' sharp edges, as M_int's do); saved with the model,
     /// which then runs so. [default: on, or as the `--init` model was trained]
-    #[arg(long, value_name = "on|off", value_parser = super::calibrate::on_off)]
+    #[arg(long, value_name = "on|off", value_parser = super::on_off)]
     coarse_crease_contacts: Option<bool>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh

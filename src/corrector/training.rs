@@ -48,6 +48,7 @@ use super::rollout::{interleaved_errors, interleaved_run, mean_distance_mm};
 use crate::data::flat32;
 use crate::error::{Error, Result};
 use crate::io::write_atomic;
+use crate::pipeline::crease_label;
 use crate::scene::Scene;
 use crate::sim::driver::Simulation;
 use crate::sim::SimState;
@@ -212,21 +213,22 @@ impl TrainingConfig {
             .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string())
     }
 
-    /// Sets up `sim` (a coarse simulation) as the corrector was trained with.
-    pub fn prepare_coarse(&self, sim: &mut Simulation) -> Result<()> {
-        if let Some(mu) = self.coarse_friction {
-            set_friction(sim, mu)?;
+    /// The coarse model the corrector was trained beside, as a calibration.
+    pub fn coarse_calibration(&self) -> crate::pipeline::CoarseCalibration {
+        crate::pipeline::CoarseCalibration {
+            compression: self.coarse_compression,
+            compression_knee: self.coarse_compression_knee,
+            friction: self.coarse_friction,
+            wrinkle_bending: self.coarse_wrinkle_bending,
+            bending: self.coarse_bending,
+            crease_contacts: self.coarse_crease_contacts,
         }
-        sim.sim
-            .model
-            .set_wrinkle_bending(self.coarse_wrinkle_bending.map(WrinkleBending::with_gain))?;
-        sim.sim
-            .model
-            .set_bending_scale(self.coarse_bending.unwrap_or(1.0))?;
-        sim.sim.detector_mut().crease_contacts = self.coarse_crease_contacts.unwrap_or(true);
-        sim.sim
-            .model
-            .set_membrane_compression(self.compression_factor(), self.coarse_compression_knee)
+    }
+
+    /// Sets up `sim` (a coarse simulation) as the corrector was trained with
+    /// ([`crate::pipeline::CoarseCalibration::apply`] of [`Self::coarse_calibration`]).
+    pub fn prepare_coarse(&self, sim: &mut Simulation) -> Result<()> {
+        self.coarse_calibration().apply(sim)
     }
 }
 
@@ -609,15 +611,16 @@ fn warm_start(
             ),
         ));
     }
-    let on_off = |c: Option<bool>| if c.unwrap_or(true) { "on" } else { "off" };
-    if on_off(old.coarse_crease_contacts) != on_off(cfg.coarse_crease_contacts) {
+    let (old_e, new_e) = (
+        crease_label(old.coarse_crease_contacts),
+        crease_label(cfg.coarse_crease_contacts),
+    );
+    if old_e != new_e {
         return Err(Error::bad_input(
             &config_path,
             format!(
-                "the network to start from was trained with crease contacts {}, the training \
-                 asks for {}",
-                on_off(old.coarse_crease_contacts),
-                on_off(cfg.coarse_crease_contacts)
+                "the network to start from was trained with crease contacts {old_e}, the \
+                 training asks for {new_e}"
             ),
         ));
     }

@@ -119,6 +119,15 @@ pub struct CoarseCalibration {
     pub crease_contacts: Option<bool>,
 }
 
+/// A crease-contacts setting as `on` or `off` (`None`: on, the simulator's).
+pub fn crease_label(setting: Option<bool>) -> &'static str {
+    if setting.unwrap_or(true) {
+        "on"
+    } else {
+        "off"
+    }
+}
+
 impl CoarseCalibration {
     /// Its file name in a models folder.
     pub const FILE: &'static str = "coarse.json";
@@ -403,16 +412,8 @@ impl<'a> Pipeline<'a> {
                 return Err(Error::Invalid(format!(
                     "the corrector in {} was trained with crease contacts {}, not {}",
                     c.dir.display(),
-                    if c.training.coarse_crease_contacts.unwrap_or(true) {
-                        "on"
-                    } else {
-                        "off"
-                    },
-                    if opts.coarse_crease_contacts.unwrap_or(true) {
-                        "on"
-                    } else {
-                        "off"
-                    }
+                    crease_label(c.training.coarse_crease_contacts),
+                    crease_label(opts.coarse_crease_contacts)
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
