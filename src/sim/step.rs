@@ -348,6 +348,9 @@ struct BodyMotion<'a, 'b> {
 /// A triangle's three points.
 type Tri = [Vector3<f64>; 3];
 
+/// A segment's two end points.
+type Segment = [Vector3<f64>; 2];
+
 impl BodyMotion<'_, '_> {
     /// Triangle `face[1]` of collider `face[0]` at the start and at the end of the (sub)step
     /// being solved.
@@ -358,6 +361,21 @@ impl BodyMotion<'_, '_> {
         let mut out = ([Vector3::zeros(); 3], [Vector3::zeros(); 3]);
         for (k, &vtx) in tri.iter().enumerate() {
             let (p0, p1) = (s.points.get(vtx as usize)?, e.points.get(vtx as usize)?);
+            out.0[k] = p0 + (p1 - p0) * self.from;
+            out.1[k] = p0 + (p1 - p0) * self.to;
+        }
+        Some(out)
+    }
+
+    /// Segment between points `ends[1]` and `ends[2]` of collider `ends[0]` at the start and
+    /// at the end of the (sub)step being solved.
+    fn segment(&self, ends: &[u32; 3]) -> Option<(Segment, Segment)> {
+        let c = ends[0] as usize;
+        let (s, e) = (self.start.get(c)?, self.end.get(c)?);
+        let mut out = ([Vector3::zeros(); 2], [Vector3::zeros(); 2]);
+        for k in 0..2 {
+            let vtx = ends[k + 1] as usize;
+            let (p0, p1) = (s.points.get(vtx)?, e.points.get(vtx)?);
             out.0[k] = p0 + (p1 - p0) * self.from;
             out.1[k] = p0 + (p1 - p0) * self.to;
         }
@@ -463,7 +481,7 @@ impl ClosingPair {
                         let allowed = (0.5 * c.distance(x)).max(narrow);
                         ([v, 0, 0, 0], 1, 1, [1.0, 0.0, 0.0, 0.0], n, allowed)
                     }
-                    Contact::EdgeObstacle { a, edge } => {
+                    Contact::EdgeObstacle { a, edge, .. } => {
                         let narrow = body_narrow?;
                         let q = segment_segment(&p(a[0]), &p(a[1]), &edge[0], &edge[1]);
                         let w = [1.0 - q.s, q.s, 0.0, 0.0];
@@ -1648,8 +1666,10 @@ impl Simulator {
     /// The lagged friction of a step ([`FrictionPoint`]): one per free cloth vertex touching a
     /// body, all measured at the start of the step (cloth at `x_n`, bodies at their start
     /// positions): the normal force is the magnitude of the summed repulsion of its body
-    /// contacts, ‖κ Σ (d̂ − d) ∇d‖; the tangent plane and the body motion under the vertex are
-    /// those of the face it is least deep under (nearest by |d|).
+    /// contacts, ‖κ Σ (d̂ − d) ∇d‖, a crease contact's shared between its edge's two vertices
+    /// by where along the edge it acts; the tangent plane and the body motion under the vertex
+    /// are those of the face it is least deep under (nearest by |d|), or of the crease where
+    /// it touches no face.
     fn friction_points(
         &self,
         x_n: &[Vector3<f64>],
@@ -1669,6 +1689,40 @@ impl Simulator {
         }
         let mut per: Vec<Option<Acc>> = (0..x_n.len()).map(|_| None).collect();
         for c in contacts {
+            // A cloth edge against a crease: its repulsion, shared between the edge's two
+            // vertices by where along the edge it acts, presses them against the crease (the
+            // grip of an edge a sheet wraps over); a vertex with no face contact takes the
+            // contact's direction as its normal and the crease's motion under it.
+            if let Contact::EdgeObstacle { a, ends, .. } = c {
+                let Some((e0, e1)) = motion.segment(ends) else {
+                    continue;
+                };
+                let (i, j) = (a[0] as usize, a[1] as usize);
+                let q = segment_segment(&x_n[i], &x_n[j], &e0[0], &e0[1]);
+                if !(q.dist > 0.0 && q.dist < p.dhat_m) {
+                    continue;
+                }
+                let on_cloth = x_n[i] + (x_n[j] - x_n[i]) * q.s;
+                let on_crease = e0[0] + (e0[1] - e0[0]) * q.t;
+                let Some(n) = (on_cloth - on_crease).try_normalize(1e-20) else {
+                    continue;
+                };
+                let moved = (e1[0] - e0[0]) * (1.0 - q.t) + (e1[1] - e0[1]) * q.t;
+                let force = p.kappa * (p.dhat_m - q.dist);
+                for (k, w) in [(i, 1.0 - q.s), (j, q.s)] {
+                    if !self.free[k] || w <= 0.0 {
+                        continue;
+                    }
+                    let slot = per[k].get_or_insert(Acc {
+                        d: f64::INFINITY,
+                        force: Vector3::zeros(),
+                        n,
+                        moved,
+                    });
+                    slot.force += n * (force * w);
+                }
+                continue;
+            }
             let Contact::VertexObstacle { v: i, face, .. } = c else {
                 continue;
             };
@@ -1779,6 +1833,84 @@ mod tests {
         let h = f.energy_gradient_hessian(&(f.anchor + f.n * 0.001)).2;
         assert!((t1.dot(&(h * t1)) - 2.0 * f.mu_lambda_n / eps).abs() < 1e-6 * h.norm());
         assert!((h * f.n).norm() < 1e-9 * h.norm());
+    }
+
+    /// A cloth edge across a crease of a moving box: the crease's repulsion grips the edge's
+    /// two vertices, μ κ (d̂ − d) shared by where along the edge it acts (a quarter of the way:
+    /// ¾ and ¼), normal to the crease's direction of contact, and they are anchored to the
+    /// crease's own motion (the box moves 10 mm along the crease in the step).
+    #[test]
+    fn a_crease_contact_grips_its_edges_vertices_moving_with_the_crease() {
+        let scene = crate::scene::samples::sample("sheet_table").expect("sample");
+        let sim = crate::sim::driver::Simulation::new(&scene, 0.04, |_| {}).expect("setup");
+        let s = &sim.sim;
+        let p = s.params.collision;
+        let mu = s.params.friction;
+        assert!(mu > 0.0 && p.dhat_m < 0.01, "{mu} {}", p.dhat_m);
+        let cube = crate::scene::Collider::cuboid("box", Vector3::zeros(), Vector3::repeat(1.0));
+        let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
+        let moved: Vec<Vector3<f64>> = pts
+            .iter()
+            .map(|q| q + Vector3::new(0.01, 0.0, 0.0))
+            .collect();
+        let tris = cube.triangles;
+        // The crease y = z = 1 (along x); the closest point of the cloth edge a quarter of the
+        // way from `a`, 0.3 d̂ out along (0, 1, 1)/√2; the edge runs along (0, 1, −1)/√2.
+        let [a, b] = s.model.edges[0];
+        let (a, b) = (a as usize, b as usize);
+        let out = Vector3::new(0.0, 1.0, 1.0).normalize();
+        let along = Vector3::new(0.0, 1.0, -1.0).normalize();
+        let d = 0.3 * p.dhat_m;
+        let c = Vector3::new(0.5, 1.0, 1.0) + out * d;
+        let mut x_n = vec![Vector3::repeat(5.0); s.model.num_vertices()];
+        x_n[a] = c - along * 0.025;
+        x_n[b] = c + along * 0.075;
+        let contacts = crate::sim::collide::find_contacts(
+            &x_n,
+            &[],
+            &[[a as u32, b as u32]],
+            &[(&pts, &tris)],
+            &p,
+        );
+        assert!(
+            matches!(contacts[..], [Contact::EdgeObstacle { .. }]),
+            "{contacts:?}"
+        );
+        let frames = |q| {
+            [ColliderFrame {
+                points: q,
+                triangles: &tris,
+            }]
+        };
+        let (start, end) = (frames(&pts), frames(&moved));
+        let motion = BodyMotion {
+            start: &start,
+            end: &end,
+            dt_s: 1.0 / 300.0,
+            from: 0.0,
+            to: 1.0,
+        };
+        let mut points = s.friction_points(&x_n, &contacts, &motion);
+        points.sort_by_key(|f| f.v);
+        assert_eq!(points.len(), 2, "{points:?}");
+        let force = mu * p.kappa * (p.dhat_m - d);
+        for f in &points {
+            let w = if f.v as usize == a { 0.75 } else { 0.25 };
+            assert!(
+                (f.mu_lambda_n - force * w).abs() < 1e-9 * force,
+                "vertex {}: {} against {}",
+                f.v,
+                f.mu_lambda_n,
+                force * w
+            );
+            assert!((f.n - out).norm() < 1e-9, "{}", f.n);
+            let want = x_n[f.v as usize] + Vector3::new(0.01, 0.0, 0.0);
+            assert!((f.anchor - want).norm() < 1e-12, "{} {want}", f.anchor);
+        }
+        // Without friction, no grip.
+        let mut s = sim.sim;
+        s.params.friction = 0.0;
+        assert!(s.friction_points(&x_n, &contacts, &motion).is_empty());
     }
 
     /// A cloth vertex 1 mm above a body face approaches it by at most max(d/2, narrow) in an

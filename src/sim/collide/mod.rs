@@ -35,6 +35,13 @@
 //!   body's frame. Vertices deeper than [`OBSTACLE_SEARCH_M`] are not found (and not pushed).
 //!   Only cloth vertices are tested against collider faces (no collider-vertex/edge against
 //!   cloth face/edge contacts).
+//! * **Creases** (cloth edge against a collider's sharp edge, faces at more than
+//!   [`SHARP_EDGE_DEG`]; [`CollisionDetector::crease_contacts`]): an edge closer than d̂ to a
+//!   crease, so a box's edge cannot slice between two cloth vertices. One-sided like the
+//!   vertex contacts: an edge whose closest point to the crease lies behind both faces of a
+//!   convex crease (or either face of a concave one) has crossed it and gets no contact, as
+//!   the unsigned distance would otherwise hold it there from inside. The simulator gives
+//!   these contacts friction (a sheet grips the edge it wraps over).
 //! * **Self** (cloth against cloth, unsigned distance): vertex–triangle pairs (vertex not in the
 //!   triangle) and edge–edge pairs (no shared vertex) closer than d̂, found with a BVH over the
 //!   triangles inflated by d̂ (point queries) and a BVH over the edges inflated by d̂/2 (self
@@ -106,6 +113,10 @@ pub enum Contact {
         a: [u32; 2],
         /// Collider edge end points.
         edge: [Vector3<f64>; 2],
+        /// Which collider (index in the detector's input) and the collider points of the
+        /// edge's two ends: where the crease's own motion is read (friction acts on the
+        /// velocity relative to it).
+        ends: [u32; 3],
     },
     /// Cloth edge `a` against cloth edge `b` (no shared vertex).
     EdgeEdge {
@@ -143,7 +154,7 @@ impl Contact {
     pub fn points(&self, x: &[Vector3<f64>]) -> [Vector3<f64>; 4] {
         match self {
             Contact::VertexObstacle { v, tri, .. } => [x[*v as usize], tri[0], tri[1], tri[2]],
-            Contact::EdgeObstacle { a, edge } => {
+            Contact::EdgeObstacle { a, edge, .. } => {
                 [x[a[0] as usize], x[a[1] as usize], edge[0], edge[1]]
             }
             _ => self
@@ -367,6 +378,63 @@ fn sharp_edges_of(
             }
         })
         .map(|(e, _)| *e)
+        .collect()
+}
+
+/// The two faces of a sharp edge, for telling a cloth edge that has crossed it from one that
+/// is still outside: each face's outward unit normal with a point of its plane, and whether the
+/// crease is convex (a table's edge) rather than concave (an armpit). `None` for a boundary or
+/// non-manifold edge, or one with a degenerate face: those always repel.
+#[derive(Debug, Clone, Copy)]
+struct CreasePlanes {
+    planes: [(Vector3<f64>, Vector3<f64>); 2],
+    convex: bool,
+}
+
+impl CreasePlanes {
+    /// Whether point `c` lies inside the body at this crease: behind both faces' planes of a
+    /// convex crease, or behind either of a concave one.
+    fn behind(&self, c: &Vector3<f64>) -> bool {
+        let [b1, b2] = self.planes.map(|(n, q)| n.dot(&(c - q)) < 0.0);
+        if self.convex {
+            b1 && b2
+        } else {
+            b1 || b2
+        }
+    }
+}
+
+/// [`CreasePlanes`] of each of `sharp` (edges of `faces`, the table of [`edge_faces`]).
+fn crease_planes(
+    pts: &[Vector3<f64>],
+    tris: &[[u32; 3]],
+    faces: &[([u32; 2], [u32; 2])],
+    sharp: &[[u32; 2]],
+) -> Vec<Option<CreasePlanes>> {
+    let plane = |t: u32| {
+        let [a, b, c] = tri_points(pts, &tris[t as usize]);
+        (b - a).cross(&(c - a)).try_normalize(1e-30).map(|n| (n, a))
+    };
+    let centroid = |t: u32| {
+        let [a, b, c] = tri_points(pts, &tris[t as usize]);
+        (a + b + c) / 3.0
+    };
+    sharp
+        .iter()
+        .map(|e| {
+            let k = faces.binary_search_by(|(f, _)| f.cmp(e)).ok()?;
+            let f = faces[k].1;
+            if f[1] >= u32::MAX - 1 {
+                return None;
+            }
+            let (p1, p2) = (plane(f[0])?, plane(f[1])?);
+            // Convex where the second face lies behind the first's plane.
+            let convex = p1.0.dot(&(centroid(f[1]) - p1.1)) < 0.0;
+            Some(CreasePlanes {
+                planes: [p1, p2],
+                convex,
+            })
+        })
         .collect()
 }
 
@@ -866,12 +934,13 @@ impl CollisionDetector {
             && colliders.iter().any(|(_, t)| !t.is_empty())
         {
             let mut cloth_edge_bvh: Option<Bvh> = None;
-            for (cache, (pts, tris)) in self.colliders.iter_mut().zip(colliders) {
+            for (k, (cache, (pts, tris))) in self.colliders.iter_mut().zip(colliders).enumerate() {
                 let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
                 let sharp = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
                 if sharp.is_empty() {
                     continue;
                 }
+                let planes = crease_planes(pts, tris, faces, &sharp);
                 let cloth_edge_bvh = cloth_edge_bvh.get_or_insert_with(|| {
                     Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * obstacle_dhat))
                 });
@@ -880,12 +949,18 @@ impl CollisionDetector {
                     let a = cloth_edges[i as usize];
                     let e = sharp[j as usize];
                     let (p0, p1) = (&pts[e[0] as usize], &pts[e[1] as usize]);
-                    let d =
-                        segment_segment(&cloth_x[a[0] as usize], &cloth_x[a[1] as usize], p0, p1)
-                            .dist;
-                    (d < obstacle_dhat).then_some(Contact::EdgeObstacle {
+                    let (c0, c1) = (&cloth_x[a[0] as usize], &cloth_x[a[1] as usize]);
+                    let q = segment_segment(c0, c1, p0, p1);
+                    // One-sided: an edge whose closest point lies inside the body has crossed
+                    // the crease (a 20 mm edge passes a table's edge within a step) and is left
+                    // to its vertices' contacts; the unsigned repulsion would hold it there
+                    // from inside, dragging the cloth towards the crease.
+                    let crossed =
+                        planes[j as usize].is_some_and(|p| p.behind(&(c0 + (c1 - c0) * q.s)));
+                    (q.dist < obstacle_dhat && !crossed).then_some(Contact::EdgeObstacle {
                         a,
                         edge: [*p0, *p1],
+                        ends: [k as u32, e[0], e[1]],
                     })
                 }));
             }
@@ -1137,11 +1212,93 @@ mod edge_obstacle_tests {
         // Far away: no contact.
         let far: Vec<Vector3<f64>> = x.iter().map(|p| p + Vector3::new(0.0, 0.1, 0.1)).collect();
         assert!(find_contacts(&far, &[], &[[0, 1]], &[(&pts, &tris)], &params).is_empty());
+        // It names the collider and the crease's two points (where friction reads its motion).
+        let Contact::EdgeObstacle {
+            edge: ends_at,
+            ends,
+            ..
+        } = edge[0]
+        else {
+            unreachable!()
+        };
+        assert_eq!(ends[0], 0);
+        assert_eq!(
+            [pts[ends[1] as usize], pts[ends[2] as usize]],
+            *ends_at,
+            "the contact's points are the collider's"
+        );
+        // The same edge 1 mm inside the cube has crossed the crease: one-sided, it is left to
+        // the vertices' contacts instead of being held there from inside …
+        let sunk: Vec<Vector3<f64>> = x
+            .iter()
+            .map(|p| p - Vector3::new(0.0, 0.001, 0.001) / 2f64.sqrt())
+            .collect();
+        let inside = find_contacts(&sunk, &[], &[[0, 1]], &[(&pts, &tris)], &params);
+        assert!(inside.is_empty(), "{inside:?}");
+        // … but an edge whose closest point is behind one face's plane only (above the top,
+        // 0.5 mm short of the back face's plane) is still outside and is held off the crease.
+        let over = [
+            Vector3::new(0.5, 1.3, 0.9995),
+            Vector3::new(0.5, 1.0005, 0.9995),
+        ];
+        let c = find_contacts(&over, &[], &[[0, 1]], &[(&pts, &tris)], &params);
+        let creases = c
+            .iter()
+            .filter(|c| matches!(c, Contact::EdgeObstacle { .. }));
+        assert_eq!(creases.count(), 1, "{c:?}");
         // With crease contacts off the edge may cut the crease: nothing is reported.
         let mut det = CollisionDetector::new();
         det.crease_contacts = false;
         let off = det.find_contacts(&lifted, &[], &[[0, 1]], &[(&pts, &tris)], &params);
         assert!(off.is_empty(), "{off:?}");
+    }
+
+    /// Inside a box seen from within (its faces turned inwards, as a room's walls), the same
+    /// edges are concave creases: a cloth edge in the room's corner is held off it, one that
+    /// has gone into either wall has crossed.
+    #[test]
+    fn a_concave_crease_holds_edges_in_the_corner_and_lets_crossed_ones_go() {
+        let cube = crate::scene::Collider::cuboid("room", Vector3::zeros(), Vector3::repeat(1.0));
+        let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
+        let tris: Vec<[u32; 3]> = cube.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect();
+        let planes = {
+            let faces = edge_faces(&tris);
+            let sharp = sharp_edges_of(&pts, &tris, &faces, SHARP_EDGE_DEG);
+            crease_planes(&pts, &tris, &faces, &sharp)
+        };
+        assert_eq!(planes.len(), 12);
+        assert!(planes.iter().all(|p| p.is_some_and(|p| !p.convex)));
+        let params = CollisionParams {
+            dhat_m: 0.003,
+            kappa: 1000.0,
+            self_collision: false,
+        };
+        // The top-back edge (y = z = 1); a cloth edge across it, 1 mm into the room's corner.
+        let x = [Vector3::new(0.5, 0.7, 1.3), Vector3::new(0.5, 1.3, 0.7)];
+        let at = |off: Vector3<f64>| -> Vec<Vector3<f64>> { x.iter().map(|p| p + off).collect() };
+        let count = |x: &[Vector3<f64>]| {
+            find_contacts(x, &[], &[[0, 1]], &[(&pts, &tris)], &params)
+                .iter()
+                .filter(|c| matches!(c, Contact::EdgeObstacle { .. }))
+                .count()
+        };
+        let corner = at(-Vector3::new(0.0, 0.001, 0.001) / 2f64.sqrt());
+        assert_eq!(count(&corner), 1);
+        // An edge gone into the top wall (its end 0.5 mm above y = 1, in front of the back
+        // wall's plane): crossed.
+        let wall = [
+            Vector3::new(0.5, 1.0005, 0.7),
+            Vector3::new(0.5, 1.0005, 0.9995),
+        ];
+        assert_eq!(count(&wall), 0);
+        // The same edge 0.5 mm below the top wall is in the room: held off the crease.
+        assert_eq!(
+            count(&[
+                wall[0] - Vector3::new(0.0, 0.001, 0.0),
+                wall[1] - Vector3::new(0.0, 0.001, 0.0)
+            ]),
+            1
+        );
     }
 }
 
