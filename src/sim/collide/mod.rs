@@ -428,8 +428,9 @@ fn crease_planes(
                 return None;
             }
             let (p1, p2) = (plane(f[0])?, plane(f[1])?);
-            // Convex where the second face lies behind the first's plane.
-            let convex = p1.0.dot(&(centroid(f[1]) - p1.1)) < 0.0;
+            // Convex where the second face lies behind the first's plane, or in it facing the
+            // other way (a fin: a zero-thickness plate's edge, the sharpest convex crease).
+            let convex = p1.0.dot(&(centroid(f[1]) - p1.1)) <= 0.0;
             Some(CreasePlanes {
                 planes: [p1, p2],
                 convex,
@@ -1284,6 +1285,30 @@ mod edge_obstacle_tests {
         };
         let corner = at(-Vector3::new(0.0, 0.001, 0.001) / 2f64.sqrt());
         assert_eq!(count(&corner), 1);
+        // A fin (two triangles back to back in one plane, as a zero-thickness plate's edge)
+        // is convex: a cloth edge passing just off its edge, its closest point a hair to one
+        // side of the plane, is held off it.
+        let fin_pts = [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(1.0, 0.0, 0.0),
+            Vector3::new(0.5, 1.0, 0.0),
+            Vector3::new(0.6, 1.0, 0.0),
+        ];
+        let fin_tris = [[0, 1, 2], [1, 0, 3]];
+        let faces = edge_faces(&fin_tris);
+        let sharp = sharp_edges_of(&fin_pts, &fin_tris, &faces, SHARP_EDGE_DEG);
+        let fin = crease_planes(&fin_pts, &fin_tris, &faces, &[[0, 1]]);
+        assert!(sharp.contains(&[0, 1]));
+        assert!(fin[0].is_some_and(|p| p.convex));
+        let past = [
+            Vector3::new(0.5, -0.001, -0.3),
+            Vector3::new(0.5, -0.002, 0.3),
+        ];
+        let c = find_contacts(&past, &[], &[[0, 1]], &[(&fin_pts, &fin_tris)], &params);
+        let creases = c
+            .iter()
+            .filter(|c| matches!(c, Contact::EdgeObstacle { .. }));
+        assert_eq!(creases.count(), 1, "{c:?}");
         // An edge gone into the top wall (its end 0.5 mm above y = 1, in front of the back
         // wall's plane): crossed.
         let wall = [
