@@ -385,22 +385,22 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
         }
         // Without a corrector, the folder's own coarse model (the table's, chosen by
-        // `clothsr calibrate` on its training drops: c = 0.03, wrinkle bending 1, half the
+        // `clothsr calibrate` on its training drops: c = 0.01, wrinkle bending 1, the
         // fabric's bending, no crease contacts), as `clothsr run` and `clothsr bench` take it.
         let (opts, cal) = CoarseCalibration::for_run(&models, corrector, Options::default())
             .expect("a valid coarse.json, if any");
         let mut p = Pipeline::new(&scene, &isr, corrector, opts).expect("set up");
         if !ships_corrector {
             let table = CoarseCalibration {
-                compression: Some(0.03),
+                compression: Some(0.01),
                 wrinkle_bending: Some(1.0),
-                bending: Some(0.5),
                 crease_contacts: Some(false),
                 ..CoarseCalibration::default()
             };
             assert_eq!(cal, Some(table));
             let k = &p.coarse.sim.model.membrane_k;
-            assert!(k.iter().all(|k| k.compression == 0.03), "{:?}", k.first());
+            assert!(k.iter().all(|k| k.compression == 0.01), "{:?}", k.first());
+            assert_eq!(p.coarse.sim.model.bending_scale(), 1.0);
             assert!(!p.coarse.sim.detector().crease_contacts);
         }
         if ships_corrector {

@@ -2,7 +2,7 @@
 # Regenerates samples/models/table/ (this folder) from this repository alone: training data from
 # our own fine simulations of samples/sheet_table.usda (a silk sheet dropped onto a table;
 # 20 mm coarse / 2.5 mm fine), then the ISR network with its config, log and the data manifests
-# it was trained on. About 45 min on 2 CPU cores (each drop 13 min on one).
+# it was trained on. About 50 min on 2 CPU cores (each drop 15 min on one).
 #
 # Two 150-frame training drops and a held-out one (another yaw and offset), as for the three
 # balls (../three_balls/make.sh), and the same ISR recipe, on all 150 frames.
@@ -32,10 +32,10 @@ mkdir -p "$OUT"
 # (session 34) keeps the sheet on the table but does no better than the calibrated simulator.
 
 # The coarse model `clothsr run` uses with this folder, chosen by `clothsr calibrate` on the two
-# training drops (README.md, session 35): it picks c = 0.03, wrinkle bending 1, half the
-# fabric's bending and no crease contacts (20 mm edges may cut the table's corner as M_int's
-# do). The crease contacts and the bending factors are the table's own list; the default grid
-# has neither.
+# training drops (README.md, session 36): it picks c = 0.01, wrinkle bending 1, the fabric's
+# bending and no crease contacts (20 mm edges may cut the table's corner as M_int's do). The
+# crease contacts and the bending factors are the table's own list; the default grid has
+# neither.
 "$BIN" calibrate --data "$DATA/train_a" --data "$DATA/train_b" --compression 0.1,0.03,0.01 \
   --friction scene --wrinkle-bending 0,1 --bending 0.1,0.25,0.5,1 --crease-contacts on,off \
   -o "$OUT/coarse.json"
