@@ -1668,8 +1668,8 @@ impl Simulator {
     /// positions): the normal force is the magnitude of the summed repulsion of its body
     /// contacts, ‖κ Σ (d̂ − d) ∇d‖, a crease contact's shared between its edge's two vertices
     /// by where along the edge it acts; the tangent plane and the body motion under the vertex
-    /// are those of the face it is least deep under (nearest by |d|), or of the crease where
-    /// it touches no face.
+    /// are those of the face it is least deep under (nearest by |d|), or where it touches no
+    /// face, of the first crease contact listed.
     fn friction_points(
         &self,
         x_n: &[Vector3<f64>],

@@ -40,8 +40,10 @@
 //!   crease, so a box's edge cannot slice between two cloth vertices. One-sided like the
 //!   vertex contacts: an edge whose closest point to the crease lies behind both faces of a
 //!   convex crease (or either face of a concave one) has crossed it and gets no contact, as
-//!   the unsigned distance would otherwise hold it there from inside. The simulator gives
-//!   these contacts friction (a sheet grips the edge it wraps over).
+//!   the unsigned distance would otherwise hold it there from inside. The side is judged at
+//!   the positions detected, not along the step: an edge the solver's first guess carries past
+//!   a crease is released, not pushed back (vertices have the entry-face rule for that). The
+//!   simulator gives these contacts friction (a sheet grips the edge it wraps over).
 //! * **Self** (cloth against cloth, unsigned distance): vertex–triangle pairs (vertex not in the
 //!   triangle) and edge–edge pairs (no shared vertex) closer than d̂, found with a BVH over the
 //!   triangles inflated by d̂ (point queries) and a BVH over the edges inflated by d̂/2 (self
