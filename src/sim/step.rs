@@ -1838,7 +1838,9 @@ mod tests {
     /// A cloth edge across a crease of a moving box: the crease's repulsion grips the edge's
     /// two vertices, μ κ (d̂ − d) shared by where along the edge it acts (a quarter of the way:
     /// ¾ and ¼), normal to the crease's direction of contact, and they are anchored to the
-    /// crease's own motion (the box moves 10 mm along the crease in the step).
+    /// crease's own motion where the edge touches it (the box, second of two colliders, is
+    /// stretched along the crease in the step: its far end moves 10 mm, the point touched, a
+    /// quarter of the way along, 2.5 mm).
     #[test]
     fn a_crease_contact_grips_its_edges_vertices_moving_with_the_crease() {
         let scene = crate::scene::samples::sample("sheet_table").expect("sample");
@@ -1851,9 +1853,12 @@ mod tests {
         let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         let moved: Vec<Vector3<f64>> = pts
             .iter()
-            .map(|q| q + Vector3::new(0.01, 0.0, 0.0))
+            .map(|q| q + Vector3::new(0.01 * q.x, 0.0, 0.0))
             .collect();
         let tris = cube.triangles;
+        let far =
+            crate::scene::Collider::cuboid("far", Vector3::repeat(9.0), Vector3::repeat(10.0));
+        let far_pts: Vec<Vector3<f64>> = far.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         // The crease y = z = 1 (along x); the closest point of the cloth edge a quarter of the
         // way from `a`, 0.3 d̂ out along (0, 1, 1)/√2; the edge runs along (0, 1, −1)/√2.
         let [a, b] = s.model.edges[0];
@@ -1861,7 +1866,7 @@ mod tests {
         let out = Vector3::new(0.0, 1.0, 1.0).normalize();
         let along = Vector3::new(0.0, 1.0, -1.0).normalize();
         let d = 0.3 * p.dhat_m;
-        let c = Vector3::new(0.5, 1.0, 1.0) + out * d;
+        let c = Vector3::new(0.25, 1.0, 1.0) + out * d;
         let mut x_n = vec![Vector3::repeat(5.0); s.model.num_vertices()];
         x_n[a] = c - along * 0.025;
         x_n[b] = c + along * 0.075;
@@ -1869,18 +1874,30 @@ mod tests {
             &x_n,
             &[],
             &[[a as u32, b as u32]],
-            &[(&pts, &tris)],
+            &[(&far_pts, &far.triangles), (&pts, &tris)],
             &p,
         );
         assert!(
-            matches!(contacts[..], [Contact::EdgeObstacle { .. }]),
+            matches!(
+                contacts[..],
+                [Contact::EdgeObstacle {
+                    ends: [1, _, _],
+                    ..
+                }]
+            ),
             "{contacts:?}"
         );
         let frames = |q| {
-            [ColliderFrame {
-                points: q,
-                triangles: &tris,
-            }]
+            [
+                ColliderFrame {
+                    points: &far_pts,
+                    triangles: &far.triangles,
+                },
+                ColliderFrame {
+                    points: q,
+                    triangles: &tris,
+                },
+            ]
         };
         let (start, end) = (frames(&pts), frames(&moved));
         let motion = BodyMotion {
@@ -1904,7 +1921,7 @@ mod tests {
                 force * w
             );
             assert!((f.n - out).norm() < 1e-9, "{}", f.n);
-            let want = x_n[f.v as usize] + Vector3::new(0.01, 0.0, 0.0);
+            let want = x_n[f.v as usize] + Vector3::new(0.0025, 0.0, 0.0);
             assert!((f.anchor - want).norm() < 1e-12, "{} {want}", f.anchor);
         }
         // Without friction, no grip.
