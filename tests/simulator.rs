@@ -729,7 +729,7 @@ fn inside_table(p: &Vector3<f64>) -> f64 {
 /// simulation's contact thickness (as `clothsr run` sets up the coarse one) does, with or
 /// without crease contacts: how far the part on the table slid, how deep the deepest vertex and
 /// the deepest point along any edge (nine each) are inside the table, and how many vertices
-/// hang below its top.
+/// hang below its top. Asserts that the sheet hangs over the edge and no vertex is inside.
 struct TableDrop {
     slide_m: f64,
     vertex_depth_m: f64,
@@ -757,7 +757,7 @@ fn coarse_table_drop(crease_contacts: bool) -> TableDrop {
         slide_m = slide_m.max((mean_x(&sim) - x0).abs());
     }
     let x = &sim.state.x;
-    TableDrop {
+    let drop = TableDrop {
         slide_m,
         vertex_depth_m: x.iter().map(inside_table).fold(0.0, f64::max),
         edge_depth_m: (sim.sim.model.edges.iter())
@@ -767,7 +767,19 @@ fn coarse_table_drop(crease_contacts: bool) -> TableDrop {
             })
             .fold(0.0, f64::max),
         hanging: x.iter().filter(|p| p.y < 0.47).count(),
-    }
+    };
+    // Either way the sheet hangs over the edge and no vertex is inside the table.
+    assert!(
+        drop.hanging > 50,
+        "{} vertices hang over the edge",
+        drop.hanging
+    );
+    assert!(
+        drop.vertex_depth_m < 1e-4,
+        "a vertex is {} m inside",
+        drop.vertex_depth_m
+    );
+    drop
 }
 
 /// Without crease contacts (`CollisionDetector::crease_contacts`, `clothsr run
@@ -777,12 +789,6 @@ fn coarse_table_drop(crease_contacts: bool) -> TableDrop {
 #[test]
 fn without_crease_contacts_coarse_edges_cut_the_tables_corner_and_the_sheet_stays_put() {
     let d = coarse_table_drop(false);
-    assert!(d.hanging > 50, "{} vertices hang over the edge", d.hanging);
-    assert!(
-        d.vertex_depth_m < 1e-4,
-        "a vertex is {} m inside",
-        d.vertex_depth_m
-    );
     assert!(
         d.edge_depth_m > 2e-3,
         "the deepest edge point is {} m inside: no edge cuts the corner",
@@ -805,12 +811,6 @@ fn without_crease_contacts_coarse_edges_cut_the_tables_corner_and_the_sheet_stay
 #[test]
 fn with_one_sided_crease_contacts_no_coarse_edge_is_held_inside_the_table() {
     let d = coarse_table_drop(true);
-    assert!(d.hanging > 50, "{} vertices hang over the edge", d.hanging);
-    assert!(
-        d.vertex_depth_m < 1e-4,
-        "a vertex is {} m inside",
-        d.vertex_depth_m
-    );
     assert!(
         d.edge_depth_m < 1e-4,
         "an edge point is {} m inside the table",

@@ -345,21 +345,21 @@ struct BodyMotion<'a, 'b> {
     to: f64,
 }
 
+/// N points of a collider.
+type Points<const N: usize> = [Vector3<f64>; N];
+
 /// A triangle's three points.
-type Tri = [Vector3<f64>; 3];
+type Tri = Points<3>;
 
 /// A segment's two end points.
-type Segment = [Vector3<f64>; 2];
+type Segment = Points<2>;
 
 impl BodyMotion<'_, '_> {
-    /// Triangle `face[1]` of collider `face[0]` at the start and at the end of the (sub)step
-    /// being solved.
-    fn triangle(&self, face: &[u32; 2]) -> Option<(Tri, Tri)> {
-        let (c, t) = (face[0] as usize, face[1] as usize);
-        let (s, e) = (self.start.get(c)?, self.end.get(c)?);
-        let tri = e.triangles.get(t)?;
-        let mut out = ([Vector3::zeros(); 3], [Vector3::zeros(); 3]);
-        for (k, &vtx) in tri.iter().enumerate() {
+    /// Points `idx` of collider `c` at the start and at the end of the (sub)step being solved.
+    fn points<const N: usize>(&self, c: u32, idx: [u32; N]) -> Option<(Points<N>, Points<N>)> {
+        let (s, e) = (self.start.get(c as usize)?, self.end.get(c as usize)?);
+        let mut out = ([Vector3::zeros(); N], [Vector3::zeros(); N]);
+        for (k, vtx) in idx.into_iter().enumerate() {
             let (p0, p1) = (s.points.get(vtx as usize)?, e.points.get(vtx as usize)?);
             out.0[k] = p0 + (p1 - p0) * self.from;
             out.1[k] = p0 + (p1 - p0) * self.to;
@@ -367,19 +367,21 @@ impl BodyMotion<'_, '_> {
         Some(out)
     }
 
+    /// Triangle `face[1]` of collider `face[0]` at the start and at the end of the (sub)step
+    /// being solved.
+    fn triangle(&self, face: &[u32; 2]) -> Option<(Tri, Tri)> {
+        let tri = self
+            .end
+            .get(face[0] as usize)?
+            .triangles
+            .get(face[1] as usize)?;
+        self.points(face[0], *tri)
+    }
+
     /// Segment between points `ends[1]` and `ends[2]` of collider `ends[0]` at the start and
     /// at the end of the (sub)step being solved.
     fn segment(&self, ends: &[u32; 3]) -> Option<(Segment, Segment)> {
-        let c = ends[0] as usize;
-        let (s, e) = (self.start.get(c)?, self.end.get(c)?);
-        let mut out = ([Vector3::zeros(); 2], [Vector3::zeros(); 2]);
-        for k in 0..2 {
-            let vtx = ends[k + 1] as usize;
-            let (p0, p1) = (s.points.get(vtx)?, e.points.get(vtx)?);
-            out.0[k] = p0 + (p1 - p0) * self.from;
-            out.1[k] = p0 + (p1 - p0) * self.to;
-        }
-        Some(out)
+        self.points(ends[0], [ends[1], ends[2]])
     }
 }
 
