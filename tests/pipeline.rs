@@ -18,6 +18,7 @@ use clothsr::pipeline::{
     resume_path, run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Report,
 };
 use clothsr::scene::Scene;
+use clothsr::sim::collide::{max_penetration, push_out, PushOut};
 use clothsr::viz::{paths, read_rrd, Recorder};
 use nalgebra::Vector3;
 
@@ -183,6 +184,64 @@ fn the_coarse_wrinkle_bending_option_sets_up_the_coarse_hinges() {
         let e = wrinkles(Some(bad)).expect_err("a bad gain");
         assert!(e.contains("wrinkle bending gain"), "{e}");
     }
+}
+
+/// The fine output is pushed out of the colliders (`Options::push_out`, on by default): on
+/// the sheet draped over the ball, the 40 mm coarse mesh's chords carried to the fine mesh
+/// cut into the ball. Pushed, no fine vertex is inside it, and the output is the network's
+/// moved only where a vertex was inside or nearer than the clearance; without, the same
+/// frame has vertices inside.
+#[test]
+fn the_fine_output_is_pushed_out_of_the_colliders() {
+    let (scene, isr) = (scene(), tiny_isr());
+    let mut outs = Vec::new();
+    for push_out in [false, true] {
+        let opts = Options {
+            push_out,
+            ..options()
+        };
+        let mut p = Pipeline::new(&scene, &isr, None, opts).expect("pipeline");
+        p.super_resolve().expect("frame 0");
+        for _ in 0..8 {
+            p.advance_frame().expect("frame");
+        }
+        let points = p.coarse.collider_points();
+        let ball = [(
+            points[0].as_slice(),
+            p.coarse.colliders[0].triangles.as_slice(),
+        )];
+        let depth = max_penetration(&p.fine.positions, &ball);
+        assert_eq!(p.push_clearance_m().is_some(), push_out);
+        let clearance = p.push_clearance_m().unwrap_or_default();
+        outs.push((
+            p.fine.positions.clone(),
+            depth,
+            p.pushed,
+            ball[0].0.to_vec(),
+            clearance,
+        ));
+    }
+    let [(raw, raw_depth, none, pts, _), (pushed, depth, stats, _, clearance)] = &outs[..] else {
+        unreachable!()
+    };
+    assert_eq!(*none, PushOut::default());
+    assert!(
+        *raw_depth > 2e-4,
+        "the chords cut {raw_depth} m into the ball"
+    );
+    assert_eq!(*depth, 0.0);
+    assert!(
+        stats.inside > 0 && (stats.max_depth_m - raw_depth).abs() < 1e-9,
+        "{stats:?}"
+    );
+    // The pushed output is the raw one pushed out, and moved only where it was pushed.
+    let mut again = raw.clone();
+    let tris = &scene.colliders[0].triangles;
+    assert!(*clearance > 1e-4 && *clearance < 1e-3, "{clearance}");
+    assert_eq!(push_out(&mut again, &[(pts, tris)], *clearance), *stats);
+    assert_eq!(&again, pushed);
+    let moved = raw.iter().zip(pushed).filter(|(a, b)| a != b).count();
+    assert_eq!(moved, stats.moved);
 }
 
 fn cloth_frames(path: &Path) -> Vec<Vec<Vector3<f32>>> {

@@ -18,6 +18,7 @@ use crate::mesh::ClothMesh;
 use crate::msr::inference::InitMaps;
 use crate::msr::{Isr, SuperResolver};
 use crate::scene::Scene;
+use crate::sim::collide::{push_out, Collider, PushOut};
 use crate::sim::driver::Simulation;
 use crate::sim::step::SimState;
 
@@ -66,6 +67,12 @@ pub struct Options {
     /// else yes). Off, a 20 mm edge may cut a table's corner as M_int's does. A corrector
     /// trained with the other is an error.
     pub coarse_crease_contacts: Option<bool>,
+    /// Push the fine output's vertices out of the colliders (to half the fine simulation's
+    /// contact thickness; [`crate::sim::collide::push_out`]): the MSR module places them
+    /// from the coarse surface, whose 20 mm chords and the network's wrinkles cut into a body
+    /// the cloth wraps (the paper's §4.5 names the penetrations). Off, the network's output
+    /// is written as it is.
+    pub push_out: bool,
 }
 
 impl Default for Options {
@@ -82,6 +89,7 @@ impl Default for Options {
             coarse_wrinkle_bending: None,
             coarse_bending: None,
             coarse_crease_contacts: None,
+            push_out: true,
         }
     }
 }
@@ -285,6 +293,11 @@ pub struct Pipeline<'a> {
     upsampler: Option<Transfer>,
     /// Times of the last frame.
     pub times: FrameTimes,
+    /// The clearance the fine output is pushed out of the colliders to, m (`None`: not pushed;
+    /// [`Options::push_out`]).
+    push_clearance_m: Option<f64>,
+    /// What the push out of the colliders did to the last frame's fine output.
+    pub pushed: PushOut,
 }
 
 impl<'a> Pipeline<'a> {
@@ -324,6 +337,9 @@ impl<'a> Pipeline<'a> {
                 d.seam_gap_m * 1e3
             );
         }
+        let push_clearance_m = opts
+            .push_out
+            .then_some(0.5 * fine_sim.sim.params.collision.dhat_m);
         let fine = fine_sim.sim.model.mesh.clone();
         let fine_parts = fine_sim.sim.model.part_ranges();
         let model = &fine_sim.sim.model;
@@ -431,7 +447,15 @@ impl<'a> Pipeline<'a> {
             simulated: Vec::new(),
             upsampler: None,
             times: FrameTimes::default(),
+            push_clearance_m,
+            pushed: PushOut::default(),
         })
+    }
+
+    /// The clearance the fine output is pushed out of the colliders to, m (`None`: not
+    /// pushed; [`Options::push_out`]).
+    pub fn push_clearance_m(&self) -> Option<f64> {
+        self.push_clearance_m
     }
 
     /// Whether a corrector runs.
@@ -442,13 +466,22 @@ impl<'a> Pipeline<'a> {
     /// The fine mesh of the current state (the first frame, before any step: a new shot).
     pub fn super_resolve(&mut self) -> Result<&[Vector3<f64>]> {
         let t = Instant::now();
-        let x = self.sr.frame(&self.coarse.state.x)?;
-        self.times.msr_s = t.elapsed().as_secs_f64();
+        let mut x = self.sr.frame(&self.coarse.state.x)?;
         if let Some(i) = x.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(Error::Simulation(format!(
                 "super-resolution produced a non-finite fine vertex ({i})"
             )));
         }
+        if let Some(clearance) = self.push_clearance_m {
+            let points = self.coarse.collider_points();
+            let bodies: Vec<Collider<'_>> = points
+                .iter()
+                .zip(&self.coarse.colliders)
+                .map(|(p, c)| (p.as_slice(), c.triangles.as_slice()))
+                .collect();
+            self.pushed = push_out(&mut x, &bodies, clearance);
+        }
+        self.times.msr_s = t.elapsed().as_secs_f64();
         self.fine.positions = x;
         Ok(&self.fine.positions)
     }

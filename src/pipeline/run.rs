@@ -23,6 +23,7 @@ use crate::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
 use crate::mesh::ClothMesh;
 use crate::msr::inference::InitMaps;
 use crate::scene::Scene;
+use crate::sim::collide::PushOut;
 use crate::sim::step::SimState;
 use crate::viz::{colours, paths, Recorder};
 
@@ -57,6 +58,8 @@ pub struct Progress {
     pub frames: usize,
     /// Stage times of the last frame.
     pub times: FrameTimes,
+    /// What pushing the last frame's fine output out of the colliders did.
+    pub pushed: PushOut,
     /// The frame a resumed run started after.
     pub resumed_after: Option<usize>,
 }
@@ -70,6 +73,9 @@ pub struct Report {
     pub resumed_after: Option<usize>,
     /// Summed stage times over the computed frames, s.
     pub totals: FrameTimes,
+    /// Pushing the fine output out of the colliders, over the computed frames: vertices
+    /// found inside and moved summed, the deepest found.
+    pub pushed: PushOut,
     /// Wall time of the frame loop, s.
     pub wall_s: f64,
     /// The progress callback asked to stop: the files hold the frames so far (published, not
@@ -400,11 +406,13 @@ pub fn run_to_files(
         frame: first,
         frames,
         times: FrameTimes::default(),
+        pushed: p.pushed,
         resumed_after: (first > 0).then_some(first),
     });
     let t0 = Instant::now();
     let mut last_publish = Instant::now();
     let mut totals = FrameTimes::default();
+    let mut pushed = PushOut::default();
     let publish = |p: &Pipeline<'_>, w: &mut Writers, f: usize| -> Result<()> {
         w.checkpoint()?;
         write_resume(
@@ -426,10 +434,14 @@ pub fn run_to_files(
         totals.simulator_s += p.times.simulator_s;
         totals.corrector_s += p.times.corrector_s;
         totals.msr_s += p.times.msr_s;
+        pushed.inside += p.pushed.inside;
+        pushed.moved += p.pushed.moved;
+        pushed.max_depth_m = pushed.max_depth_m.max(p.pushed.max_depth_m);
         let flow = progress(&Progress {
             frame: f,
             frames,
             times: p.times,
+            pushed: p.pushed,
             resumed_after: (first > 0).then_some(first),
         });
         if flow.is_break() && f < frames {
@@ -438,6 +450,7 @@ pub fn run_to_files(
                 frames_computed: f - first,
                 resumed_after: (first > 0).then_some(first),
                 totals,
+                pushed,
                 wall_s: t0.elapsed().as_secs_f64(),
                 stopped: true,
             });
@@ -464,6 +477,7 @@ pub fn run_to_files(
         frames_computed: frames - first,
         resumed_after: (first > 0).then_some(first),
         totals,
+        pushed,
         wall_s: t0.elapsed().as_secs_f64(),
         stopped: false,
     })

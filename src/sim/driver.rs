@@ -186,7 +186,7 @@ impl Simulation {
     /// colliders. The state's time goes back to the start, with zero velocity. Stops sewing
     /// once every seam pair is within `gap_m` or after `max_s` of simulated time.
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
-        let held = self.colliders_held();
+        let held = self.collider_points();
         let frames = collider_frames(&self.colliders, &held);
         let mut out = DressStats::default();
         let garments = self.sim.model.part_ranges();
@@ -238,12 +238,12 @@ impl Simulation {
         self.state.x = x;
         self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
         self.seams_at_rest_where_they_are()?;
-        let held = self.colliders_held();
+        let held = self.collider_points();
         self.sew_and_settle(&held, DressStats::default(), max_s, settle_s, gap_m)
     }
 
-    /// The colliders' positions at the state's time (dressing holds them there).
-    fn colliders_held(&self) -> Vec<Vec<Vector3<f64>>> {
+    /// The colliders' points at the state's time (dressing holds them there).
+    pub fn collider_points(&self) -> Vec<Vec<Vector3<f64>>> {
         let mut held: Vec<Vec<Vector3<f64>>> = vec![Vec::new(); self.colliders.len()];
         for (c, out) in self.colliders.iter().zip(held.iter_mut()) {
             c.positions_at(self.state.t_s, out);

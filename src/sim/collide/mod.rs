@@ -230,6 +230,111 @@ pub fn find_contacts(
     CollisionDetector::new().find_contacts(cloth_x, cloth_tris, cloth_edges, colliders, params)
 }
 
+/// What [`push_out`] did to a point set.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PushOut {
+    /// Points that were inside a collider.
+    pub inside: usize,
+    /// Points moved: those inside, and those outside but nearer a collider than the clearance.
+    pub moved: usize,
+    /// How deep the deepest point was inside a collider, m (0 when none was).
+    pub max_depth_m: f64,
+}
+
+/// Moves every point of `x` that lies inside a collider, or outside it but nearer than
+/// `clearance_m`, to `clearance_m` outside the collider's surface: from the closest surface
+/// point along the angle-weighted pseudo-normal there for a point inside (the sign test of the
+/// module docs), straight away from the surface for one outside. For meshes that no solver held
+/// off the bodies, such as the MSR module's fine output: the network places fine vertices
+/// from the coarse mesh's surface, and where that mesh wraps a body its chords and the
+/// network's wrinkles cut into it. Points deeper than [`OBSTACLE_SEARCH_M`] are not found.
+/// Colliders are taken in turn; a point pushed out of one into another (a gap narrower than
+/// the clearance) ends outside the last. The counts are those of the first move.
+pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m: f64) -> PushOut {
+    let mut total = PushOut::default();
+    for (pts, tris) in colliders {
+        if tris.is_empty() {
+            continue;
+        }
+        let bvh = Bvh::build(&triangle_boxes(pts, tris, 0.0));
+        // One move; a point on the medial axis (equally near two faces) goes out from the
+        // closest point of one along their pseudo-normal and may end nearer the other than
+        // the clearance, which the next move fixes.
+        let step = |p: &mut Vector3<f64>| -> PushOut {
+            let at = *p;
+            let dist = |t: u32| {
+                let [a, b, c] = tri_points(pts, &tris[t as usize]);
+                point_triangle(&at, &a, &b, &c).dist
+            };
+            let Some((_, umin)) = bvh.nearest(&at, OBSTACLE_SEARCH_M, dist) else {
+                return PushOut::default();
+            };
+            // The faces tying for nearest give the closest point and the pseudo-normal.
+            let tie = 1e-12 + 1e-9 * umin;
+            let (mut pseudo, mut q) = (Vector3::zeros(), None);
+            bvh.query_ball(&at, umin + tie, |t| {
+                let x3 = tri_points(pts, &tris[t as usize]);
+                let closest = point_triangle(&at, &x3[0], &x3[1], &x3[2]);
+                if closest.dist > umin + tie {
+                    return;
+                }
+                let b = closest.bary;
+                q.get_or_insert(x3[0] * b[0] + x3[1] * b[1] + x3[2] * b[2]);
+                if let Some((n, n2)) = face_normal(&x3[0], &x3[1], &x3[2]) {
+                    let w = match closest.feature {
+                        TriangleFeature::Vertex(k) => corner_angle(&x3, k),
+                        _ => 1.0,
+                    };
+                    pseudo += n * (w / n2.sqrt());
+                }
+            });
+            let Some(q) = q else {
+                return PushOut::default();
+            };
+            let away = at - q;
+            let inside = umin > 0.0 && away.dot(&pseudo) < 0.0;
+            if !inside && umin >= clearance_m * (1.0 - 1e-9) {
+                return PushOut::default();
+            }
+            let dir = if inside || umin <= 1e-12 {
+                pseudo.try_normalize(1e-12)
+            } else {
+                Some(away / umin)
+            };
+            let Some(dir) = dir else {
+                return PushOut::default();
+            };
+            *p = q + dir * clearance_m;
+            PushOut {
+                inside: usize::from(inside),
+                moved: 1,
+                max_depth_m: if inside { umin } else { 0.0 },
+            }
+        };
+        let one = |p: &mut Vector3<f64>| -> PushOut {
+            let first = step(p);
+            for _ in 0..3 {
+                if step(p).moved == 0 {
+                    break;
+                }
+            }
+            first
+        };
+        let r = x
+            .par_iter_mut()
+            .map(one)
+            .reduce(PushOut::default, |a, b| PushOut {
+                inside: a.inside + b.inside,
+                moved: a.moved + b.moved,
+                max_depth_m: a.max_depth_m.max(b.max_depth_m),
+            });
+        total.inside += r.inside;
+        total.moved += r.moved;
+        total.max_depth_m = total.max_depth_m.max(r.max_depth_m);
+    }
+    total
+}
+
 /// The deepest penetration (metres, ≥ 0) of any cloth vertex into any collider: the distance to
 /// the nearest collider face for vertices classified inside (see the module docs), searched up
 /// to [`OBSTACLE_SEARCH_M`]; 0 when none is inside. A progress metric.
@@ -1504,7 +1609,7 @@ mod tests {
     }
 
     /// A cube [−0.1, 0.1]³, two counter-clockwise triangles per face.
-    fn cube() -> (Vec<Vector3<f64>>, Vec<[u32; 3]>) {
+    pub(super) fn cube() -> (Vec<Vector3<f64>>, Vec<[u32; 3]>) {
         let pts: Vec<Vector3<f64>> = (0..8)
             .map(|i| {
                 let c = |b: usize| if i & b != 0 { 0.1 } else { -0.1 };
@@ -2011,5 +2116,61 @@ mod swept_tests {
             Vector3::new(0.0, 0.0, -0.1),
         );
         assert!(together.is_empty(), "{together:?}");
+    }
+
+    /// `push_out` against the cube [−0.1, 0.1]³ with 0.5 mm clearance: a point 2 mm under the
+    /// top goes to 0.5 mm over it straight up; one 0.1 mm over the top goes to 0.5 mm; one
+    /// 5 mm over stays; one 0.5 mm inside the side x+ goes out through the side; one equally
+    /// near the top and the side (the medial axis) goes out along their pseudo-normal, then
+    /// straight up to the clearance; one at a corner ends at the clearance from the corner;
+    /// one at the cube's centre, 100 mm deep, is beyond the search and stays.
+    #[test]
+    fn push_out_moves_points_out_of_a_body_to_the_clearance() {
+        let (pts, tris) = super::tests::cube();
+        let c = 5e-4;
+        // Distance from a point outside the cube to it (0 inside).
+        let gap = |p: &Vector3<f64>| p.map(|v| (v.abs() - 0.1).max(0.0)).norm();
+        let mut x = vec![
+            Vector3::new(0.03, 0.098, -0.02),
+            Vector3::new(0.03, 0.1001, -0.02),
+            Vector3::new(0.03, 0.105, -0.02),
+            Vector3::new(0.0995, 0.09, 0.04),
+            Vector3::new(0.099, 0.099, 0.04),
+            Vector3::new(0.099, 0.099, 0.099),
+            Vector3::zeros(),
+        ];
+        let before = x.clone();
+        let r = push_out(&mut x, &[(&pts, &tris)], c);
+        assert_eq!((r.inside, r.moved), (4, 5), "{r:?}");
+        assert!((r.max_depth_m - 2e-3).abs() < 1e-12, "{r:?}");
+        let near = |a: &Vector3<f64>, b: Vector3<f64>| (a - b).norm() < 1e-12;
+        assert!(
+            near(&x[0], Vector3::new(0.03, 0.1 + c, -0.02)),
+            "{:?}",
+            x[0]
+        );
+        assert!(
+            near(&x[1], Vector3::new(0.03, 0.1 + c, -0.02)),
+            "{:?}",
+            x[1]
+        );
+        assert_eq!(x[2], before[2]);
+        assert!(near(&x[3], Vector3::new(0.1 + c, 0.09, 0.04)), "{:?}", x[3]);
+        let s = c / 2f64.sqrt();
+        let medial = [
+            Vector3::new(0.099 + s, 0.1 + c, 0.04),
+            Vector3::new(0.1 + c, 0.099 + s, 0.04),
+        ];
+        assert!(medial.iter().any(|m| near(&x[4], *m)), "{:?}", x[4]);
+        assert!((gap(&x[5]) - c).abs() < 1e-12, "{:?}", x[5]);
+        assert_eq!(x[6], before[6]);
+        // Pushed out, every point is outside: a second pass finds nothing to move.
+        let again = push_out(&mut x, &[(&pts, &tris)], c);
+        assert_eq!((again.inside, again.moved), (0, 0), "{again:?}");
+        // An empty collider list, or a collider with no triangles, moves nothing.
+        let mut y = before.clone();
+        assert_eq!(push_out(&mut y, &[], c), PushOut::default());
+        assert_eq!(push_out(&mut y, &[(&pts, &[])], c), PushOut::default());
+        assert_eq!(y, before);
     }
 }
