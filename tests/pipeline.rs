@@ -9,7 +9,7 @@ use std::ops::ControlFlow;
 use std::path::Path;
 
 use clothsr::corrector::inference::default_device;
-use clothsr::eval::{compare, summarise, Animation};
+use clothsr::eval::{compare, summarise, Animation, Bodies, INSIDE_SEARCH_M};
 use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
 use clothsr::msr::model::IsrConfig;
 use clothsr::msr::training::IsrTrainingConfig;
@@ -18,7 +18,7 @@ use clothsr::pipeline::{
     resume_path, run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Report,
 };
 use clothsr::scene::Scene;
-use clothsr::sim::collide::{max_penetration, push_out, PushOut};
+use clothsr::sim::collide::{count_inside, max_penetration, push_out, PushOut};
 use clothsr::viz::{paths, read_rrd, Recorder};
 use nalgebra::Vector3;
 
@@ -289,6 +289,24 @@ fn a_run_writes_valid_usd_and_rerun_files_and_resumes_exactly() {
     // The sheet falls under gravity: the last frame is lower than the first.
     let mean_y = |f: &[Vector3<f32>]| f.iter().map(|p| p.y as f64).sum::<f64>() / f.len() as f64;
     assert!(mean_y(&fine[frames]) < mean_y(&fine[0]) - 1e-3);
+    // The output carries the ball, and `eval` counts cloth inside it: none in the falling
+    // sheet; sunk 5 cm, the vertices over the ball's top are, as the scene's ball says.
+    let bodies = Bodies::read_usd(&full.fine).expect("bodies");
+    assert!(!bodies.is_empty());
+    let x: Vec<Vector3<f64>> = fine[frames].iter().map(|p| p.cast()).collect();
+    assert_eq!(bodies.inside(&x, frames as f64), (0, 0.0));
+    let sunk: Vec<Vector3<f64>> = x.iter().map(|p| p - Vector3::new(0.0, 0.05, 0.0)).collect();
+    let (n, depth) = bodies.inside(&sunk, frames as f64);
+    let ball = &scene().colliders[0];
+    let mut points = Vec::new();
+    ball.positions_at(0.0, &mut points);
+    let want = count_inside(&sunk, &[(&points, &ball.triangles)], INSIDE_SEARCH_M);
+    assert!(want.inside > 100, "{want:?}");
+    assert!(n.abs_diff(want.inside) <= 2, "{n} against {want:?}");
+    assert!(
+        (depth - want.max_depth_m).abs() < 1e-5,
+        "{depth} against {want:?}"
+    );
 
     let summary = read_rrd(&rrd).expect("a valid recording");
     for entity in [

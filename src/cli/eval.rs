@@ -1,12 +1,14 @@
 //! `clothsr eval --gt FINE.usdc --pred OUT.usdc [--baseline B.usdc]…`: per-frame errors of a
 //! prediction (and baselines) against a fine simulation, a summary table, a CSV, an
-//! error-over-time plot and a Rerun heat map (see [`clothsr::eval`]).
+//! error-over-time plot and a Rerun heat map (see [`clothsr::eval`]); where the prediction's file
+//! holds the scene's colliders, how many vertices of each series lie inside them.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clothsr::eval::{
-    compare, floor_bound, plot, summarise, vertex_errors, write_csv, Animation, FrameMetrics,
+    compare, floor_bound, plot, summarise, vertex_errors, write_csv, Animation, Bodies,
+    FrameMetrics,
 };
 use clothsr::viz::{colours, Recorder};
 
@@ -136,6 +138,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let b = summarise(m).mean_mm;
         if b > 0.0 {
             println!("prediction / {name}: {:.3}×", pred_mean / b);
+        }
+    }
+    // Cloth inside the bodies: the prediction's file carries the scene's colliders.
+    let bodies = Bodies::read_usd(&args.pred)?;
+    if !bodies.is_empty() {
+        println!(
+            "{:<24} {:>6} {:>16} {:>14} {:>11}",
+            "inside the bodies", "frames", "vertices a frame", "frames with any", "deepest mm"
+        );
+        let all = std::iter::once(("ground truth", &gt))
+            .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(&anims));
+        for (name, a) in all {
+            let times = &series[0].1;
+            let (mut sum, mut any, mut deepest, mut n) = (0usize, 0usize, 0.0f64, 0usize);
+            for f in times {
+                let Some(k) = a.frame_at(f.time_code) else {
+                    continue;
+                };
+                let (inside, depth) = bodies.inside(&a.frames[k], f.time_code);
+                sum += inside;
+                any += usize::from(inside > 0);
+                deepest = deepest.max(depth);
+                n += 1;
+            }
+            println!(
+                "{:<24} {:>6} {:>16.1} {:>14} {:>11.2}",
+                name,
+                n,
+                sum as f64 / n.max(1) as f64,
+                any,
+                deepest * 1e3
+            );
         }
     }
     if let Some(twin_path) = &args.floor {

@@ -157,6 +157,64 @@ fn describe(parts: &[(String, usize)]) -> String {
         .join(", ")
 }
 
+/// How deep inside a body [`Bodies::inside`] looks for cloth, m: deeper points are not found.
+pub const INSIDE_SEARCH_M: f64 = 0.02;
+
+/// The collision bodies of a stage (meshes with the collider role: `clothsr run` writes its
+/// scene's colliders beside the garments), for measuring how far cloth goes into them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bodies {
+    /// Per body: triangles, time codes and points per time code (one sample for a still body).
+    bodies: Vec<(Vec<[u32; 3]>, Vec<f64>, Vec<Vec<Vector3<f64>>>)>,
+}
+
+impl Bodies {
+    /// The colliders of a USD file (none is not an error: `is_empty` then).
+    pub fn read_usd(path: &Path) -> Result<Bodies> {
+        let stage = read_usd(path)?;
+        let bodies = stage
+            .meshes
+            .into_iter()
+            .filter(|m| m.role == MeshRole::Collider && !m.frames.is_empty())
+            .map(|m| {
+                let frames = m
+                    .frames
+                    .iter()
+                    .map(|f| f.iter().map(|p| p.cast::<f64>()).collect())
+                    .collect();
+                (m.triangles(), m.time_codes.clone(), frames)
+            })
+            .collect();
+        Ok(Bodies { bodies })
+    }
+
+    /// Whether the stage had no collider.
+    pub fn is_empty(&self) -> bool {
+        self.bodies.is_empty()
+    }
+
+    /// How many of the points `x`, at time code `t`, lie inside a body (the simulator's sign
+    /// test, [`crate::sim::collide::count_inside`], up to [`INSIDE_SEARCH_M`] deep), and the
+    /// deepest, m. A body's points are its
+    /// sample at `t`, else its last sample before it, else its first.
+    pub fn inside(&self, x: &[Vector3<f64>], t: f64) -> (usize, f64) {
+        let colliders: Vec<crate::sim::collide::Collider<'_>> = self
+            .bodies
+            .iter()
+            .map(|(tris, times, frames)| {
+                let k = times
+                    .iter()
+                    .rposition(|&s| s <= t + 1e-6)
+                    .unwrap_or(0)
+                    .min(frames.len() - 1);
+                (frames[k].as_slice(), tris.as_slice())
+            })
+            .collect();
+        let r = crate::sim::collide::count_inside(x, &colliders, INSIDE_SEARCH_M);
+        (r.inside, r.max_depth_m)
+    }
+}
+
 /// Errors of one frame against the ground truth.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameMetrics {

@@ -251,22 +251,46 @@ pub struct PushOut {
 /// Colliders are taken in turn; a point pushed out of one into another (a gap narrower than
 /// the clearance) ends outside the last. The counts are those of the first move.
 pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m: f64) -> PushOut {
+    push_out_within(x, colliders, clearance_m, OBSTACLE_SEARCH_M, true)
+}
+
+/// How many points of `x` lie inside a collider (up to `search_m` deep), and the deepest:
+/// [`push_out`]'s `inside` and `max_depth_m`, moving nothing.
+pub fn count_inside(x: &[Vector3<f64>], colliders: &[Collider<'_>], search_m: f64) -> PushOut {
+    let mut scratch = x.to_vec();
+    push_out_within(&mut scratch, colliders, 0.0, search_m, false)
+}
+
+/// [`push_out`] with faces searched up to `search_m` away; `apply`: repeat each point's move
+/// until it holds (else one move, enough to count).
+fn push_out_within(
+    x: &mut [Vector3<f64>],
+    colliders: &[Collider<'_>],
+    clearance_m: f64,
+    search_m: f64,
+    apply: bool,
+) -> PushOut {
     let mut total = PushOut::default();
     for (pts, tris) in colliders {
         if tris.is_empty() {
             continue;
         }
         let bvh = Bvh::build(&triangle_boxes(pts, tris, 0.0));
+        // Only a point in the body's box (grown by the clearance) can be inside or near it.
+        let reach = Aabb::from_points(pts.iter()).inflate(clearance_m);
         // One move; a point on the medial axis (equally near two faces) goes out from the
         // closest point of one along their pseudo-normal and may end nearer the other than
         // the clearance, which the next move fixes.
         let step = |p: &mut Vector3<f64>| -> PushOut {
             let at = *p;
+            if reach.distance_sq(&at) > 0.0 {
+                return PushOut::default();
+            }
             let dist = |t: u32| {
                 let [a, b, c] = tri_points(pts, &tris[t as usize]);
                 point_triangle(&at, &a, &b, &c).dist
             };
-            let Some((_, umin)) = bvh.nearest(&at, OBSTACLE_SEARCH_M, dist) else {
+            let Some((_, umin)) = bvh.nearest(&at, search_m, dist) else {
                 return PushOut::default();
             };
             // The faces tying for nearest give the closest point and the pseudo-normal.
@@ -313,6 +337,9 @@ pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m:
         };
         let one = |p: &mut Vector3<f64>| -> PushOut {
             let first = step(p);
+            if !apply {
+                return first;
+            }
             for _ in 0..3 {
                 if step(p).moved == 0 {
                     break;
@@ -2164,6 +2191,12 @@ mod swept_tests {
         assert!(medial.iter().any(|m| near(&x[4], *m)), "{:?}", x[4]);
         assert!((gap(&x[5]) - c).abs() < 1e-12, "{:?}", x[5]);
         assert_eq!(x[6], before[6]);
+        // Counted without moving: the same points inside, the same depth.
+        let counted = count_inside(&before, &[(&pts, &tris)], OBSTACLE_SEARCH_M);
+        assert_eq!(
+            (counted.inside, counted.max_depth_m),
+            (r.inside, r.max_depth_m)
+        );
         // Pushed out, every point is outside: a second pass finds nothing to move.
         let again = push_out(&mut x, &[(&pts, &tris)], c);
         assert_eq!((again.inside, again.moved), (0, 0), "{again:?}");
