@@ -164,8 +164,17 @@ pub const INSIDE_SEARCH_M: f64 = 0.02;
 /// scene's colliders beside the garments), for measuring how far cloth goes into them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bodies {
-    /// Per body: triangles, time codes and points per time code (one sample for a still body).
-    bodies: Vec<(Vec<[u32; 3]>, Vec<f64>, Vec<Vec<Vector3<f64>>>)>,
+    bodies: Vec<Body>,
+}
+
+/// One of [`Bodies`].
+#[derive(Debug, Clone, PartialEq)]
+struct Body {
+    triangles: Vec<[u32; 3]>,
+    /// Time codes of the samples (one sample for a still body).
+    time_codes: Vec<f64>,
+    /// Points per sample, m.
+    frames: Vec<Vec<Vector3<f64>>>,
 }
 
 impl Bodies {
@@ -182,7 +191,11 @@ impl Bodies {
                     .iter()
                     .map(|f| f.iter().map(|p| p.cast::<f64>()).collect())
                     .collect();
-                (m.triangles(), m.time_codes.clone(), frames)
+                Body {
+                    triangles: m.triangles(),
+                    time_codes: m.time_codes.clone(),
+                    frames,
+                }
             })
             .collect();
         Ok(Bodies { bodies })
@@ -201,13 +214,14 @@ impl Bodies {
         let colliders: Vec<crate::sim::collide::Collider<'_>> = self
             .bodies
             .iter()
-            .map(|(tris, times, frames)| {
-                let k = times
+            .map(|b| {
+                let k = b
+                    .time_codes
                     .iter()
                     .rposition(|&s| s <= t + 1e-6)
                     .unwrap_or(0)
-                    .min(frames.len() - 1);
-                (frames[k].as_slice(), tris.as_slice())
+                    .min(b.frames.len() - 1);
+                (b.frames[k].as_slice(), b.triangles.as_slice())
             })
             .collect();
         let r = crate::sim::collide::count_inside(x, &colliders, INSIDE_SEARCH_M);
