@@ -315,6 +315,7 @@ fn a_run_writes_valid_usd_and_rerun_files_and_resumes_exactly() {
         format!("{}/ball", paths::COLLIDERS),
         format!("{}/simulator_s", paths::TIMINGS),
         format!("{}/msr_s", paths::TIMINGS),
+        paths::PUSHED_OUT.to_string(),
     ] {
         assert!(summary.entities.contains(&entity), "{entity}: {summary:?}");
     }

@@ -365,6 +365,9 @@ pub fn run_to_files(
             r.scalar(&format!("{}/simulator_s", paths::TIMINGS), t.simulator_s)?;
             r.scalar(&format!("{}/corrector_s", paths::TIMINGS), t.corrector_s)?;
             r.scalar(&format!("{}/msr_s", paths::TIMINGS), t.msr_s)?;
+            if p.push_clearance_m().is_some() {
+                r.scalar(paths::PUSHED_OUT, p.pushed.inside as f64)?;
+            }
         }
         Ok(())
     };

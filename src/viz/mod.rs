@@ -29,6 +29,8 @@ pub mod paths {
     pub const COLLIDERS: &str = "world/colliders";
     /// Per-stage timings, seconds per frame.
     pub const TIMINGS: &str = "timings";
+    /// Fine vertices the pipeline found inside the colliders and pushed out, per frame.
+    pub const PUSHED_OUT: &str = "fine/pushed_out_of_bodies";
 }
 
 /// Colours (RGBA) of the meshes.
