@@ -276,8 +276,14 @@ fn push_out_within(
             continue;
         }
         let bvh = Bvh::build(&triangle_boxes(pts, tris, 0.0));
-        // Only a point in the body's box (grown by the clearance) can be inside or near it.
-        let reach = Aabb::from_points(pts.iter()).inflate(clearance_m);
+        // Only a point in a closed body's box (grown by the clearance) can be inside or near
+        // it; an open one (a floor, a wall) has an inside as deep as the search behind it.
+        let grow = if is_closed(tris) {
+            clearance_m
+        } else {
+            clearance_m.max(search_m)
+        };
+        let reach = Aabb::from_points(pts.iter()).inflate(grow);
         // One move; a point on the medial axis (equally near two faces) goes out from the
         // closest point of one along their pseudo-normal and may end nearer the other than
         // the clearance, which the next move fixes.
@@ -360,6 +366,16 @@ fn push_out_within(
         total.max_depth_m = total.max_depth_m.max(r.max_depth_m);
     }
     total
+}
+
+/// Whether every edge of `tris` is shared by exactly two of them (a closed surface).
+fn is_closed(tris: &[[u32; 3]]) -> bool {
+    let mut edges: Vec<(u32, u32)> = tris
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+        .collect();
+    edges.sort_unstable();
+    edges.chunk_by(|a, b| a == b).all(|run| run.len() == 2)
 }
 
 /// The deepest penetration (metres, ≥ 0) of any cloth vertex into any collider: the distance to
@@ -2191,6 +2207,17 @@ mod swept_tests {
         assert!(medial.iter().any(|m| near(&x[4], *m)), "{:?}", x[4]);
         assert!((gap(&x[5]) - c).abs() < 1e-12, "{:?}", x[5]);
         assert_eq!(x[6], before[6]);
+        // An open body (the cube's top face alone, a floor) has its inside below it, however
+        // far the box of its points: a point 2 mm under it goes up; the closed cube is closed.
+        assert!(is_closed(&tris) && !is_closed(&tris[6..8]));
+        let mut under = [Vector3::new(0.03, 0.098, -0.02)];
+        let floor = push_out(&mut under, &[(&pts, &tris[6..8])], c);
+        assert_eq!((floor.inside, floor.moved), (1, 1), "{floor:?}");
+        assert!(
+            near(&under[0], Vector3::new(0.03, 0.1 + c, -0.02)),
+            "{:?}",
+            under[0]
+        );
         // Counted without moving: the same points inside, the same depth.
         let counted = count_inside(&before, &[(&pts, &tris)], OBSTACLE_SEARCH_M);
         assert_eq!(
