@@ -149,8 +149,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         let all = std::iter::once(("ground truth", &gt))
             .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(&anims));
+        let times = &series[0].1;
         for (name, a) in all {
-            let times = &series[0].1;
             let (mut sum, mut any, mut deepest, mut n) = (0usize, 0usize, 0.0f64, 0usize);
             for f in times {
                 let Some(k) = a.frame_at(f.time_code) else {

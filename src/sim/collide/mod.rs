@@ -251,121 +251,153 @@ pub struct PushOut {
 /// Colliders are taken in turn; a point pushed out of one into another (a gap narrower than
 /// the clearance) ends outside the last. The counts are those of the first move.
 pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m: f64) -> PushOut {
-    push_out_within(x, colliders, clearance_m, OBSTACLE_SEARCH_M, true)
+    let mut total = PushOut::default();
+    for (pts, tris) in colliders {
+        let Some(solid) = Solid::new(pts, tris, clearance_m, OBSTACLE_SEARCH_M) else {
+            continue;
+        };
+        let r = x
+            .par_iter_mut()
+            .map_init(Vec::new, |cands, p| {
+                let Some((to, depth)) = solid.push(p, cands) else {
+                    return PushOut::default();
+                };
+                *p = to;
+                // A point on the medial axis (equally near two faces) goes out from the
+                // closest point of one along their pseudo-normal and may end nearer the
+                // other than the clearance, which the next move fixes.
+                for _ in 0..3 {
+                    match solid.push(p, cands) {
+                        Some((to, _)) => *p = to,
+                        None => break,
+                    }
+                }
+                PushOut::of(depth)
+            })
+            .reduce(PushOut::default, PushOut::add);
+        total = total.add(r);
+    }
+    total
 }
 
 /// How many points of `x` lie inside a collider (up to `search_m` deep), and the deepest:
 /// [`push_out`]'s `inside` and `max_depth_m`, moving nothing.
 pub fn count_inside(x: &[Vector3<f64>], colliders: &[Collider<'_>], search_m: f64) -> PushOut {
-    let mut scratch = x.to_vec();
-    push_out_within(&mut scratch, colliders, 0.0, search_m, false)
-}
-
-/// [`push_out`] with faces searched up to `search_m` away; `apply`: repeat each point's move
-/// until it holds (else one move, enough to count).
-fn push_out_within(
-    x: &mut [Vector3<f64>],
-    colliders: &[Collider<'_>],
-    clearance_m: f64,
-    search_m: f64,
-    apply: bool,
-) -> PushOut {
     let mut total = PushOut::default();
     for (pts, tris) in colliders {
-        if tris.is_empty() {
+        let Some(solid) = Solid::new(pts, tris, 0.0, search_m) else {
             continue;
+        };
+        let r = x
+            .par_iter()
+            .map_init(Vec::new, |cands, p| {
+                solid
+                    .push(p, cands)
+                    .map_or_else(PushOut::default, |(_, depth)| PushOut::of(depth))
+            })
+            .reduce(PushOut::default, PushOut::add);
+        total = total.add(r);
+    }
+    total
+}
+
+impl PushOut {
+    /// One point moved, from `depth` inside (`None`: it was outside, nearer than the
+    /// clearance).
+    fn of(depth: Option<f64>) -> PushOut {
+        PushOut {
+            inside: usize::from(depth.is_some()),
+            moved: 1,
+            max_depth_m: depth.unwrap_or(0.0),
         }
-        let bvh = Bvh::build(&triangle_boxes(pts, tris, 0.0));
-        // Only a point in a closed body's box (grown by the clearance) can be inside or near
-        // it; an open one (a floor, a wall) has an inside as deep as the search behind it.
+    }
+
+    /// Both counts together.
+    fn add(self, o: PushOut) -> PushOut {
+        PushOut {
+            inside: self.inside + o.inside,
+            moved: self.moved + o.moved,
+            max_depth_m: self.max_depth_m.max(o.max_depth_m),
+        }
+    }
+}
+
+/// A collider prepared for [`push_out`] and [`count_inside`].
+struct Solid<'a> {
+    pts: &'a [Vector3<f64>],
+    tris: &'a [[u32; 3]],
+    bvh: Bvh,
+    /// Only a point in here can be inside the body or nearer than the clearance.
+    reach: Aabb,
+    clearance_m: f64,
+    search_m: f64,
+}
+
+impl<'a> Solid<'a> {
+    /// `None` for a collider without triangles.
+    fn new(
+        pts: &'a [Vector3<f64>],
+        tris: &'a [[u32; 3]],
+        clearance_m: f64,
+        search_m: f64,
+    ) -> Option<Solid<'a>> {
+        if tris.is_empty() {
+            return None;
+        }
+        // A closed body's points' box grown by the clearance holds every point inside or
+        // near it; an open one (a floor, a wall) has an inside as deep as the search behind.
         let grow = if is_closed(tris) {
             clearance_m
         } else {
             clearance_m.max(search_m)
         };
-        let reach = Aabb::from_points(pts.iter()).inflate(grow);
-        // One move; a point on the medial axis (equally near two faces) goes out from the
-        // closest point of one along their pseudo-normal and may end nearer the other than
-        // the clearance, which the next move fixes.
-        let step = |p: &mut Vector3<f64>| -> PushOut {
-            let at = *p;
-            if reach.distance_sq(&at) > 0.0 {
-                return PushOut::default();
-            }
-            let dist = |t: u32| {
-                let [a, b, c] = tri_points(pts, &tris[t as usize]);
-                point_triangle(&at, &a, &b, &c).dist
-            };
-            let Some((_, umin)) = bvh.nearest(&at, search_m, dist) else {
-                return PushOut::default();
-            };
-            // The faces tying for nearest give the closest point and the pseudo-normal.
-            let tie = 1e-12 + 1e-9 * umin;
-            let (mut pseudo, mut q) = (Vector3::zeros(), None);
-            bvh.query_ball(&at, umin + tie, |t| {
-                let x3 = tri_points(pts, &tris[t as usize]);
-                let closest = point_triangle(&at, &x3[0], &x3[1], &x3[2]);
-                if closest.dist > umin + tie {
-                    return;
-                }
-                let b = closest.bary;
-                q.get_or_insert(x3[0] * b[0] + x3[1] * b[1] + x3[2] * b[2]);
-                if let Some((n, n2)) = face_normal(&x3[0], &x3[1], &x3[2]) {
-                    let w = match closest.feature {
-                        TriangleFeature::Vertex(k) => corner_angle(&x3, k),
-                        _ => 1.0,
-                    };
-                    pseudo += n * (w / n2.sqrt());
-                }
-            });
-            let Some(q) = q else {
-                return PushOut::default();
-            };
-            let away = at - q;
-            let inside = umin > 0.0 && away.dot(&pseudo) < 0.0;
-            if !inside && umin >= clearance_m * (1.0 - 1e-9) {
-                return PushOut::default();
-            }
-            let dir = if inside || umin <= 1e-12 {
-                pseudo.try_normalize(1e-12)
-            } else {
-                Some(away / umin)
-            };
-            let Some(dir) = dir else {
-                return PushOut::default();
-            };
-            *p = q + dir * clearance_m;
-            PushOut {
-                inside: usize::from(inside),
-                moved: 1,
-                max_depth_m: if inside { umin } else { 0.0 },
-            }
-        };
-        let one = |p: &mut Vector3<f64>| -> PushOut {
-            let first = step(p);
-            if !apply {
-                return first;
-            }
-            for _ in 0..3 {
-                if step(p).moved == 0 {
-                    break;
-                }
-            }
-            first
-        };
-        let r = x
-            .par_iter_mut()
-            .map(one)
-            .reduce(PushOut::default, |a, b| PushOut {
-                inside: a.inside + b.inside,
-                moved: a.moved + b.moved,
-                max_depth_m: a.max_depth_m.max(b.max_depth_m),
-            });
-        total.inside += r.inside;
-        total.moved += r.moved;
-        total.max_depth_m = total.max_depth_m.max(r.max_depth_m);
+        Some(Solid {
+            pts,
+            tris,
+            bvh: Bvh::build(&triangle_boxes(pts, tris, 0.0)),
+            reach: Aabb::from_points(pts.iter()).inflate(grow),
+            clearance_m,
+            search_m,
+        })
     }
-    total
+
+    /// Where point `at` goes, and how deep it was inside (`None`: outside): to the clearance
+    /// from the closest surface point, along the pseudo-normal there from inside, straight
+    /// away from the surface from outside. `None` for a point outside at least the clearance
+    /// away, or with no face within the search. `cands` is scratch space.
+    fn push(
+        &self,
+        at: &Vector3<f64>,
+        cands: &mut Vec<(u32, ObstacleEval)>,
+    ) -> Option<(Vector3<f64>, Option<f64>)> {
+        if self.reach.distance_sq(at) > 0.0 {
+            return None;
+        }
+        let tri = |t: u32| tri_points(self.pts, &self.tris[t as usize]);
+        let (_, umin) = self.bvh.nearest(at, self.search_m, |t| {
+            let [a, b, c] = tri(t);
+            point_triangle(at, &a, &b, &c).dist
+        })?;
+        cands.clear();
+        let tie = 1e-12 + 1e-9 * umin;
+        self.bvh.query_ball(at, umin + tie, |t| {
+            let [a, b, c] = tri(t);
+            let closest = point_triangle(at, &a, &b, &c);
+            cands.push((t, obstacle_eval_with(at, &a, &b, &c, closest)));
+        });
+        let (q, pseudo) = nearest_side(self.pts, self.tris, cands, umin)?;
+        let away = at - q;
+        let inside = umin > 0.0 && away.dot(&pseudo) < 0.0;
+        if !inside && umin >= self.clearance_m * (1.0 - 1e-9) {
+            return None;
+        }
+        let dir = if inside || umin <= 1e-12 {
+            pseudo.try_normalize(1e-12)?
+        } else {
+            away / umin
+        };
+        Some((q + dir * self.clearance_m, inside.then_some(umin)))
+    }
 }
 
 /// Whether every edge of `tris` is shared by exactly two of them (a closed surface).
@@ -640,6 +672,38 @@ fn entry_face(
     last.map(|(_, n, below)| (n, below))
 }
 
+/// The closest surface point and the angle-weighted pseudo-normal (Bærentzen & Aanæs; not
+/// normalised) of the faces of `cands` (gathered around a point) that tie for nearest at
+/// `umin`: a point is inside where it lies behind that normal. `None` when none ties.
+fn nearest_side(
+    pts: &[Vector3<f64>],
+    tris: &[[u32; 3]],
+    cands: &[(u32, ObstacleEval)],
+    umin: f64,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let tie = 1e-12 + 1e-9 * umin;
+    let mut pseudo = Vector3::zeros();
+    let mut q: Option<Vector3<f64>> = None;
+    for (t, e) in cands.iter() {
+        if e.closest.dist > umin + tie {
+            continue;
+        }
+        let x = tri_points(pts, &tris[*t as usize]);
+        if q.is_none() {
+            let b = e.closest.bary;
+            q = Some(x[0] * b[0] + x[1] * b[1] + x[2] * b[2]);
+        }
+        if let Some(n) = e.normal {
+            let w = match e.closest.feature {
+                TriangleFeature::Vertex(k) => corner_angle(&x, k),
+                _ => 1.0,
+            };
+            pseudo += n * w;
+        }
+    }
+    q.map(|q| (q, pseudo))
+}
+
 /// Classifies cloth point `p` against one collider and calls `emit(face)` for each contact
 /// face (module docs); `start`, where `p` began the step against this collider (`None`: not
 /// known), gives the face an inside point came in through. `cands` is scratch space. Returns
@@ -699,27 +763,10 @@ fn classify_vertex(
         rho = u + dhat;
         umin = gather(rho, cands);
     }
-    let tie = tie(umin);
-    // Angle-weighted pseudo-normal of the faces tying for nearest.
-    let mut pseudo = Vector3::zeros();
-    let mut q: Option<Vector3<f64>> = None;
-    for (t, e) in cands.iter() {
-        if e.closest.dist > umin + tie {
-            continue;
-        }
-        let x = tri(*t);
-        if q.is_none() {
-            let b = e.closest.bary;
-            q = Some(x[0] * b[0] + x[1] * b[1] + x[2] * b[2]);
-        }
-        if let Some(n) = e.normal {
-            let w = match e.closest.feature {
-                TriangleFeature::Vertex(k) => corner_angle(&x, k),
-                _ => 1.0,
-            };
-            pseudo += n * w;
-        }
-    }
+    let (q, pseudo) = match nearest_side(pts, tris, cands, umin) {
+        Some((q, n)) => (Some(q), n),
+        None => (None, Vector3::zeros()),
+    };
     let inside = umin > 0.0 && q.is_some_and(|q| (p - q).dot(&pseudo) < 0.0);
     if inside {
         // Where it is known, the face the vertex came in through decides which faces push it
