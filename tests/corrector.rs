@@ -221,7 +221,27 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             .try_to_vec::<f32>()
             .expect("vec");
         assert_eq!(direct.len(), 3 * seq.graph.num_nodes);
-        let mut expect = direct.clone();
+        // The edges cut into parts run in parallel give the same function, to the order of
+        // the sums at each receiver; inference cuts them into one part per rayon thread.
+        for parts in [2, 3, 7] {
+            let split: Vec<f32> = net
+                .forward_in_parts(&g, parts)
+                .into_data()
+                .try_to_vec::<f32>()
+                .expect("vec");
+            for (k, (a, b)) in direct.iter().zip(&split).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-5 * (1.0 + a.abs()),
+                    "{parts} parts, {k}: {a} vs {b} (attention {attention}, {decoder:?})"
+                );
+            }
+        }
+        let inference: Vec<f32> = net
+            .forward_in_parts(&g, rayon::current_num_threads())
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("vec");
+        let mut expect = inference.clone();
         norm.targets.invert(&mut expect);
         // The loaded model owns its weights: the folder may go while it runs (burn's own
         // file loader read them lazily and panicked here).

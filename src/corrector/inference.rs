@@ -282,7 +282,10 @@ impl Corrector {
             step_change.clone(),
         )
         .with_tension(self.take_back_weights(x));
-        let out = self.net.forward(&g).into_data();
+        let out = self
+            .net
+            .forward_in_parts(&g, rayon::current_num_threads())
+            .into_data();
         let mut p: Vec<f32> = out
             .try_to_vec::<f32>()
             .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;

@@ -44,6 +44,7 @@ use burn::module::Module;
 use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::tensor::activation::{leaky_relu, relu, sigmoid};
 use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::graph::{MeshGraph, BODY_COLUMN, BODY_RADIUS_M, EDGE_FEATURES, NODE_FEATURES};
@@ -363,54 +364,97 @@ impl GraphTensors {
     }
 }
 
+/// A contiguous range of a graph's directed edges with their latents (`[E_k, L]`) and end
+/// nodes (`[E_k]` each): the unit the edge MLPs run on, one range per thread at inference
+/// ([`CorrectorNet::forward_in_parts`]).
+#[derive(Debug, Clone)]
+struct EdgePart {
+    edges: Tensor<2>,
+    senders: Tensor<1, Int>,
+    receivers: Tensor<1, Int>,
+}
+
+/// `f` applied to every part, on its own rayon task where there are several (each part's edge
+/// MLP is a few matrix products too small for the matrix kernels to spread over threads).
+fn map_parts<P: Sync, T: Send>(parts: &[P], f: impl Fn(&P) -> T + Sync + Send) -> Vec<T> {
+    if parts.len() > 1 {
+        parts.par_iter().map(f).collect()
+    } else {
+        parts.iter().map(f).collect()
+    }
+}
+
+/// The sum of `[N, C]` tensors (one per part).
+fn sum_parts(terms: Vec<Tensor<2>>) -> Tensor<2> {
+    let mut terms = terms.into_iter();
+    let first = terms.next().expect("a graph has at least one edge part");
+    terms.fold(first, |acc, t| acc + t)
+}
+
 impl Block {
-    /// `nodes [N, L], edges [E, L] → (nodes [N, L], edges [E, L])`.
-    fn forward(
-        &self,
-        nodes: Tensor<2>,
-        edges: Tensor<2>,
-        senders: &Tensor<1, Int>,
-        receivers: &Tensor<1, Int>,
-    ) -> (Tensor<2>, Tensor<2>) {
+    /// `nodes [N, L]`, edge parts (latents `[E_k, L]`) → the same after the block.
+    fn forward(&self, nodes: Tensor<2>, parts: Vec<EdgePart>) -> (Tensor<2>, Vec<EdgePart>) {
         let [n, latent] = nodes.dims();
-        let from_i = self
-            .edge_sender
-            .forward(nodes.clone())
-            .select(0, senders.clone()); // [E, L]
-        let from_j = self
-            .edge_receiver
-            .forward(nodes.clone())
-            .select(0, receivers.clone()); // [E, L]
-        let first = self.edge.layers[0].forward(edges.clone()) + from_i + from_j; // [E, L]
-        let e_new = self.edge.after_first(first); // [E, L]
         let device = nodes.device();
-        let messages = match &self.score {
-            None => e_new.clone(),
-            Some(score) => {
-                // Softmax over each receiver's incoming edges; scores are clamped rather than
-                // shifted by a per-receiver maximum, which keeps every weight representable.
-                let w = score
+        let sent = self.edge_sender.forward(nodes.clone()); // [N, L]
+        let received = self.edge_receiver.forward(nodes.clone()); // [N, L]
+                                                                  // e′ on each part, with the attention's unnormalised weights.
+        let updated = map_parts(&parts, |p| {
+            let first = self.edge.layers[0].forward(p.edges.clone())
+                + sent.clone().select(0, p.senders.clone())
+                + received.clone().select(0, p.receivers.clone()); // [E_k, L]
+            let e_new = self.edge.after_first(first); // [E_k, L]
+                                                      // Softmax over each receiver's incoming edges; scores are clamped rather than
+                                                      // shifted by a per-receiver maximum, which keeps every weight representable.
+            let w = self.score.as_ref().map(|score| {
+                score
                     .forward(leaky_relu(e_new.clone(), 0.2))
                     .clamp(-30.0, 30.0)
-                    .exp(); // [E, 1]
-                let total = Tensor::<2>::zeros([n, 1], &device).select_assign(
-                    0,
-                    receivers.clone(),
-                    w.clone(),
-                    IndexingUpdateOp::Add,
-                ); // [N, 1]
-                let alpha = w / total.select(0, receivers.clone()); // [E, 1]
-                e_new.clone() * alpha
-            }
-        };
-        let sum = Tensor::<2>::zeros([n, latent], &device).select_assign(
-            0,
-            receivers.clone(),
-            messages,
-            IndexingUpdateOp::Add,
-        ); // [N, L]
+                    .exp() // [E_k, 1]
+            });
+            (e_new, w)
+        });
+        // The attention's normaliser: each receiver's total weight over all parts.
+        let total = self.score.as_ref().map(|_| {
+            sum_parts(map_parts(
+                &parts.iter().zip(&updated).collect::<Vec<_>>(),
+                |(p, u)| {
+                    let w = u.1.clone().expect("scored edges"); // [E_k, 1]
+                    Tensor::<2>::zeros([n, 1], &device).select_assign(
+                        0,
+                        p.receivers.clone(),
+                        w,
+                        IndexingUpdateOp::Add,
+                    ) // [N, 1]
+                },
+            ))
+        });
+        let sums = map_parts(&parts.iter().zip(&updated).collect::<Vec<_>>(), |(p, u)| {
+            let (e_new, w) = u;
+            let messages = match (w, &total) {
+                (Some(w), Some(total)) => {
+                    e_new.clone() * (w.clone() / total.clone().select(0, p.receivers.clone()))
+                } // [E_k, L]
+                _ => e_new.clone(),
+            };
+            Tensor::<2>::zeros([n, latent], &device).select_assign(
+                0,
+                p.receivers.clone(),
+                messages,
+                IndexingUpdateOp::Add,
+            ) // [N, L]
+        });
+        let sum = sum_parts(sums); // [N, L]
         let v_new = self.node.forward(Tensor::cat(vec![nodes.clone(), sum], 1)); // [N, L]
-        (nodes + v_new, edges + e_new)
+        let parts = parts
+            .into_iter()
+            .zip(updated)
+            .map(|(p, (e_new, _))| EdgePart {
+                edges: p.edges + e_new,
+                ..p
+            })
+            .collect();
+        (nodes + v_new, parts)
     }
 }
 
@@ -459,10 +503,40 @@ impl CorrectorConfig {
 impl CorrectorNet {
     /// Normalised velocity corrections `[N, 3]` for a batch of graphs.
     pub fn forward(&self, g: &GraphTensors) -> Tensor<2> {
+        self.forward_in_parts(g, 1)
+    }
+
+    /// [`Self::forward`] with the graph's directed edges cut into `parts` contiguous ranges
+    /// (each of whole edge pairs) whose edge MLPs run as parallel rayon tasks: the same
+    /// function, up to the order of the floating-point sums at each receiver. At inference
+    /// the edge MLPs are most of the work, and their matrix products are too small for the
+    /// matrix kernels to use more than one core (`clothsr rollout` on the three balls,
+    /// latent 32: see the corrector's README). Training keeps one part.
+    pub fn forward_in_parts(&self, g: &GraphTensors, parts: usize) -> Tensor<2> {
+        let [e] = g.senders.dims();
+        let pairs = e / 2;
+        let parts = parts.clamp(1, pairs.max(1));
+        let bounds: Vec<usize> = (0..=parts).map(|k| 2 * (k * pairs / parts)).collect();
+        let bounds: Vec<usize> = bounds
+            .iter()
+            .map(|&b| if b == 2 * pairs { e } else { b })
+            .collect();
+        let ranges: Vec<std::ops::Range<usize>> = bounds.windows(2).map(|w| w[0]..w[1]).collect();
+        let mut edge_parts = map_parts(&ranges, |r| {
+            let features = if parts == 1 {
+                g.edges.clone()
+            } else {
+                g.edges.clone().slice([r.clone(), 0..EDGE_FEATURES])
+            }; // [E_k, EDGE_FEATURES]
+            EdgePart {
+                edges: self.encode_edges.forward(features), // [E_k, L]
+                senders: g.senders.clone().slice([r.clone()]),
+                receivers: g.receivers.clone().slice([r.clone()]),
+            }
+        });
         let mut nodes = self.encode_nodes.forward(g.nodes.clone()); // [N, L]
-        let mut edges = self.encode_edges.forward(g.edges.clone()); // [E, L]
         for block in &self.blocks {
-            (nodes, edges) = block.forward(nodes, edges, &g.senders, &g.receivers);
+            (nodes, edge_parts) = block.forward(nodes, edge_parts);
         }
         let [n, _] = nodes.dims();
         let body = g.nodes.clone().slice([0..n, BODY_COLUMN..BODY_COLUMN + 1]); // [N, 1]
@@ -488,18 +562,20 @@ impl CorrectorNet {
         let Some(decode_edges) = &self.decode_edges else {
             return local; // [N, 3]
         };
-        let g_e = decode_edges.forward(edges); // [E, 3]
-        let [e, _] = g_e.dims();
-        let device = g_e.device();
-        let pairs = g_e.reshape([e / 2, 6]); // [E/2, 6]: g of edge 2k, then of 2k + 1
-        let f = pairs.clone().slice([0..e / 2, 0..3]) - pairs.slice([0..e / 2, 3..6]); // [E/2, 3]
-        let f = Tensor::cat(vec![f.clone(), f.neg()], 1).reshape([e, 3]); // [E, 3], f_ji = −f_ij
-        let impulse = Tensor::<2>::zeros([n, 3], &device).select_assign(
-            0,
-            g.receivers.clone(),
-            f,
-            IndexingUpdateOp::Add,
-        ); // [N, 3], sums to zero
-        impulse * g.inv_mass.clone() + local // [N, 3]
+        let device = local.device();
+        let impulses = map_parts(&edge_parts, |p| {
+            let g_e = decode_edges.forward(p.edges.clone()); // [E_k, 3]
+            let [e, _] = g_e.dims();
+            let pairs = g_e.reshape([e / 2, 6]); // [E_k/2, 6]: g of edge 2k, then of 2k + 1
+            let f = pairs.clone().slice([0..e / 2, 0..3]) - pairs.slice([0..e / 2, 3..6]); // [E_k/2, 3]
+            let f = Tensor::cat(vec![f.clone(), f.neg()], 1).reshape([e, 3]); // [E_k, 3], f_ji = −f_ij
+            Tensor::<2>::zeros([n, 3], &device).select_assign(
+                0,
+                p.receivers.clone(),
+                f,
+                IndexingUpdateOp::Add,
+            ) // [N, 3]
+        });
+        sum_parts(impulses) * g.inv_mass.clone() + local // [N, 3], the impulses sum to zero
     }
 }
