@@ -1265,3 +1265,102 @@ fn drift_windows_start_from_the_interleaved_runs_own_states() {
         assert!(!o.path().join("config.json").exists());
     }
 }
+
+#[test]
+fn a_distilled_network_learns_its_teachers_outputs_and_statistics() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let gated = CorrectorConfig::new()
+        .with_latent(32)
+        .with_steps(2)
+        .with_decoder(Some(Decoder::Gated));
+    let teacher = tmp.path().join("teacher");
+    // The teacher trains on the first two frames only, so that its statistics are not the
+    // ones the whole data set gives.
+    let mut first_frames = vec![TrainSet {
+        seq: load(Some(1..=2)),
+        sim: None,
+    }];
+    train(
+        &TrainingConfig::new(gated.clone())
+            .with_steps(40)
+            .with_batch(2)
+            .with_lr_start(3e-3)
+            .with_lr_end(1e-3),
+        &mut first_frames,
+        &[],
+        &teacher,
+        |_| ControlFlow::Continue(()),
+    )
+    .expect("teacher");
+    // A smaller student, and the same student shape trained on the data instead.
+    let student_cfg = |steps: usize| {
+        TrainingConfig::new(gated.clone().with_latent(16))
+            .with_steps(steps)
+            .with_batch(2)
+            .with_lr_start(3e-3)
+            .with_lr_end(1e-3)
+            .with_seed(3)
+    };
+    let run = |cfg: &TrainingConfig, name: &str| {
+        let out = tmp.path().join(name);
+        let mut losses = Vec::new();
+        train(cfg, &mut sets(), &[], &out, |p| {
+            losses.push(p.loss);
+            ControlFlow::Continue(())
+        })
+        .expect("train");
+        (out, losses)
+    };
+    let distil = |steps| student_cfg(steps).with_distil_from(Some(teacher.clone()));
+    let (student, losses) = run(&distil(150), "student");
+    let (untrained, _) = run(&distil(1), "untrained");
+    let (own, _) = run(&student_cfg(150), "own");
+    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+    let last: f64 = losses[140..].iter().sum::<f64>() / 10.0;
+    assert!(last < 0.5 * first, "distillation loss {first} → {last}");
+    // The student has the teacher's statistics, not ones fitted to the data.
+    let norm = |d: &std::path::Path| std::fs::read(d.join("normalisation.json")).expect("norm");
+    assert_eq!(norm(&student), norm(&teacher));
+    assert_ne!(norm(&own), norm(&teacher));
+    // Its corrections are the teacher's, far closer than a network of its shape trained on
+    // the data's targets, and than where it started.
+    let seq = load(None);
+    let predict = |dir: &std::path::Path| {
+        let c = Corrector::load(dir, &seq.mesh).expect("load");
+        seq.steps
+            .iter()
+            .skip(1)
+            .flat_map(|st| {
+                let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
+                let dv = vectors(st.dv.as_deref().expect("Δq"));
+                c.predict(&x, &v, &dv, &st.body).expect("predict")
+            })
+            .collect::<Vec<_>>()
+    };
+    let t = predict(&teacher);
+    let gap = |dir: &std::path::Path| dist(&predict(dir), &t);
+    let (g_student, g_untrained, g_own) = (gap(&student), gap(&untrained), gap(&own));
+    assert!(
+        g_student < 0.3 * g_untrained && g_student < 0.5 * g_own,
+        "distance to the teacher's corrections: distilled {g_student}, at its start \
+         {g_untrained}, trained on the data {g_own}"
+    );
+
+    // A teacher trained beside another coarse model is refused, naming its configuration,
+    // and the refused run leaves no folder.
+    let out = tmp.path().join("refused");
+    let e = train(
+        &distil(10).with_coarse_friction(Some(1.0)),
+        &mut sets(),
+        &[],
+        &out,
+        |_| ControlFlow::Continue(()),
+    )
+    .expect_err("another coarse model");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("teacher") && msg.contains("friction") && msg.contains("config.json"),
+        "{msg}"
+    );
+    assert!(!out.exists());
+}

@@ -253,6 +253,12 @@ pub struct CorrectorArgs {
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
     #[arg(long, value_name = "MODEL", conflicts_with_all = ["latent", "mp_steps", "attention", "decoder"])]
     init: Option<PathBuf>,
+    /// Distil this trained corrector (a model directory, the teacher): phase 1's targets are
+    /// its outputs on the training states instead of the data's corrections, and the
+    /// network takes its normalisation; typically a smaller `--latent` than the teacher's,
+    /// for speed. Train beside the teacher's coarse model (its `--coarse-*` settings).
+    #[arg(long, value_name = "MODEL")]
+    distil: Option<PathBuf>,
     /// Save the mean of the phase-2 weights after every window past this one (stochastic
     /// weight averaging) instead of the last weights; with `--val-data`, the mean is what
     /// is validated.
@@ -389,6 +395,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
                 .filter(|&on| !on),
         )
         .with_init_from(a.init.clone())
+        .with_distil_from(a.distil.clone())
         .with_average_from(a.average_from)
         .with_rollout_as_inference(a.rollout_as_inference.then_some(true))
         .with_drift_share((a.drift_share != 0.0).then_some(a.drift_share))

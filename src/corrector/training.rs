@@ -14,8 +14,9 @@
 //!   network at every step (the simulator's output is data).
 //!
 //! * Beyond the paper: a warm start from a trained corrector ([`TrainingConfig::init_from`]),
-//!   an average of the phase-2 weights ([`TrainingConfig::average_from`]) and phase-2 windows
-//!   rolled out as at inference ([`TrainingConfig::rollout_as_inference`]).
+//!   an average of the phase-2 weights ([`TrainingConfig::average_from`]), phase-2 windows
+//!   rolled out as at inference ([`TrainingConfig::rollout_as_inference`]) and phase 1
+//!   distilling a trained corrector ([`TrainingConfig::distil_from`]).
 //!
 //! The output directory holds `config.json`, `normalisation.json`, `model.bpk`, `log.csv`
 //! (phase, step, learning rate, loss, elapsed seconds) and, while training, `checkpoint/`
@@ -192,6 +193,15 @@ pub struct TrainingConfig {
     /// (`None`: 10): their gap to the ground truth is many steps' worth, and a one-step pull
     /// back would teach corrections of metres a second.
     pub drift_tau_steps: Option<f64>,
+    /// A trained corrector (model directory), the teacher, whose outputs are phase 1's
+    /// targets in place of the data's corrections (knowledge distillation, Hinton et al.
+    /// 2015): the network learns the teacher's function on the training states, as a smaller
+    /// and faster network where the teacher is too slow for the simulator's step. The
+    /// student takes the teacher's normalisation (the targets are the teacher's outputs in
+    /// its units), and must be trained beside the coarse model the teacher was (membrane,
+    /// friction, wrinkle bending, bending, crease contacts). Phase 2 keeps the data's
+    /// targets. `None`: the data's targets. Optional so that older configs load.
+    pub distil_from: Option<PathBuf>,
 }
 
 /// Drift windows between two interleaved runs when [`TrainingConfig::drift_refresh`] is unset.
@@ -445,6 +455,8 @@ struct Trainer<'a> {
     pristine: Vec<Option<Simulation>>,
     /// [`Summary::drift_runs`].
     drift_runs: Vec<(usize, f64)>,
+    /// The network distilled ([`TrainingConfig::distil_from`]).
+    teacher: Option<CorrectorNet>,
 }
 
 fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) -> Result<()> {
@@ -588,11 +600,23 @@ fn warm_start(
             ),
         ));
     }
+    check_same_coarse(&old, cfg, &config_path, "the network to start from")?;
+    Ok(Some((net, norm)))
+}
+
+/// Refuses (naming `config_path`) a trained corrector (`what`, configured as `old`) trained
+/// beside another coarse model than `cfg` asks for.
+fn check_same_coarse(
+    old: &TrainingConfig,
+    cfg: &TrainingConfig,
+    config_path: &Path,
+    what: &str,
+) -> Result<()> {
     if old.coarse_friction != cfg.coarse_friction {
         return Err(Error::bad_input(
-            &config_path,
+            config_path,
             format!(
-                "the network to start from was trained beside a coarse friction coefficient \
+                "{what} was trained beside a coarse friction coefficient \
                  of {:?}, the training asks for {:?} (None: the simulator's)",
                 old.coarse_friction, cfg.coarse_friction
             ),
@@ -604,9 +628,9 @@ fn warm_start(
     );
     if old_b != new_b {
         return Err(Error::bad_input(
-            &config_path,
+            config_path,
             format!(
-                "the network to start from was trained beside {old_b} times the fabric's \
+                "{what} was trained beside {old_b} times the fabric's \
                  bending stiffness, the training asks for {new_b}"
             ),
         ));
@@ -617,18 +641,18 @@ fn warm_start(
     );
     if old_e != new_e {
         return Err(Error::bad_input(
-            &config_path,
+            config_path,
             format!(
-                "the network to start from was trained with crease contacts {old_e}, the \
+                "{what} was trained with crease contacts {old_e}, the \
                  training asks for {new_e}"
             ),
         ));
     }
     if old.coarse_wrinkle_bending != cfg.coarse_wrinkle_bending {
         return Err(Error::bad_input(
-            &config_path,
+            config_path,
             format!(
-                "the network to start from was trained beside a coarse wrinkle bending gain \
+                "{what} was trained beside a coarse wrinkle bending gain \
                  of {:?}, the training asks for {:?} (None: off)",
                 old.coarse_wrinkle_bending, cfg.coarse_wrinkle_bending
             ),
@@ -638,9 +662,9 @@ fn warm_start(
         || old.coarse_compression_knee != cfg.coarse_compression_knee
     {
         return Err(Error::bad_input(
-            &config_path,
+            config_path,
             format!(
-                "the network to start from was trained beside a coarse membrane with \
+                "{what} was trained beside a coarse membrane with \
                  compression factor {} (knee {:?}), the training asks for {} (knee {:?})",
                 old.compression_factor(),
                 old.coarse_compression_knee,
@@ -649,7 +673,18 @@ fn warm_start(
             ),
         ));
     }
-    Ok(Some((net, norm)))
+    Ok(())
+}
+
+/// The teacher network `cfg` distils ([`TrainingConfig::distil_from`]), without gradients,
+/// and its statistics; `None` without one.
+fn teacher(cfg: &TrainingConfig, device: &Device) -> Result<Option<(CorrectorNet, Normalisation)>> {
+    let Some(dir) = cfg.distil_from.as_deref() else {
+        return Ok(None);
+    };
+    let (net, norm, old) = load_net(dir, device)?;
+    check_same_coarse(&old, cfg, &dir.join(CONFIG_FILE), "the teacher")?;
+    Ok(Some((net.no_grad(), norm)))
 }
 
 /// A running mean of a network's float parameters (stochastic weight averaging), in the
@@ -773,7 +808,20 @@ pub fn train(
     let start = if resuming {
         None
     } else {
-        match warm_start(cfg, &device) {
+        match warm_start(cfg, &device).and_then(|start| {
+            // The teacher's statistics are the student's: a warm start must share them.
+            if let (Some((_, own)), Some(dir)) = (&start, &cfg.distil_from) {
+                let teacher_norm: Normalisation = read_json(&dir.join(NORMALISATION_FILE))?;
+                if &teacher_norm != own {
+                    return Err(Error::bad_input(
+                        dir.join(NORMALISATION_FILE),
+                        "the teacher's normalisation is not the one of the network to start \
+                         from (a student starts fresh or from a student of this teacher)",
+                    ));
+                }
+            }
+            Ok(start)
+        }) {
             Ok(start) => start,
             Err(e) => {
                 if made_out {
@@ -784,12 +832,22 @@ pub fn train(
             }
         }
     };
+    let teacher = match teacher(cfg, &device) {
+        Ok(t) => t,
+        Err(e) => {
+            if made_out && !resuming {
+                // Best effort: the refusal is the error to report.
+                let _ = std::fs::remove_dir_all(out);
+            }
+            return Err(e);
+        }
+    };
     let norm = if resuming {
         read_json(&norm_path)?
     } else {
-        let norm = match &start {
-            Some((_, norm)) => norm.clone(),
-            None => fit_normalisation(sets),
+        let norm = match (&start, &teacher) {
+            (Some((_, norm)), _) | (None, Some((_, norm))) => norm.clone(),
+            (None, None) => fit_normalisation(sets),
         };
         write_json(&norm_path, &norm)?;
         write_json(&config_path, cfg)?;
@@ -861,6 +919,7 @@ pub fn train(
         drift_used: 0,
         pristine: Vec::new(),
         drift_runs: Vec::new(),
+        teacher: teacher.map(|(net, _)| net),
     };
     let mut summary = Summary {
         noise_std_m: t.noise_std_m,
@@ -1158,6 +1217,10 @@ impl Trainer<'_> {
                 * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
             let samples: Vec<Sample> = (0..cfg.batch).map(|_| self.sample(sets)).collect();
             let (g, target, mask, weight) = batch_tensors(&samples, &self.norm, &self.device);
+            let target = match &self.teacher {
+                Some(teacher) => teacher.forward(&g).detach(), // [N, 3]
+                None => target,
+            };
             let pred = self.net.forward(&g);
             let loss = l1(pred, target, mask, weight);
             let value = f64::from(loss.clone().into_scalar::<f32>());
