@@ -65,14 +65,7 @@ struct CachedBody {
     /// The triangles' boxes (kept to reuse the allocation).
     boxes: Vec<Aabb>,
     refits: usize,
-    /// Each vertex's nearest triangle at the last call ([`NO_TRIANGLE`]: none in reach): its
-    /// distance now bounds the search, which then opens few of the tree's boxes (a vertex
-    /// moves far less than the reach in a step). The distance found is the same.
-    last: Vec<u32>,
 }
-
-/// [`CachedBody::last`] for a vertex with no triangle in reach.
-const NO_TRIANGLE: u32 = u32::MAX;
 
 impl ProximityCache {
     /// Refits of a collider's tree between rebuilds.
@@ -111,31 +104,17 @@ impl ProximityCache {
                     _ => Vec::new(),
                 };
             }
-            if body.last.len() != x.len() {
-                body.last = vec![NO_TRIANGLE; x.len()];
-            }
             let (bvh, points) = (&body.bvh, &body.points);
-            let dist = |p: &Vector3<f64>, i: u32| {
-                let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
-                point_triangle(p, &a, &b, &c).dist
-            };
             x.par_iter()
                 .zip(nearest.par_iter_mut())
-                .zip(body.last.par_iter_mut())
                 .with_min_len(64)
-                .for_each(|((p, best), last)| {
-                    // The last nearest triangle's distance now (the bound is inclusive, so
-                    // the search finds it, or a nearer one, again).
-                    let bound = match c.triangles.get(*last as usize) {
-                        Some(_) => best.min(dist(p, *last)),
-                        None => *best,
-                    };
-                    match bvh.nearest(p, bound, |i| dist(p, i)) {
-                        Some((i, d)) => {
-                            *best = best.min(d);
-                            *last = i;
-                        }
-                        None => *last = NO_TRIANGLE,
+                .for_each(|(p, best)| {
+                    let hit = bvh.nearest(p, *best, |i| {
+                        let [a, b, c] = c.triangles[i as usize].map(|v| points[v as usize]);
+                        point_triangle(p, &a, &b, &c).dist
+                    });
+                    if let Some((_, d)) = hit {
+                        *best = best.min(d);
                     }
                 });
         }
@@ -639,8 +618,7 @@ mod tests {
         let mut cache = ProximityCache::default();
         let mut changed = 0;
         // More calls than REBUILD_EVERY, so both refits and a rebuild are compared.
-        // The points move too, so that the last call's nearest triangles (which bound each
-        // search) are no longer the nearest.
+        // The points move too, as the cloth does between calls.
         for k in 0..=ProximityCache::REBUILD_EVERY + 5 {
             let t = k as f64 / (ProximityCache::REBUILD_EVERY + 5) as f64;
             let x: Vec<Vector3<f64>> = x
