@@ -398,14 +398,16 @@ impl Block {
         let device = nodes.device();
         let sent = self.edge_sender.forward(nodes.clone()); // [N, L]
         let received = self.edge_receiver.forward(nodes.clone()); // [N, L]
-                                                                  // e′ on each part, with the attention's unnormalised weights.
+
+        // e′ on each part, with the attention's unnormalised weights.
         let updated = map_parts(&parts, |p| {
             let first = self.edge.layers[0].forward(p.edges.clone())
                 + sent.clone().select(0, p.senders.clone())
                 + received.clone().select(0, p.receivers.clone()); // [E_k, L]
             let e_new = self.edge.after_first(first); // [E_k, L]
-                                                      // Softmax over each receiver's incoming edges; scores are clamped rather than
-                                                      // shifted by a per-receiver maximum, which keeps every weight representable.
+
+            // Softmax over each receiver's incoming edges; scores are clamped rather than
+            // shifted by a per-receiver maximum, which keeps every weight representable.
             let w = self.score.as_ref().map(|score| {
                 score
                     .forward(leaky_relu(e_new.clone(), 0.2))
@@ -414,22 +416,20 @@ impl Block {
             });
             (e_new, w)
         });
+        let both: Vec<_> = parts.iter().zip(&updated).collect();
         // The attention's normaliser: each receiver's total weight over all parts.
         let total = self.score.as_ref().map(|_| {
-            sum_parts(map_parts(
-                &parts.iter().zip(&updated).collect::<Vec<_>>(),
-                |(p, u)| {
-                    let w = u.1.clone().expect("scored edges"); // [E_k, 1]
-                    Tensor::<2>::zeros([n, 1], &device).select_assign(
-                        0,
-                        p.receivers.clone(),
-                        w,
-                        IndexingUpdateOp::Add,
-                    ) // [N, 1]
-                },
-            ))
+            sum_parts(map_parts(&both, |(p, u)| {
+                let w = u.1.clone().expect("scored edges"); // [E_k, 1]
+                Tensor::<2>::zeros([n, 1], &device).select_assign(
+                    0,
+                    p.receivers.clone(),
+                    w,
+                    IndexingUpdateOp::Add,
+                ) // [N, 1]
+            }))
         });
-        let sums = map_parts(&parts.iter().zip(&updated).collect::<Vec<_>>(), |(p, u)| {
+        let sums = map_parts(&both, |(p, u)| {
             let (e_new, w) = u;
             let messages = match (w, &total) {
                 (Some(w), Some(total)) => {
@@ -516,12 +516,16 @@ impl CorrectorNet {
         let [e] = g.senders.dims();
         let pairs = e / 2;
         let parts = parts.clamp(1, pairs.max(1));
-        let bounds: Vec<usize> = (0..=parts).map(|k| 2 * (k * pairs / parts)).collect();
-        let bounds: Vec<usize> = bounds
-            .iter()
-            .map(|&b| if b == 2 * pairs { e } else { b })
-            .collect();
-        let ranges: Vec<std::ops::Range<usize>> = bounds.windows(2).map(|w| w[0]..w[1]).collect();
+        // Part k holds edge pairs k·pairs/parts up to the next part's; the last ends at e.
+        let start = |k: usize| {
+            if k == parts {
+                e
+            } else {
+                2 * (k * pairs / parts)
+            }
+        };
+        let ranges: Vec<std::ops::Range<usize>> =
+            (0..parts).map(|k| start(k)..start(k + 1)).collect();
         let mut edge_parts = map_parts(&ranges, |r| {
             let features = if parts == 1 {
                 g.edges.clone()

@@ -805,37 +805,32 @@ pub fn train(
     let norm_path = out.join(NORMALISATION_FILE);
     let device = default_device()?.autodiff();
     device.seed(cfg.seed);
-    let start = if resuming {
-        None
-    } else {
-        match warm_start(cfg, &device).and_then(|start| {
-            // The teacher's statistics are the student's: a warm start must share them.
-            if let (Some((_, own)), Some(dir)) = (&start, &cfg.distil_from) {
-                let teacher_norm: Normalisation = read_json(&dir.join(NORMALISATION_FILE))?;
-                if &teacher_norm != own {
-                    return Err(Error::bad_input(
-                        dir.join(NORMALISATION_FILE),
-                        "the teacher's normalisation is not the one of the network to start \
-                         from (a student starts fresh or from a student of this teacher)",
-                    ));
-                }
-            }
-            Ok(start)
-        }) {
-            Ok(start) => start,
-            Err(e) => {
-                if made_out {
-                    // Best effort: the refusal is the error to report.
-                    let _ = std::fs::remove_dir_all(out);
-                }
-                return Err(e);
+    // The models training starts from and distils, each checked against `cfg`. A run refused
+    // here made nothing yet, so a folder it made goes again.
+    let loaded = (|| {
+        let start = if resuming {
+            None
+        } else {
+            warm_start(cfg, &device)?
+        };
+        let teacher = teacher(cfg, &device)?;
+        // The teacher's statistics are the student's: a warm start must share them.
+        if let (Some((_, own)), Some((_, taught)), Some(dir)) = (&start, &teacher, &cfg.distil_from)
+        {
+            if own != taught {
+                return Err(Error::bad_input(
+                    dir.join(NORMALISATION_FILE),
+                    "the teacher's normalisation is not the one of the network to start \
+                     from (a student starts fresh or from a student of this teacher)",
+                ));
             }
         }
-    };
-    let teacher = match teacher(cfg, &device) {
-        Ok(t) => t,
+        Ok((start, teacher))
+    })();
+    let (start, teacher) = match loaded {
+        Ok(loaded) => loaded,
         Err(e) => {
-            if made_out && !resuming {
+            if made_out {
                 // Best effort: the refusal is the error to report.
                 let _ = std::fs::remove_dir_all(out);
             }
