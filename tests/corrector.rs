@@ -6,6 +6,7 @@
 mod common;
 
 use clothsr::corrector::data::{vectors, Sequence};
+use clothsr::corrector::fused::{FusedInputs, FusedNet};
 use clothsr::corrector::graph::MeshGraph;
 use clothsr::corrector::inference::{default_device, features, Corrector, WEIGHTS_FILE};
 use clothsr::corrector::model::{Decoder, GraphTensors, DEFAULT_TENSION_RAMP};
@@ -236,19 +237,54 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                 );
             }
         }
+        // At inference on the CPU the loaded model runs the fused forward pass, the in-memory
+        // network's on burn: the same function to the order of the sums, and each the same
+        // bits as the in-memory network run the same way (the loaded weights are exact).
+        assert!(loaded.is_fused());
+        let parts = rayon::current_num_threads();
         let inference: Vec<f32> = net
-            .forward_in_parts(&g, rayon::current_num_threads())
+            .forward_in_parts(&g, parts)
             .into_data()
             .try_to_vec::<f32>()
             .expect("vec");
-        let mut expect = inference.clone();
-        norm.targets.invert(&mut expect);
+        let fused = FusedNet::of(&net).forward(
+            FusedInputs {
+                nodes: &nodes,
+                edges: &edges,
+                senders: &seq.graph.senders,
+                receivers: &seq.graph.receivers,
+                inv_mass: &g_inv_mass(&seq.graph),
+                step_change: &step_change,
+                tension: None,
+            },
+            parts,
+        );
         // The loaded model owns its weights: the folder may go while it runs (burn's own
         // file loader read them lazily and panicked here).
         std::fs::remove_file(dir.path().join(WEIGHTS_FILE)).expect("remove the weights");
-        let p = loaded.predict(&x, &v, &dv, &st.body).expect("predict");
-        for (a, b) in p.iter().flat_map(|p| p.iter().copied()).zip(&expect) {
-            assert_eq!(a as f32, *b, "attention {attention}, {decoder:?}");
+        let mut on_burn = Corrector::new(
+            net.clone(),
+            norm.clone(),
+            cfg.clone(),
+            &seq.mesh,
+            dir.path(),
+            &device,
+        );
+        on_burn.use_burn();
+        assert!(!on_burn.is_fused());
+        for (c, out) in [(&loaded, &fused), (&on_burn, &inference)] {
+            let mut expect = out.clone();
+            norm.targets.invert(&mut expect);
+            let p = c.predict(&x, &v, &dv, &st.body).expect("predict");
+            for (a, b) in p.iter().flat_map(|p| p.iter().copied()).zip(&expect) {
+                assert_eq!(a as f32, *b, "attention {attention}, {decoder:?}");
+            }
+        }
+        for (k, (a, b)) in direct.iter().zip(&fused).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-5 * (1.0 + a.abs()),
+                "fused, {k}: {a} vs {b} (attention {attention}, {decoder:?})"
+            );
         }
         // Two graphs in one batch give each graph's own output.
         let n = seq.graph.num_nodes as u32;
@@ -1363,4 +1399,127 @@ fn a_distilled_network_learns_its_teachers_outputs_and_statistics() {
         "{msg}"
     );
     assert!(!out.exists());
+}
+
+/// A triangulated k × k grid as a graph's directed edge pairs (edge 2m + 1 is edge 2m
+/// reversed): `(senders, receivers)`.
+fn grid_edges(k: u32) -> (Vec<u32>, Vec<u32>) {
+    let (mut senders, mut receivers) = (Vec::new(), Vec::new());
+    for i in 0..k {
+        for j in 0..k {
+            let a = i * k + j;
+            let mut pair = |b: u32| {
+                senders.extend([a, b]);
+                receivers.extend([b, a]);
+            };
+            if j + 1 < k {
+                pair(a + 1);
+            }
+            if i + 1 < k {
+                pair(a + k);
+            }
+            if i + 1 < k && j + 1 < k {
+                pair(a + k + 1);
+            }
+        }
+    }
+    (senders, receivers)
+}
+
+#[test]
+fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
+    use burn::module::{Module, ModuleMapper, Param};
+    use burn::tensor::{Distribution, Tensor};
+    use clothsr::corrector::fused::TILE;
+    use clothsr::corrector::graph::{EDGE_FEATURES, NODE_FEATURES};
+    use rand::{Rng, SeedableRng};
+    /// Every parameter moved at random: LayerNorms' γ and β away from 1 and 0, biases from 0.
+    struct Jiggle;
+    impl ModuleMapper for Jiggle {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            param.map(|t| {
+                let noise = t.random_like(Distribution::Uniform(-0.3, 0.3));
+                t + noise
+            })
+        }
+    }
+    // 17 × 17 nodes, 1,600 directed edges: several tiles per thread's range.
+    let k = 17;
+    let (senders, receivers) = grid_edges(k);
+    let (n, e) = ((k * k) as usize, senders.len());
+    assert!(e > 4 * TILE);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let mut normal =
+        |len: usize| -> Vec<f32> { (0..len).map(|_| rng.random_range(-1.5..1.5)).collect() };
+    let mut nodes = normal(n * NODE_FEATURES);
+    // Body proximities across the gated decoder's contact ramp (in the network's units).
+    for (i, f) in nodes.chunks_exact_mut(NODE_FEATURES).enumerate() {
+        f[clothsr::corrector::graph::BODY_COLUMN] = (i % 7) as f32 / 6.0;
+    }
+    let edges = normal(e * EDGE_FEATURES);
+    let step_change = normal(3 * n);
+    let inv_mass: Vec<f32> = (0..n).map(|i| 0.5 + (i % 5) as f32 * 0.3).collect();
+    let tension: Vec<f32> = (0..n).map(|i| (i % 4) as f32 / 3.0).collect();
+    let device = default_device().expect("device");
+    let kinds = [
+        Decoder::Node,
+        Decoder::Momentum,
+        Decoder::Gated,
+        Decoder::GatedEdges,
+    ];
+    for (attention, decoder) in [false, true]
+        .into_iter()
+        .flat_map(|a| kinds.map(|d| (a, d)))
+    {
+        for layers in [1, 2] {
+            let cfg = CorrectorConfig::new()
+                .with_latent(24)
+                .with_hidden_layers(layers)
+                .with_steps(2)
+                .with_attention(attention)
+                .with_decoder(Some(decoder))
+                .with_share_min(Some(-0.2));
+            let net = cfg.init(&device).map(&mut Jiggle);
+            let g = GraphTensors::new(
+                nodes.clone(),
+                edges.clone(),
+                &senders,
+                &receivers,
+                inv_mass.clone(),
+                step_change.clone(),
+                &device,
+            )
+            .with_tension(Some(tension.clone()));
+            let direct: Vec<f32> = net
+                .forward(&g)
+                .into_data()
+                .try_to_vec::<f32>()
+                .expect("vec");
+            let fused = FusedNet::of(&net);
+            let scale = direct.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+            assert!(scale > 0.1, "{decoder:?}: a network that says nothing");
+            for parts in [1, 2, 3, 7] {
+                let out = fused.forward(
+                    FusedInputs {
+                        nodes: &nodes,
+                        edges: &edges,
+                        senders: &senders,
+                        receivers: &receivers,
+                        inv_mass: &inv_mass,
+                        step_change: &step_change,
+                        tension: Some(&tension),
+                    },
+                    parts,
+                );
+                assert_eq!(out.len(), 3 * n);
+                for (i, (a, b)) in direct.iter().zip(&out).enumerate() {
+                    assert!(
+                        (a - b).abs() <= 2e-5 * (1.0 + a.abs()),
+                        "{parts} parts, {i}: {a} vs {b} (attention {attention}, {decoder:?}, \
+                         {layers} hidden layers)"
+                    );
+                }
+            }
+        }
+    }
 }

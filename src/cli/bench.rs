@@ -237,6 +237,8 @@ struct TableRow {
     /// Coarse step, corrector call per step, ISR per frame, fine step; seconds.
     t_c: f64,
     t_g: Option<f64>,
+    /// The corrector's network alone per call, fused CPU pass and burn; seconds.
+    network: Option<(f64, f64)>,
     t_i: f64,
     t_f: f64,
     steps: usize,
@@ -291,7 +293,45 @@ fn pipeline(args: &Args) -> anyhow::Result<()> {
         );
     }
     println!("t_sf = steps·(t_c + t_g) + t_i (the SR frame), t_ff = steps·t_f (the fine frame)");
+    for r in &rows {
+        if let Some((fused, burn)) = r.network {
+            println!(
+                "{}: the corrector's network alone {:.2} ms a call (fused CPU pass), {:.2} ms on \
+                 burn ({:.2}×)",
+                r.name,
+                fused * 1e3,
+                burn * 1e3,
+                burn / fused
+            );
+        }
+    }
     Ok(())
+}
+
+/// The corrector in `dir`'s network alone per call on `sim`'s current state, with the fused
+/// CPU forward pass and with burn: seconds, the means of `reps` calls each, alternated.
+fn network_times(dir: &Path, sim: &Simulation, reps: usize) -> anyhow::Result<(f64, f64)> {
+    use clothsr::corrector::Corrector;
+    let mesh = &sim.sim.model.mesh;
+    let fused = Corrector::load(dir, mesh)?;
+    let mut burn = Corrector::load(dir, mesh)?;
+    burn.use_burn();
+    let x = &sim.state.x;
+    let v = &sim.state.v;
+    let dv = vec![Vector3::zeros(); x.len()];
+    let body = clothsr::corrector::graph::body_proximity(x, &sim.colliders, sim.state.t_s);
+    let (mut t_fused, mut t_burn) = (0.0, 0.0);
+    for k in 0..=reps {
+        for (c, t) in [(&fused, &mut t_fused), (&burn, &mut t_burn)] {
+            let start = Instant::now();
+            c.predict(x, v, &dv, &body)?;
+            // The first call of each warms up and is not counted.
+            if k > 0 {
+                *t += start.elapsed().as_secs_f64();
+            }
+        }
+    }
+    Ok((t_fused / reps as f64, t_burn / reps as f64))
 }
 
 fn pipeline_row(
@@ -320,6 +360,10 @@ fn pipeline_row(
         ti += p.times.msr_s;
     }
     let n = args.frames as f64;
+    let network = match corrector {
+        Some(dir) => Some(network_times(dir, &p.coarse, 50)?),
+        None => None,
+    };
     let mut fine = clothsr::data::new_simulation(
         &scene,
         isr.cfg.pixel_m,
@@ -342,6 +386,7 @@ fn pipeline_row(
         coarse: (cm.num_vertices(), cm.triangles.len()),
         t_c: tc / (n * steps as f64),
         t_g: p.has_corrector().then(|| tg / (n * steps as f64)),
+        network,
         t_i: ti / n,
         t_f: tf,
         steps,

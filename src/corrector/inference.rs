@@ -15,6 +15,7 @@ use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Device, Int, Tensor};
 use nalgebra::Vector3;
 
+use super::fused::{FusedInputs, FusedNet};
 use super::graph::{step_change, MeshGraph, ProximityCache, EDGE_FEATURES, NODE_FEATURES};
 use super::model::{index_tensor, inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
@@ -129,6 +130,9 @@ pub struct Corrector {
     /// Where its time goes.
     pub times: CorrectorTimes,
     net: CorrectorNet,
+    /// The network's weights for the fused CPU forward pass ([`super::fused`]), used when
+    /// the network is on burn's CPU device; `None`: burn runs it.
+    fused: Option<FusedNet>,
     norm: Normalisation,
     graph: MeshGraph,
     /// The graph's edge lists on the device, uploaded once.
@@ -235,6 +239,7 @@ impl Corrector {
         let graph = MeshGraph::new(mesh);
         Corrector {
             times: CorrectorTimes::default(),
+            fused: (*device == Device::flex()).then(|| FusedNet::of(&net)),
             net,
             norm,
             senders: index_tensor(&graph.senders, device),
@@ -246,6 +251,18 @@ impl Corrector {
             dir: dir.to_path_buf(),
             proximity: Mutex::default(),
         }
+    }
+
+    /// Whether the network runs on the fused CPU forward pass ([`super::fused`]) rather than
+    /// on burn (only for a network on burn's CPU device).
+    pub fn is_fused(&self) -> bool {
+        self.fused.is_some()
+    }
+
+    /// Runs the network on burn from now on (the same function as the fused pass, to the
+    /// rounding of its sums): for comparing the two (`clothsr bench pipeline`, the tests).
+    pub fn use_burn(&mut self) {
+        self.fused = None;
     }
 
     /// The predicted velocity correction p for M_c = (x, v), reached by a step that changed
@@ -273,22 +290,38 @@ impl Corrector {
         let t = Instant::now();
         let mut step_change = flat32(dv);
         self.norm.targets.apply(&mut step_change);
-        let g = GraphTensors::with_indices(
-            nodes,
-            edges,
-            self.senders.clone(),
-            self.receivers.clone(),
-            self.inv_mass.clone(),
-            step_change.clone(),
-        )
-        .with_tension(self.take_back_weights(x));
-        let out = self
-            .net
-            .forward_in_parts(&g, rayon::current_num_threads())
-            .into_data();
-        let mut p: Vec<f32> = out
-            .try_to_vec::<f32>()
-            .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?;
+        let tension = self.take_back_weights(x);
+        let parts = rayon::current_num_threads();
+        let mut p: Vec<f32> = match &self.fused {
+            Some(fused) => fused.forward(
+                FusedInputs {
+                    nodes: &nodes,
+                    edges: &edges,
+                    senders: &self.graph.senders,
+                    receivers: &self.graph.receivers,
+                    inv_mass: &self.inv_mass,
+                    step_change: &step_change,
+                    tension: tension.as_deref(),
+                },
+                parts,
+            ),
+            None => {
+                let g = GraphTensors::with_indices(
+                    nodes,
+                    edges,
+                    self.senders.clone(),
+                    self.receivers.clone(),
+                    self.inv_mass.clone(),
+                    step_change.clone(),
+                )
+                .with_tension(tension);
+                self.net
+                    .forward_in_parts(&g, parts)
+                    .into_data()
+                    .try_to_vec::<f32>()
+                    .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?
+            }
+        };
         CorrectorTimes::add(&self.times.network_ns, t);
         if let Some(k) = (0..p.len()).find(|&k| {
             (p[k].abs() > MAX_CORRECTION_STD + step_change[k].abs()) || !p[k].is_finite()

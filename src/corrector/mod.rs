@@ -6,12 +6,14 @@
 //! * [`graph`]: the coarse mesh as a graph, node and edge features;
 //! * [`normalise`]: data-set statistics;
 //! * [`model`]: the burn network (encode–process–decode, optional attention);
+//! * [`fused`]: the same network's forward pass on the CPU outside burn, for inference;
 //! * [`data`]: samples from data sets made by [`crate::data`];
 //! * [`training`]: one-step training with noise and patches, then window rollout training;
 //! * [`inference`]: the [`Corrector`] the simulation loop calls after every step;
 //! * [`rollout`]: rollout errors against the ground truth, with the paper's ablations.
 
 pub mod data;
+pub mod fused;
 pub mod graph;
 pub mod inference;
 pub mod model;

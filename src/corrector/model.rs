@@ -186,8 +186,8 @@ impl CorrectorConfig {
 /// LayerNorm.
 #[derive(Module, Debug)]
 pub struct Mlp {
-    layers: Vec<Linear>,
-    norm: Option<LayerNorm>,
+    pub(super) layers: Vec<Linear>,
+    pub(super) norm: Option<LayerNorm>,
 }
 
 impl Mlp {
@@ -236,11 +236,11 @@ impl Mlp {
 /// edge (the same function with fewer operations: a mesh has ~6 directed edges per vertex).
 #[derive(Module, Debug)]
 pub struct Block {
-    edge: Mlp,
-    edge_sender: Linear,
-    edge_receiver: Linear,
-    node: Mlp,
-    score: Option<Linear>,
+    pub(super) edge: Mlp,
+    pub(super) edge_sender: Linear,
+    pub(super) edge_receiver: Linear,
+    pub(super) node: Mlp,
+    pub(super) score: Option<Linear>,
 }
 
 /// An edge list (`[E]` node indices) on `device`.
@@ -461,13 +461,13 @@ impl Block {
 /// The corrector network.
 #[derive(Module, Debug)]
 pub struct CorrectorNet {
-    encode_nodes: Mlp,
-    encode_edges: Mlp,
-    blocks: Vec<Block>,
-    decode: Mlp,
-    decode_edges: Option<Mlp>,
-    gate: Option<Mlp>,
-    share_min: Option<f64>,
+    pub(super) encode_nodes: Mlp,
+    pub(super) encode_edges: Mlp,
+    pub(super) blocks: Vec<Block>,
+    pub(super) decode: Mlp,
+    pub(super) decode_edges: Option<Mlp>,
+    pub(super) gate: Option<Mlp>,
+    pub(super) share_min: Option<f64>,
 }
 
 impl CorrectorConfig {

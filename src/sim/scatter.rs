@@ -6,9 +6,10 @@
 //! memory (at 40K vertices those were ~200 MB per Newton iteration), and the summation order of
 //! every entry is fixed by the colouring, so results do not depend on the thread count.
 //!
-//! `unsafe` is allowed here, and only here, for a private slice writer: Rust cannot see that
-//! the colouring makes the parallel writes disjoint, so the writer hands out `&mut` to entries
-//! of a slice from several threads. [`ColouredElements`] keeps the colouring and the block slots
+//! `unsafe` is allowed here for a private slice writer (elsewhere only for the one call into
+//! `gemm`'s matrix kernels in `corrector::fused`, whose API takes raw pointers): Rust cannot
+//! see that the colouring makes the parallel writes disjoint, so the writer hands out `&mut`
+//! to entries of a slice from several threads. [`ColouredElements`] keeps the colouring and the block slots
 //! together (built from the matrix, private fields), which is what makes that sound; every
 //! access is bounds-checked.
 #![allow(unsafe_code)]
