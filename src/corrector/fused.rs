@@ -53,6 +53,7 @@ impl Dense {
     }
 
     /// `x [rows, input]` → `y [rows, output]` = x·W + b.
+    #[inline(always)]
     #[allow(unsafe_code)] // gemm's API takes raw pointers and strides.
     fn apply(&self, x: &[f32], rows: usize, y: &mut [f32]) {
         let (x, y) = (&x[..rows * self.input], &mut y[..rows * self.output]);
@@ -133,6 +134,7 @@ impl FusedMlp {
 
     /// `x [rows, input]` → `[rows, output]`, held in `s`; `pre` adds to the first layer's
     /// output before its activation (`[rows, hidden]`).
+    #[inline(always)]
     fn run<'s>(
         &self,
         x: &[f32],
@@ -165,20 +167,44 @@ impl FusedMlp {
         let mut y = vec![0.0; rows * o];
         y.par_chunks_mut(TILE * o)
             .zip(x[..rows * i].par_chunks(TILE * i))
-            .for_each_init(Scratch::default, |s, (y, x)| {
-                let r = y.len() / o;
-                y.copy_from_slice(self.run(x, r, s, |_| ()));
+            .for_each_init(Scratch::default, |scratch, (y, x)| {
+                simd(RowTile {
+                    mlp: self,
+                    x,
+                    y,
+                    scratch,
+                })
             });
         y
     }
 }
 
+/// Σ f(x) over `row`, summed in [`LANES`] interleaved partial sums: a float sum in one chain
+/// is one dependent add after another (the compiler may not reorder it), the lanes are
+/// vector adds. Rounding differs from a sequential sum by a few ulps.
+#[inline(always)]
+fn lane_sum(row: &[f32], f: impl Fn(f32) -> f32) -> f32 {
+    let mut lanes = [0.0f32; LANES];
+    let mut chunks = row.chunks_exact(LANES);
+    for c in &mut chunks {
+        for (l, &x) in lanes.iter_mut().zip(c) {
+            *l += f(x);
+        }
+    }
+    let tail: f32 = chunks.remainder().iter().map(|&x| f(x)).sum();
+    lanes.iter().sum::<f32>() + tail
+}
+
+/// Partial sums in [`lane_sum`].
+const LANES: usize = 16;
+
 /// One row normalised to zero mean and unit variance (population variance), then scaled by γ
 /// and shifted by β.
+#[inline(always)]
 fn layer_norm(row: &mut [f32], gamma: &[f32], beta: Option<&[f32]>, eps: f32) {
     let n = row.len() as f32;
-    let mean = row.iter().sum::<f32>() / n;
-    let var = row.iter().map(|x| (x - mean) * (x - mean)).sum::<f32>() / n;
+    let mean = lane_sum(row, |x| x) / n;
+    let var = lane_sum(row, |x| (x - mean) * (x - mean)) / n;
     let inv = 1.0 / (var + eps).sqrt();
     match beta {
         Some(beta) => {
@@ -204,12 +230,82 @@ struct FusedBlock {
     score: Option<Dense>,
 }
 
+/// `op` compiled for the CPU's widest vector instructions (AVX-512 or AVX2 on x86, picked at
+/// run time by `pulp`): the element-wise loops its `#[inline(always)]` body holds are
+/// vectorised that wide (the crate itself is compiled for baseline x86-64, SSE2).
+#[inline(always)]
+fn simd<Op: pulp::WithSimd>(op: Op) -> Op::Output {
+    pulp::Arch::new().dispatch(op)
+}
+
+/// A range's messages summed at each receiver (`[N, L]`), and with attention each receiver's
+/// total weight (`[N]`).
+struct RangeSums {
+    sum: Vec<f32>,
+    total: Vec<f32>,
+}
+
+/// One thread's range of whole edge pairs for [`FusedBlock::edge_range`]: latents `[E_k, L]`
+/// updated in place, end nodes from the range's first edge on, the block's sender and receiver
+/// terms `[N, L]`.
+struct EdgeRange<'a> {
+    block: &'a FusedBlock,
+    range: &'a mut [f32],
+    senders: &'a [u32],
+    receivers: &'a [u32],
+    sent: &'a [f32],
+    received: &'a [f32],
+    sums: &'a mut RangeSums,
+}
+
+impl pulp::WithSimd for EdgeRange<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        self.block.edge_range(self)
+    }
+}
+
+/// One tile of rows through an MLP for [`FusedMlp::run_rows`].
+struct RowTile<'a> {
+    mlp: &'a FusedMlp,
+    x: &'a [f32],
+    y: &'a mut [f32],
+    scratch: &'a mut Scratch,
+}
+
+impl pulp::WithSimd for RowTile<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let rows = self.y.len() / self.mlp.output();
+        let out = self.mlp.run(self.x, rows, self.scratch, |_| ());
+        self.y.copy_from_slice(out);
+    }
+}
+
+/// The edge MLP's first layer terms of each edge's end nodes added to `h` (`[rows, L]`):
+/// (W_s·v)_i from `sent` and (W_r·v)_j from `received` (`[N, L]`).
+#[inline(always)]
+fn add_ends(h: &mut [f32], snd: &[u32], rcv: &[u32], sent: &[f32], received: &[f32], l: usize) {
+    for ((h, &i), &j) in h.chunks_exact_mut(l).zip(snd).zip(rcv) {
+        let (a, b) = (row(sent, i, l), row(received, j, l));
+        for ((h, a), b) in h.iter_mut().zip(a).zip(b) {
+            *h += a + b;
+        }
+    }
+}
+
 /// A row of `rows` (`[·, width]`).
+#[inline(always)]
 fn row(rows: &[f32], i: u32, width: usize) -> &[f32] {
     &rows[i as usize * width..][..width]
 }
 
 /// A mutable row of `rows` (`[·, width]`).
+#[inline(always)]
 fn row_mut(rows: &mut [f32], i: u32, width: usize) -> &mut [f32] {
     &mut rows[i as usize * width..][..width]
 }
@@ -220,6 +316,54 @@ fn range_len(e: usize, parts: usize) -> usize {
 }
 
 impl FusedBlock {
+    /// One range of edges through the edge MLP, their messages summed at their receivers.
+    #[inline(always)]
+    fn edge_range(&self, r: EdgeRange<'_>) {
+        let l = self.edge.output();
+        let mut s = Scratch::default();
+        let mut w = Vec::new();
+        let RangeSums { sum, total } = r.sums;
+        for (t, tile) in r.range.chunks_mut(TILE * l).enumerate() {
+            let rows = tile.len() / l;
+            let (snd, rcv) = (
+                &r.senders[t * TILE..t * TILE + rows],
+                &r.receivers[t * TILE..t * TILE + rows],
+            );
+            let e_new = self.edge.run(tile, rows, &mut s, |h| {
+                add_ends(h, snd, rcv, r.sent, r.received, l)
+            }); // [rows, L]
+            match &self.score {
+                Some(score) => {
+                    // exp(clamp(a·LeakyReLU(e′) + c, ±30)), as the burn network.
+                    w.clear();
+                    w.extend(e_new.chunks_exact(l).map(|e| {
+                        let z: f32 = e
+                            .iter()
+                            .zip(&score.w)
+                            .map(|(&x, a)| if x >= 0.0 { x } else { 0.2 * x } * a)
+                            .sum();
+                        let c = score.b.as_ref().map_or(0.0, |b| b[0]);
+                        (z + c).clamp(-30.0, 30.0).exp()
+                    }));
+                    for ((e, &j), &w) in e_new.chunks_exact(l).zip(rcv).zip(&w) {
+                        total[j as usize] += w;
+                        for (s, e) in row_mut(sum, j, l).iter_mut().zip(e) {
+                            *s += w * e;
+                        }
+                    }
+                }
+                None => {
+                    for (e, &j) in e_new.chunks_exact(l).zip(rcv) {
+                        for (s, e) in row_mut(sum, j, l).iter_mut().zip(e) {
+                            *s += e;
+                        }
+                    }
+                }
+            }
+            tile.iter_mut().zip(e_new.iter()).for_each(|(e, d)| *e += d);
+        }
+    }
+
     fn of(b: &Block) -> FusedBlock {
         let linear = |l: &Linear| FusedMlp {
             layers: vec![Dense::of(l)],
@@ -254,56 +398,20 @@ impl FusedBlock {
             .par_chunks_mut(per * l)
             .enumerate()
             .map(|(k, range)| {
-                let mut sum = vec![0.0f32; n * l]; // [N, L]
-                let mut total = vec![0.0f32; if self.score.is_some() { n } else { 0 }]; // [N]
-                let mut s = Scratch::default();
-                let mut w = Vec::new();
-                for (t, tile) in range.chunks_mut(TILE * l).enumerate() {
-                    let rows = tile.len() / l;
-                    let first = k * per + t * TILE;
-                    let (snd, rcv) = (
-                        &senders[first..first + rows],
-                        &receivers[first..first + rows],
-                    );
-                    let e_new = self.edge.run(tile, rows, &mut s, |h| {
-                        for ((h, &i), &j) in h.chunks_exact_mut(l).zip(snd).zip(rcv) {
-                            let (a, b) = (row(&sent, i, l), row(&received, j, l));
-                            for ((h, a), b) in h.iter_mut().zip(a).zip(b) {
-                                *h += a + b;
-                            }
-                        }
-                    }); // [rows, L]
-                    match &self.score {
-                        Some(score) => {
-                            // exp(clamp(a·LeakyReLU(e′) + c, ±30)), as the burn network.
-                            w.clear();
-                            w.extend(e_new.chunks_exact(l).map(|e| {
-                                let z: f32 = e
-                                    .iter()
-                                    .zip(&score.w)
-                                    .map(|(&x, a)| if x >= 0.0 { x } else { 0.2 * x } * a)
-                                    .sum();
-                                let c = score.b.as_ref().map_or(0.0, |b| b[0]);
-                                (z + c).clamp(-30.0, 30.0).exp()
-                            }));
-                            for ((e, &j), &w) in e_new.chunks_exact(l).zip(rcv).zip(&w) {
-                                total[j as usize] += w;
-                                for (s, e) in row_mut(&mut sum, j, l).iter_mut().zip(e) {
-                                    *s += w * e;
-                                }
-                            }
-                        }
-                        None => {
-                            for (e, &j) in e_new.chunks_exact(l).zip(rcv) {
-                                for (s, e) in row_mut(&mut sum, j, l).iter_mut().zip(e) {
-                                    *s += e;
-                                }
-                            }
-                        }
-                    }
-                    tile.iter_mut().zip(e_new.iter()).for_each(|(e, d)| *e += d);
-                }
-                (sum, total)
+                let mut sums = RangeSums {
+                    sum: vec![0.0f32; n * l],
+                    total: vec![0.0f32; if self.score.is_some() { n } else { 0 }],
+                };
+                simd(EdgeRange {
+                    block: self,
+                    range,
+                    senders: &senders[k * per..],
+                    receivers: &receivers[k * per..],
+                    sent: &sent,
+                    received: &received,
+                    sums: &mut sums,
+                });
+                (sums.sum, sums.total)
             })
             .collect();
         let mut parts = partial.into_iter();
@@ -383,6 +491,13 @@ impl FusedNet {
     /// Normalised velocity corrections `[N, 3]`, the edges cut into `parts` ranges (one per
     /// rayon thread at inference).
     pub fn forward(&self, g: FusedInputs<'_>, parts: usize) -> Vec<f32> {
+        // The whole pass runs on one of rayon's threads: each parallel step called from a
+        // thread outside the pool would hand its work over and wait to be woken.
+        rayon::scope(|_| self.forward_in_pool(g, parts))
+    }
+
+    /// [`Self::forward`] on the calling thread.
+    fn forward_in_pool(&self, g: FusedInputs<'_>, parts: usize) -> Vec<f32> {
         let n = g.nodes.len() / NODE_FEATURES;
         let e = g.senders.len();
         debug_assert_eq!(g.edges.len(), e * EDGE_FEATURES);

@@ -365,6 +365,19 @@ impl Corrector {
         state: &mut SimState,
         sim: &Simulation,
     ) -> Result<()> {
+        // On one of rayon's threads, so that the proximity search's and the network's parallel
+        // steps do not each hand their work over from the caller's thread and wait to be woken
+        // (0.5–1 ms a call on two cores).
+        rayon::scope(|_| self.correct_in_pool(start_v, state, sim))
+    }
+
+    /// [`Self::correct`] on the calling thread.
+    fn correct_in_pool(
+        &self,
+        start_v: &[Vector3<f64>],
+        state: &mut SimState,
+        sim: &Simulation,
+    ) -> Result<()> {
         let t = Instant::now();
         self.times.calls.fetch_add(1, Ordering::Relaxed);
         let body = self

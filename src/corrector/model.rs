@@ -37,7 +37,8 @@
 //!
 //! Every MLP is ReLU with `hidden_layers` hidden layers of `latent` units; all but the decoder
 //! end in a LayerNorm. Inputs and outputs are normalised outside the network
-//! ([`super::normalise`]).
+//! ([`super::normalise`]). Training runs this burn network; inference on the CPU runs its
+//! weights through [`super::fused`].
 
 use burn::config::Config;
 use burn::module::Module;
@@ -511,7 +512,9 @@ impl CorrectorNet {
     /// function, up to the order of the floating-point sums at each receiver. At inference
     /// the edge MLPs are most of the work, and their matrix products are too small for the
     /// matrix kernels to use more than one core (`clothsr rollout` on the three balls,
-    /// latent 32: see the corrector's README). Training keeps one part.
+    /// latent 32: see the corrector's README). Training keeps one part. On burn's CPU device
+    /// inference runs [`super::fused::FusedNet`] instead, the same function evaluated tile by
+    /// tile outside burn; this runs it on other devices.
     pub fn forward_in_parts(&self, g: &GraphTensors, parts: usize) -> Tensor<2> {
         let [e] = g.senders.dims();
         let pairs = e / 2;
