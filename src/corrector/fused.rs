@@ -8,9 +8,13 @@
 //! those passes, and the products themselves ran below the vector units' speed. Here each
 //! tile of [`TILE`] edges goes through its whole MLP, residual and scatter while it is in
 //! the core's cache; the products are `gemm`'s kernels (the crate burn's CPU backend uses,
-//! picking AVX2 or AVX-512 at run time) on the tile. Each rayon thread takes one contiguous
-//! range of whole edge pairs and sums its messages into its own `[N, L]` buffer, added in
-//! range order afterwards.
+//! picking AVX2 or AVX-512 at run time) on the tile, and the element-wise loops around them
+//! are compiled for the same vector width through `pulp`. Each rayon thread takes one
+//! contiguous range of whole edge pairs and sums its messages into its own `[N, L]` buffer,
+//! added in range order afterwards; the whole pass runs on rayon's threads.
+//!
+//! Measured (`clothsr bench pipeline`, release build, two cores, the shipped three-balls
+//! network, latent 64, 745 nodes): 2.5 ms a call against burn's 3.9 ms.
 //!
 //! Shapes: node rows `[N, ·]`, edge rows `[E, ·]`, all row-major `f32`.
 
