@@ -305,7 +305,8 @@ impl Corrector {
                 },
                 parts,
             ),
-            None => {
+            // On rayon's threads too, as the fused pass runs.
+            None => rayon::scope(|_| {
                 let g = GraphTensors::with_indices(
                     nodes,
                     edges,
@@ -319,8 +320,8 @@ impl Corrector {
                     .forward_in_parts(&g, parts)
                     .into_data()
                     .try_to_vec::<f32>()
-                    .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))?
-            }
+                    .map_err(|e| Error::Invalid(format!("corrector output: {e:?}")))
+            })?,
         };
         CorrectorTimes::add(&self.times.network_ns, t);
         if let Some(k) = (0..p.len()).find(|&k| {
