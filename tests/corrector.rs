@@ -1498,6 +1498,42 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
             let fused = FusedNet::of(&net);
             let scale = direct.iter().fold(0.0f32, |m, x| m.max(x.abs()));
             assert!(scale > 0.1, "{decoder:?}: a network that says nothing");
+            // A graph without edges: its nodes get no messages (burn's sums are zero).
+            if !attention && !decoder.has_edge_impulses() {
+                let lone = GraphTensors::new(
+                    nodes.clone(),
+                    Vec::new(),
+                    &[],
+                    &[],
+                    inv_mass.clone(),
+                    step_change.clone(),
+                    &device,
+                )
+                .with_tension(Some(tension.clone()));
+                let expect: Vec<f32> = net
+                    .forward(&lone)
+                    .into_data()
+                    .try_to_vec::<f32>()
+                    .expect("vec");
+                let out = fused.forward(
+                    FusedInputs {
+                        nodes: &nodes,
+                        edges: &[],
+                        senders: &[],
+                        receivers: &[],
+                        inv_mass: &inv_mass,
+                        step_change: &step_change,
+                        tension: Some(&tension),
+                    },
+                    2,
+                );
+                for (i, (a, b)) in expect.iter().zip(&out).enumerate() {
+                    assert!(
+                        (a - b).abs() <= 2e-5 * (1.0 + a.abs()),
+                        "no edges, {i}: {a} vs {b} ({decoder:?}, {layers} hidden layers)"
+                    );
+                }
+            }
             for parts in [1, 2, 3, 7] {
                 let out = fused.forward(
                     FusedInputs {
