@@ -1480,81 +1480,60 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
                 .with_decoder(Some(decoder))
                 .with_share_min(Some(-0.2));
             let net = cfg.init(&device).map(&mut Jiggle);
-            let g = GraphTensors::new(
-                nodes.clone(),
-                edges.clone(),
-                &senders,
-                &receivers,
-                inv_mass.clone(),
-                step_change.clone(),
-                &device,
-            )
-            .with_tension(Some(tension.clone()));
-            let direct: Vec<f32> = net
-                .forward(&g)
-                .into_data()
-                .try_to_vec::<f32>()
-                .expect("vec");
             let fused = FusedNet::of(&net);
-            let scale = direct.iter().fold(0.0f32, |m, x| m.max(x.abs()));
-            assert!(scale > 0.1, "{decoder:?}: a network that says nothing");
-            // A graph without edges: its nodes get no messages (burn's sums are zero).
-            if !attention && !decoder.has_edge_impulses() {
-                let lone = GraphTensors::new(
+            // The burn network's and the fused pass's outputs on the nodes with the given edges.
+            let on_burn = |edges: &[f32], senders: &[u32], receivers: &[u32]| -> Vec<f32> {
+                let g = GraphTensors::new(
                     nodes.clone(),
-                    Vec::new(),
-                    &[],
-                    &[],
+                    edges.to_vec(),
+                    senders,
+                    receivers,
                     inv_mass.clone(),
                     step_change.clone(),
                     &device,
                 )
                 .with_tension(Some(tension.clone()));
-                let expect: Vec<f32> = net
-                    .forward(&lone)
+                net.forward(&g)
                     .into_data()
                     .try_to_vec::<f32>()
-                    .expect("vec");
-                let out = fused.forward(
-                    FusedInputs {
-                        nodes: &nodes,
-                        edges: &[],
-                        senders: &[],
-                        receivers: &[],
-                        inv_mass: &inv_mass,
-                        step_change: &step_change,
-                        tension: Some(&tension),
-                    },
-                    2,
-                );
-                for (i, (a, b)) in expect.iter().zip(&out).enumerate() {
-                    assert!(
-                        (a - b).abs() <= 2e-5 * (1.0 + a.abs()),
-                        "no edges, {i}: {a} vs {b} ({decoder:?}, {layers} hidden layers)"
-                    );
-                }
-            }
-            for parts in [1, 2, 3, 7] {
-                let out = fused.forward(
-                    FusedInputs {
-                        nodes: &nodes,
-                        edges: &edges,
-                        senders: &senders,
-                        receivers: &receivers,
-                        inv_mass: &inv_mass,
-                        step_change: &step_change,
-                        tension: Some(&tension),
-                    },
-                    parts,
-                );
+                    .expect("vec")
+            };
+            let on_fused = |edges: &[f32], senders: &[u32], receivers: &[u32], parts| {
+                let inputs = FusedInputs {
+                    nodes: &nodes,
+                    edges,
+                    senders,
+                    receivers,
+                    inv_mass: &inv_mass,
+                    step_change: &step_change,
+                    tension: Some(&tension),
+                };
+                fused.forward(inputs, parts)
+            };
+            let same = |expect: &[f32], out: &[f32], what: &str| {
                 assert_eq!(out.len(), 3 * n);
-                for (i, (a, b)) in direct.iter().zip(&out).enumerate() {
+                for (i, (a, b)) in expect.iter().zip(out).enumerate() {
                     assert!(
                         (a - b).abs() <= 2e-5 * (1.0 + a.abs()),
-                        "{parts} parts, {i}: {a} vs {b} (attention {attention}, {decoder:?}, \
+                        "{what}, {i}: {a} vs {b} (attention {attention}, {decoder:?}, \
                          {layers} hidden layers)"
                     );
                 }
+            };
+            let direct = on_burn(&edges, &senders, &receivers);
+            let scale = direct.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+            assert!(scale > 0.1, "{decoder:?}: a network that says nothing");
+            for parts in [1, 2, 3, 7] {
+                let out = on_fused(&edges, &senders, &receivers, parts);
+                same(&direct, &out, &format!("{parts} parts"));
+            }
+            // A graph without edges: its nodes get no messages (burn's sums are zero).
+            if !attention && !decoder.has_edge_impulses() {
+                same(
+                    &on_burn(&[], &[], &[]),
+                    &on_fused(&[], &[], &[], 2),
+                    "no edges",
+                );
             }
         }
     }
