@@ -165,6 +165,19 @@ fn dist(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum()
 }
 
+/// Every decoder, each without and with attention.
+fn every_network_kind() -> impl Iterator<Item = (bool, Decoder)> {
+    let kinds = [
+        Decoder::Node,
+        Decoder::Momentum,
+        Decoder::Gated,
+        Decoder::GatedEdges,
+    ];
+    [false, true]
+        .into_iter()
+        .flat_map(move |a| kinds.map(|d| (a, d)))
+}
+
 #[test]
 fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
     let seq = load(Some(1..=1));
@@ -173,16 +186,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
         sim: None,
     }];
     let norm = fit_normalisation(&sets);
-    let kinds = [
-        Decoder::Node,
-        Decoder::Momentum,
-        Decoder::Gated,
-        Decoder::GatedEdges,
-    ];
-    for (attention, decoder) in [false, true]
-        .into_iter()
-        .flat_map(|a| kinds.map(|d| (a, d)))
-    {
+    for (attention, decoder) in every_network_kind() {
         let cfg = TrainingConfig::new(
             CorrectorConfig::new()
                 .with_latent(16)
@@ -1461,16 +1465,7 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
     let inv_mass: Vec<f32> = (0..n).map(|i| 0.5 + (i % 5) as f32 * 0.3).collect();
     let tension: Vec<f32> = (0..n).map(|i| (i % 4) as f32 / 3.0).collect();
     let device = default_device().expect("device");
-    let kinds = [
-        Decoder::Node,
-        Decoder::Momentum,
-        Decoder::Gated,
-        Decoder::GatedEdges,
-    ];
-    for (attention, decoder) in [false, true]
-        .into_iter()
-        .flat_map(|a| kinds.map(|d| (a, d)))
-    {
+    for (attention, decoder) in every_network_kind() {
         for layers in [1, 2] {
             let cfg = CorrectorConfig::new()
                 .with_latent(24)

@@ -250,6 +250,28 @@ struct RangeSums {
     total: Vec<f32>,
 }
 
+impl RangeSums {
+    /// No messages yet for `n` nodes of width `l` (totals only with `attention`).
+    fn zeros(n: usize, l: usize, attention: bool) -> RangeSums {
+        RangeSums {
+            sum: vec![0.0; n * l],
+            total: vec![0.0; if attention { n } else { 0 }],
+        }
+    }
+
+    /// Adds another range's sums.
+    fn add(&mut self, other: &RangeSums) {
+        self.sum
+            .iter_mut()
+            .zip(&other.sum)
+            .for_each(|(a, b)| *a += b);
+        self.total
+            .iter_mut()
+            .zip(&other.total)
+            .for_each(|(a, b)| *a += b);
+    }
+}
+
 /// One thread's range of whole edge pairs for [`FusedBlock::edge_range`]: latents `[E_k, L]`
 /// updated in place, end nodes from the range's first edge on, the block's sender and receiver
 /// terms `[N, L]`.
@@ -399,14 +421,12 @@ impl FusedBlock {
         let per = range_len(senders.len(), parts);
         // Each range's messages summed at its receivers, and with attention each receiver's
         // total weight.
-        let partial: Vec<(Vec<f32>, Vec<f32>)> = edges
+        let empty = || RangeSums::zeros(n, l, self.score.is_some());
+        let partial: Vec<RangeSums> = edges
             .par_chunks_mut(per * l)
             .enumerate()
             .map(|(k, range)| {
-                let mut sums = RangeSums {
-                    sum: vec![0.0f32; n * l],
-                    total: vec![0.0f32; if self.score.is_some() { n } else { 0 }],
-                };
+                let mut sums = empty();
                 simd(EdgeRange {
                     block: self,
                     range,
@@ -416,22 +436,16 @@ impl FusedBlock {
                     received: &received,
                     sums: &mut sums,
                 });
-                (sums.sum, sums.total)
+                sums
             })
             .collect();
         // A graph without edges has no range: its nodes get no messages, as in burn.
         let mut ranges = partial.into_iter();
-        let (mut sum, mut total) = ranges.next().unwrap_or_else(|| {
-            let attention = if self.score.is_some() { n } else { 0 };
-            (vec![0.0; n * l], vec![0.0; attention])
-        });
-        for (range_sum, range_total) in ranges {
-            sum.iter_mut().zip(&range_sum).for_each(|(a, b)| *a += b);
-            total
-                .iter_mut()
-                .zip(&range_total)
-                .for_each(|(a, b)| *a += b);
+        let mut sums = ranges.next().unwrap_or_else(empty);
+        for range in ranges {
+            sums.add(&range);
         }
+        let RangeSums { mut sum, total } = sums;
         if self.score.is_some() {
             for (s, t) in sum.chunks_exact_mut(l).zip(&total) {
                 // A node no edge reaches has no message (the burn network's sum is 0 there).
