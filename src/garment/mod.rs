@@ -73,6 +73,30 @@ pub struct Panel {
 }
 
 impl Panel {
+    /// A `w` × `h` rectangle, counter-clockwise from its lower-left corner at the origin of its
+    /// plane, with straight edges, placed by `placement`.
+    pub fn rectangle(name: &str, w: f64, h: f64, placement: Placement) -> Panel {
+        let vertices = vec![
+            Vector2::new(0.0, 0.0),
+            Vector2::new(w, 0.0),
+            Vector2::new(w, h),
+            Vector2::new(0.0, h),
+        ];
+        let edges = (0..4)
+            .map(|i| PanelEdge {
+                start: i,
+                end: (i + 1) % 4,
+                curve: Curve::Straight,
+            })
+            .collect();
+        Panel {
+            name: name.into(),
+            vertices,
+            edges,
+            placement,
+        }
+    }
+
     /// Length of edge `e`, metres.
     pub fn edge_length(&self, e: usize) -> f64 {
         let edge = &self.edges[e];
@@ -364,25 +388,7 @@ pub(crate) mod tests {
 
     /// A `w` × `h` rectangle panel, counter-clockwise from its lower-left corner.
     pub fn rectangle(name: &str, w: f64, h: f64) -> Panel {
-        let vertices = vec![
-            Vector2::new(0.0, 0.0),
-            Vector2::new(w, 0.0),
-            Vector2::new(w, h),
-            Vector2::new(0.0, h),
-        ];
-        let edges = (0..4)
-            .map(|i| PanelEdge {
-                start: i,
-                end: (i + 1) % 4,
-                curve: Curve::Straight,
-            })
-            .collect();
-        Panel {
-            name: name.into(),
-            vertices,
-            edges,
-            placement: Placement::default(),
-        }
+        Panel::rectangle(name, w, h, Placement::default())
     }
 
     #[test]

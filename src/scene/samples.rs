@@ -10,19 +10,6 @@ pub const SAMPLE_NAMES: [&str; 4] = ["sheet_three_balls", "sheet_table", "sheet_
 
 /// A `w` × `h` rectangular panel lying flat (facing +y) with its centre at `centre`.
 pub fn flat_sheet(name: &str, w: f64, h: f64, centre: Vector3<f64>, fabric: Fabric) -> Garment {
-    let vertices = vec![
-        Vector2::new(0.0, 0.0),
-        Vector2::new(w, 0.0),
-        Vector2::new(w, h),
-        Vector2::new(0.0, h),
-    ];
-    let edges = (0..4)
-        .map(|i| PanelEdge {
-            start: i,
-            end: (i + 1) % 4,
-            curve: Curve::Straight,
-        })
-        .collect();
     // Rx(-90°) maps the panel's (u, v, 0) to (u, 0, -v): the sheet faces +y.
     let placement = Placement {
         translation_m: centre + Vector3::new(-0.5 * w, 0.0, 0.5 * h),
@@ -30,12 +17,7 @@ pub fn flat_sheet(name: &str, w: f64, h: f64, centre: Vector3<f64>, fabric: Fabr
     };
     Garment {
         name: name.into(),
-        panels: vec![Panel {
-            name: "sheet".into(),
-            vertices,
-            edges,
-            placement,
-        }],
+        panels: vec![Panel::rectangle("sheet", w, h, placement)],
         seams: Vec::new(),
         fabric,
     }
