@@ -875,16 +875,7 @@ pub fn train(
         );
     }
     let log_path = out.join("log.csv");
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(resuming)
-        .write(true)
-        .truncate(!resuming)
-        .open(&log_path)
-        .map_err(|e| Error::io(&log_path, e))?;
-    if !resuming {
-        writeln!(log, "phase,step,lr,loss,seconds").map_err(|e| Error::io(&log_path, e))?;
-    }
+    let log = crate::io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
     let best = match position.best {
         Some(_) if resuming => Some(crate::corrector::inference::load_weights(
             cfg.model.init(&device),

@@ -30,3 +30,19 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())
 }
+
+/// A training run's CSV log at `path`: a resumed run (`resuming`) appends to the log it left,
+/// a new one starts it afresh with the `header` line.
+pub fn open_log(path: &Path, resuming: bool, header: &str) -> Result<std::fs::File> {
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(resuming)
+        .write(true)
+        .truncate(!resuming)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    if !resuming {
+        writeln!(log, "{header}").map_err(|e| Error::io(path, e))?;
+    }
+    Ok(log)
+}

@@ -309,20 +309,11 @@ pub fn train(
         tracing::info!("resuming at step {}", position.done);
     }
     let log_path = out.join("log.csv");
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(resuming)
-        .write(true)
-        .truncate(!resuming)
-        .open(&log_path)
-        .map_err(|e| Error::io(&log_path, e))?;
-    if !resuming {
-        writeln!(
-            log,
-            "step,lr,loss,position,gradient,coarse_loss,init_loss,seconds"
-        )
-        .map_err(|e| Error::io(&log_path, e))?;
-    }
+    let mut log = crate::io::open_log(
+        &log_path,
+        resuming,
+        "step,lr,loss,position,gradient,coarse_loss,init_loss,seconds",
+    )?;
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ (position.done as u64) << 20);
     let t0 = Instant::now();
     let mut losses = Vec::new();
