@@ -25,15 +25,8 @@ pub struct Args {
     /// Output frames (each `1/(fps·dt)` steps).
     #[arg(long)]
     frames: usize,
-    /// Extra colliders (OBJ, OBJ sequence, USD).
-    #[arg(long)]
-    collider: Vec<PathBuf>,
-    /// Avatar (USD, UsdSkel or point cache).
-    #[arg(long)]
-    avatar: Option<PathBuf>,
-    /// Fabric preset for patterns and meshes without one.
-    #[arg(long, default_value = "cotton")]
-    fabric: String,
+    #[command(flatten)]
+    inputs: super::SceneInputs,
     #[command(flatten)]
     variation: super::VariationArgs,
     /// Disable cloth self-collision.
@@ -66,13 +59,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
     let variation = args.variation.variation()?;
-    let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
-    for c in &args.collider {
-        scene.add_collider_file(c)?;
-    }
-    if let Some(a) = &args.avatar {
-        scene.add_collider_file(a)?;
-    }
+    let scene = args.inputs.load(&args.scene)?;
     let opts = Options {
         coarse_edge_m: args.coarse_mm * 1e-3,
         fine_edge_m: args.fine_mm * 1e-3,
@@ -85,12 +72,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         source: Some(SceneSource {
             scene: super::absolute(&args.scene)?,
             colliders: args
+                .inputs
                 .collider
                 .iter()
                 .map(|c| super::absolute(c))
                 .collect::<anyhow::Result<_>>()?,
-            avatar: args.avatar.as_deref().map(super::absolute).transpose()?,
-            fabric: args.fabric.clone(),
+            avatar: args
+                .inputs
+                .avatar
+                .as_deref()
+                .map(super::absolute)
+                .transpose()?,
+            fabric: args.inputs.fabric.clone(),
         }),
     };
     generate_with_progress(

@@ -152,6 +152,32 @@ fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
     }
 }
 
+/// A scene's extra inputs, as `clothsr dataset` records them and `clothsr run` replays them.
+#[derive(Debug, clap::Args)]
+pub(crate) struct SceneInputs {
+    /// Extra colliders (OBJ, OBJ sequence, USD).
+    #[arg(long)]
+    pub(crate) collider: Vec<PathBuf>,
+    /// Avatar (USD, UsdSkel or point cache).
+    #[arg(long)]
+    pub(crate) avatar: Option<PathBuf>,
+    /// Fabric preset for patterns and meshes without one.
+    #[arg(long, default_value = "cotton")]
+    pub(crate) fabric: String,
+}
+
+impl SceneInputs {
+    /// The scene file `path` with this fabric for what has none, these colliders and this
+    /// avatar.
+    pub(crate) fn load(&self, path: &Path) -> anyhow::Result<clothsr::scene::Scene> {
+        let mut scene = clothsr::scene::Scene::load(path, &fabric(&self.fabric)?)?;
+        for c in self.collider.iter().chain(&self.avatar) {
+            scene.add_collider_file(c)?;
+        }
+        Ok(scene)
+    }
+}
+
 /// A variation of a scene, as `clothsr dataset` makes training sequences and `clothsr run`
 /// replays them.
 #[derive(Debug, clap::Args)]

@@ -13,7 +13,6 @@ use clothsr::msr::Isr;
 use clothsr::pipeline::{
     run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Progress,
 };
-use clothsr::scene::Scene;
 use clothsr::viz::Recorder;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
@@ -71,15 +70,8 @@ pub struct Args {
     /// Coarse edge length, millimetres.
     #[arg(long, default_value_t = 20.0)]
     coarse_mm: f64,
-    /// Extra colliders (OBJ, OBJ sequence, USD).
-    #[arg(long)]
-    collider: Vec<PathBuf>,
-    /// Avatar (USD, UsdSkel or point cache).
-    #[arg(long)]
-    avatar: Option<PathBuf>,
-    /// Fabric preset for patterns and meshes without one.
-    #[arg(long, default_value = "cotton")]
-    fabric: String,
+    #[command(flatten)]
+    inputs: super::SceneInputs,
     #[command(flatten)]
     variation: super::VariationArgs,
     /// Skip sewing and settling garments with seams before the first frame.
@@ -311,13 +303,7 @@ fn run_one(
     opts: Options,
     multi: &MultiProgress,
 ) -> anyhow::Result<()> {
-    let mut scene = Scene::load(&job.scene, &super::fabric(&args.fabric)?)?;
-    for c in &args.collider {
-        scene.add_collider_file(c)?;
-    }
-    if let Some(a) = &args.avatar {
-        scene.add_collider_file(a)?;
-    }
+    let mut scene = args.inputs.load(&job.scene)?;
     variation.apply(&mut scene);
     let frames = args
         .frames
@@ -370,9 +356,9 @@ fn run_one(
         super::absolute(&job.scene)?.display(),
         super::absolute(&args.models)?.display(),
         p.has_corrector(),
-        args.collider,
-        args.avatar,
-        args.fabric
+        args.inputs.collider,
+        args.inputs.avatar,
+        args.inputs.fabric
     );
     let outputs = Outputs {
         fine: job.output.clone(),
