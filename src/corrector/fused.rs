@@ -25,7 +25,7 @@ use gemm::{gemm, Parallelism};
 use rayon::prelude::*;
 
 use super::graph::{BODY_COLUMN, BODY_RADIUS_M, EDGE_FEATURES, NODE_FEATURES};
-use super::model::{Block, CorrectorNet, Mlp, CONTACT_RADIUS_M};
+use super::model::{Block, CorrectorNet, Mlp, ATTENTION_SLOPE, CONTACT_RADIUS_M, SCORE_LIMIT};
 
 /// Rows (edges or nodes) that go through an MLP together: at L = 64 a tile's activations are
 /// 32 KB, beside the layer's 16 KB of weights.
@@ -361,16 +361,16 @@ impl FusedBlock {
             }); // [rows, L]
             match &self.score {
                 Some(score) => {
-                    // exp(clamp(a·LeakyReLU(e′) + c, ±30)), as the burn network.
+                    // exp(clamp(a·LeakyReLU(e′) + c, ±SCORE_LIMIT)), as the burn network.
+                    let c = score.b.as_ref().map_or(0.0, |b| b[0]);
                     w.clear();
                     w.extend(e_new.chunks_exact(l).map(|e| {
                         let z: f32 = e
                             .iter()
                             .zip(&score.w)
-                            .map(|(&x, a)| (if x >= 0.0 { x } else { 0.2 * x }) * a)
+                            .map(|(&x, a)| (if x >= 0.0 { x } else { ATTENTION_SLOPE * x }) * a)
                             .sum();
-                        let c = score.b.as_ref().map_or(0.0, |b| b[0]);
-                        (z + c).clamp(-30.0, 30.0).exp()
+                        (z + c).clamp(-SCORE_LIMIT, SCORE_LIMIT).exp()
                     }));
                     for ((e, &j), &w) in e_new.chunks_exact(l).zip(rcv).zip(&w) {
                         total[j as usize] += w;

@@ -276,6 +276,13 @@ pub struct GraphTensors {
 /// of the step's velocity change to a free one, m (a few contact thicknesses).
 pub const CONTACT_RADIUS_M: f64 = 0.005;
 
+/// The attention's score LeakyReLU slope for negative inputs (GATv2's 0.2).
+pub const ATTENTION_SLOPE: f32 = 0.2;
+
+/// Attention scores are clamped to ±this before the exponential, rather than shifted by a
+/// per-receiver maximum, which keeps every weight representable.
+pub const SCORE_LIMIT: f32 = 30.0;
+
 /// Smallest relative mass used (a vertex of no triangle would otherwise divide by zero).
 const MIN_MASS: f32 = 0.05;
 
@@ -407,12 +414,11 @@ impl Block {
                 + received.clone().select(0, p.receivers.clone()); // [E_k, L]
             let e_new = self.edge.after_first(first); // [E_k, L]
 
-            // Softmax over each receiver's incoming edges; scores are clamped rather than
-            // shifted by a per-receiver maximum, which keeps every weight representable.
+            // Softmax over each receiver's incoming edges, of scores clamped to ±SCORE_LIMIT.
             let w = self.score.as_ref().map(|score| {
                 score
-                    .forward(leaky_relu(e_new.clone(), 0.2))
-                    .clamp(-30.0, 30.0)
+                    .forward(leaky_relu(e_new.clone(), f64::from(ATTENTION_SLOPE)))
+                    .clamp(-SCORE_LIMIT, SCORE_LIMIT)
                     .exp() // [E_k, 1]
             });
             (e_new, w)
