@@ -26,16 +26,24 @@ pub fn flat_sheet(name: &str, w: f64, h: f64, centre: Vector3<f64>, fabric: Fabr
 /// Two `w` × `h` panels standing upright (facing ±z) `2d` apart across the y axis, their
 /// bottom edge at y = 0, sewn along both vertical sides: the smallest garment, a tube.
 pub fn two_panel_tube(w: f64, h: f64, d: f64, fabric: Fabric) -> Garment {
-    let mut front = flat_sheet("f", w, h, Vector3::zeros(), fabric.clone())
-        .panels
-        .remove(0);
-    front.name = "front".into();
-    front.placement.rotation_xyz_deg = Vector3::zeros();
-    front.placement.translation_m = Vector3::new(-0.5 * w, 0.0, d);
-    let mut back = front.clone();
-    back.name = "back".into();
-    back.placement.rotation_xyz_deg = Vector3::new(0.0, 180.0, 0.0);
-    back.placement.translation_m = Vector3::new(0.5 * w, 0.0, -d);
+    let front = Panel::rectangle(
+        "front",
+        w,
+        h,
+        Placement {
+            translation_m: Vector3::new(-0.5 * w, 0.0, d),
+            rotation_xyz_deg: Vector3::zeros(),
+        },
+    );
+    let back = Panel::rectangle(
+        "back",
+        w,
+        h,
+        Placement {
+            translation_m: Vector3::new(0.5 * w, 0.0, -d),
+            rotation_xyz_deg: Vector3::new(0.0, 180.0, 0.0),
+        },
+    );
     let seam = |a: usize, b: usize| Seam {
         a: EdgeRef { panel: 0, edge: a },
         b: EdgeRef { panel: 1, edge: b },
