@@ -289,7 +289,7 @@ fn a_missing_file_is_named_once_with_its_reason() {
     let dir = tempfile::tempdir().expect("tempdir");
     let missing = dir.path().join("no_such_drop");
     let res = Command::new(env!("CARGO_BIN_EXE_clothsr"))
-        .args(["rollout", "--model"])
+        .args(["lab", "rollout", "--model"])
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/models/three_balls/corrector"))
         .arg("--data")
         .arg(&missing)

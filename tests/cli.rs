@@ -1,4 +1,4 @@
-//! The command line on real files: `inspect` and `mesh` on every shared pattern, the samples.
+//! The command line on real files: `inspect` and `mesh` on every fixture pattern, the samples.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -9,7 +9,7 @@ fn clothsr() -> Command {
 }
 
 fn patterns() -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/patterns");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/patterns");
     let mut out = Vec::new();
     for dir in [
         "garmentcode_examples",
@@ -30,7 +30,7 @@ fn patterns() -> Vec<PathBuf> {
 }
 
 #[test]
-fn inspect_and_mesh_work_on_every_shared_pattern() {
+fn inspect_and_mesh_work_on_every_fixture_pattern() {
     let dir = tempfile::tempdir().expect("tempdir");
     let all = patterns();
     assert!(all.len() >= 29);
@@ -83,7 +83,7 @@ fn inspect_reports_vertex_counts_and_avatar_frames() {
     );
     let out = clothsr()
         .arg("inspect")
-        .arg(root.join("../shared/data/avatars/mh_walk_train.usda"))
+        .arg(root.join("tests/data/avatars/mh_walk_train.usda"))
         .output()
         .expect("run");
     let text = String::from_utf8_lossy(&out.stdout);
@@ -97,7 +97,7 @@ fn inspect_reports_vertex_counts_and_avatar_frames() {
 fn committed_samples_are_what_the_generator_writes() {
     let dir = tempfile::tempdir().expect("tempdir");
     let status = clothsr()
-        .args(["samples", "-o"])
+        .args(["lab", "samples", "-o"])
         .arg(dir.path())
         .status()
         .expect("run");
@@ -154,6 +154,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         String::from_utf8_lossy(&out.stdout).to_string()
     };
     run(vec![
+        "lab".into(),
         "dataset".into(),
         sample.clone().into(),
         "--coarse-mm".into(),
@@ -180,6 +181,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     );
     let calibrate = |extra: &[&str]| {
         let mut args: Vec<OsString> = vec![
+            "lab".into(),
             "calibrate".into(),
             "--data".into(),
             data.clone().into(),
@@ -212,6 +214,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // A CSV that could not be written is refused before any run.
     let under_a_file = data.join("manifest.json").join("cal.csv");
     let bad = clothsr()
+        .arg("lab")
         .arg("calibrate")
         .arg("--data")
         .arg(&data)
@@ -276,6 +279,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert_eq!(chosen.friction.unwrap_or(-1.0), rows[0][2]);
     assert!(stdout.contains("chosen:"), "{stdout}");
     run(vec![
+        "lab".into(),
         "train".into(),
         "corrector".into(),
         "--data".into(),
@@ -301,6 +305,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let tuned = dir.path().join("tuned");
     let tune = |extra: &[&str]| {
         let mut args: Vec<OsString> = vec![
+            "lab".into(),
             "train".into(),
             "corrector".into(),
             "--data".into(),
@@ -387,6 +392,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // `clothsr rollout` of the model on the data set, with these arguments after.
     let rollout = |args: Vec<OsString>| {
         let mut all: Vec<OsString> = vec![
+            "lab".into(),
             "rollout".into(),
             "--model".into(),
             model.clone().into(),
@@ -453,6 +459,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // `clothsr rollout` with these arguments refused: its error output.
     let rollout_refused = |args: &[&str]| -> String {
         let out = clothsr()
+            .arg("lab")
             .arg("rollout")
             .args(args)
             .arg("--model")
@@ -580,6 +587,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // two ground truths reported beside the rollout as its predictability floor.
     let forked = dir.path().join("forked");
     run(vec![
+        "lab".into(),
         "fork".into(),
         data.clone().into(),
         "--frame".into(),
@@ -612,6 +620,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     // The ISR network on the same data, evaluated by `sr`.
     let isr = dir.path().join("models").join("isr");
     run(vec![
+        "lab".into(),
         "train".into(),
         "isr".into(),
         "--data".into(),
@@ -637,6 +646,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let config = std::fs::read_to_string(isr.join("config.json")).expect("config");
     assert!(config.contains("\"geometry_input\": true"), "{config}");
     let report = run(vec![
+        "lab".into(),
         "sr".into(),
         "--model".into(),
         isr.clone().into(),
@@ -656,6 +666,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     copy_dir(&model, &dir.path().join("models").join("corrector"));
     let usd = dir.path().join("fine.usdc");
     run(vec![
+        "lab".into(),
         "run".into(),
         sample.clone().into(),
         "--models".into(),
@@ -703,6 +714,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         gt.clone().into(),
     ]);
     run(vec![
+        "lab".into(),
         "run".into(),
         sample.clone().into(),
         "--models".into(),
@@ -833,6 +845,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let refused = dir.path().join("refused.usdc");
     let run_refused = |args: &[&str]| -> (Option<i32>, String) {
         let out = clothsr()
+            .arg("lab")
             .arg("run")
             .arg(&sample)
             .arg("--models")
@@ -847,7 +860,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         assert!(!refused.exists());
         (out.status.code(), err)
     };
-    let (code, err) = run_refused(&["--coarse-mm", "80", "--frames", "1", "--no-corrector"]);
+    let (code, err) = run_refused(&["--coarse-mm", "80", "--frames", "1", "--corrector", "off"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("coarse.json") && err.contains("compression must be in (0, 1], got 2"),
@@ -870,7 +883,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
 
     // A directory that is not a model: exit code 2 and the directory named.
     let out = clothsr()
-        .args(["rollout", "--model"])
+        .args(["lab", "rollout", "--model"])
         .arg(&data)
         .arg("--data")
         .arg(&data)
@@ -889,4 +902,58 @@ fn copy_dir(from: &Path, to: &Path) {
             std::fs::copy(e.path(), to.join(e.file_name())).expect("copy");
         }
     }
+}
+
+/// Issue 48: `clothsr --help` lists the user's commands and `lab`, the research tools answer
+/// under `clothsr lab`, and `run --help` shows a short, grouped set of flags.
+#[test]
+fn help_lists_the_users_commands_and_the_lab_holds_the_research_tools() {
+    let help = |args: &[&str]| {
+        let out = clothsr().args(args).arg("--help").output().expect("run");
+        assert!(out.status.success(), "{args:?}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let commands = |text: &str| -> Vec<String> {
+        text.split("Commands:")
+            .nth(1)
+            .and_then(|t| t.split("Options:").next())
+            .unwrap_or_default()
+            .lines()
+            .filter_map(|l| l.split_whitespace().next().map(String::from))
+            .collect()
+    };
+    let top = help(&[]);
+    assert_eq!(
+        commands(&top),
+        ["run", "eval", "inspect", "convert", "mesh", "simulate", "lab", "help"],
+        "{top}"
+    );
+    let lab = help(&["lab"]);
+    for c in [
+        "dataset",
+        "fork",
+        "train",
+        "rollout",
+        "calibrate",
+        "sr",
+        "run",
+        "bench",
+        "samples",
+    ] {
+        assert!(commands(&lab).iter().any(|x| x == c), "{c}: {lab}");
+    }
+    let run = help(&["run"]);
+    let flags = run
+        .lines()
+        .filter(|l| l.trim_start().starts_with('-'))
+        .count();
+    assert!(flags <= 16, "{flags} flags: {run}");
+    for heading in ["Input:", "Output:", "Models:", "Preview:"] {
+        assert!(run.contains(heading), "{heading} {run}");
+    }
+    assert!(!run.contains("--coarse-compression"), "{run}");
+    assert!(help(&["lab", "run"]).contains("--coarse-compression"));
+    // The research tools are not user commands any more.
+    let out = clothsr().args(["train", "--help"]).output().expect("run");
+    assert!(!out.status.success());
 }

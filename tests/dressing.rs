@@ -1,4 +1,4 @@
-//! Dressing GarmentCode garments on the shared avatar before its animation: flat panels rolled
+//! Dressing GarmentCode garments on the walking avatar fixture (`tests/data/avatars`) before its animation: flat panels rolled
 //! around the body, seams closed without friction and gravity, then settled.
 
 use std::path::PathBuf;
@@ -7,13 +7,13 @@ use clothsr::garment::Fabric;
 use clothsr::scene::Scene;
 use clothsr::sim::driver::Simulation;
 
-fn shared(path: &str) -> PathBuf {
+fn fixture(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
+        .join("tests/data")
         .join(path)
 }
 
-/// A cotton GarmentCode pattern (`pattern`, under the shared data) at 20 mm with the walking
+/// A cotton GarmentCode pattern (`pattern`, under `tests/data`) at 20 mm with the walking
 /// avatar as collider, fast solver.
 fn on_the_walking_avatar(pattern: &str) -> Simulation {
     on_the_walking_avatar_at(pattern, 0.02)
@@ -22,9 +22,9 @@ fn on_the_walking_avatar(pattern: &str) -> Simulation {
 /// [`on_the_walking_avatar`] at `edge_m`.
 fn on_the_walking_avatar_at(pattern: &str, edge_m: f64) -> Simulation {
     let fabric = Fabric::preset("cotton").expect("preset");
-    let mut scene = Scene::load(&shared(pattern), &fabric).expect("pattern");
+    let mut scene = Scene::load(&fixture(pattern), &fabric).expect("pattern");
     scene
-        .add_collider_file(&shared("avatars/mh_walk_train_baked.usdc"))
+        .add_collider_file(&fixture("avatars/mh_walk_train_baked_2s.usdc"))
         .expect("avatar");
     Simulation::new(&scene, edge_m, |p| p.newton_exact = false).expect("set-up")
 }

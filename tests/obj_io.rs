@@ -118,7 +118,7 @@ fn bunny_obj_is_a_static_collider() {
     let mut scene = Scene::default();
     scene
         .add_collider_file(
-            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/colliders/bunny.obj"),
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/colliders/bunny.obj"),
         )
         .expect("bunny");
     let c = &scene.colliders[0];

@@ -1,4 +1,4 @@
-//! Meshing real GarmentCode patterns (`../shared/data/patterns`): quality at 20 mm and 2.5 mm,
+//! Meshing real GarmentCode patterns (`tests/data/patterns`): quality at 20 mm and 2.5 mm,
 //! seam vertex counts, shared material space.
 
 use std::path::{Path, PathBuf};
@@ -7,7 +7,7 @@ use clothsr::garment::{garmentcode, Fabric};
 use clothsr::mesh::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
 
 fn patterns() -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/patterns");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/patterns");
     let mut out = Vec::new();
     let mut stack = vec![root];
     while let Some(dir) = stack.pop() {
@@ -23,7 +23,7 @@ fn patterns() -> Vec<PathBuf> {
     out.sort();
     assert!(
         out.len() >= 20,
-        "expected the shared patterns, found {}",
+        "expected the fixture patterns, found {}",
         out.len()
     );
     out
@@ -74,7 +74,7 @@ fn check_quality(path: &Path, edge_m: f64) {
 }
 
 #[test]
-fn every_shared_pattern_meshes_well_at_20mm() {
+fn every_fixture_pattern_meshes_well_at_20mm() {
     for p in patterns() {
         check_quality(&p, COARSE_EDGE_M);
     }
@@ -82,7 +82,7 @@ fn every_shared_pattern_meshes_well_at_20mm() {
 
 #[test]
 fn a_real_pattern_meshes_well_at_2_5mm() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/patterns");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/patterns");
     check_quality(
         &root.join("mh_skirt_circle/mh_skirt_circle_specification.json"),
         FINE_EDGE_M,

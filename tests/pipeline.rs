@@ -519,21 +519,21 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
 }
 
 /// The skirt's shipped models (`samples/models/skirt/`): GarmentCode's pencil skirt dressed on
-/// the walking avatar from the shared data, its corrector interleaved with the coarse
+/// the walking avatar fixture (`tests/data/avatars`), its corrector interleaved with the coarse
 /// simulator and its ISR on the 99,796-vertex fine mesh, for one frame.
 #[test]
 fn shipped_skirt_models_run_a_frame_on_the_walking_avatar() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let shared = root.join("../shared/data");
+    let data = root.join("tests/data");
     let models = root.join("samples/models/skirt");
     let isr = Isr::load(&models.join("isr")).expect("the shipped ISR model loads");
     let mut scene = Scene::load(
-        &shared.join("patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json"),
+        &data.join("patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json"),
         &clothsr::garment::Fabric::preset("cotton").expect("preset"),
     )
     .expect("pattern");
     scene
-        .add_collider_file(&shared.join("avatars/mh_walk_train_baked.usdc"))
+        .add_collider_file(&data.join("avatars/mh_walk_train_baked_2s.usdc"))
         .expect("avatar");
     let corrector = models.join("corrector");
     let mut p = Pipeline::new(&scene, &isr, Some(&corrector), Options::default()).expect("set up");
@@ -629,5 +629,81 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
             err.contains(expected) && err.contains("coarse.json"),
             "{text}: {err}"
         );
+    }
+}
+
+/// Issue 48: a models folder's `models.json` decides whether `run` uses the corrector
+/// (`--corrector auto`); `on` needs a corrector; a bad manifest is refused, naming the file;
+/// every shipped folder has a valid one.
+#[test]
+fn the_run_takes_the_better_validated_path_of_a_models_folder() {
+    use clothsr::pipeline::{choose_path, CorrectorChoice, ModelPath, ModelsManifest};
+    let dir = tempfile::tempdir().expect("tmp");
+    let models = dir.path();
+    let auto = |m: &Path| choose_path(m, CorrectorChoice::Auto).map(|(p, _)| p);
+    // No corrector, no manifest: the coarse model alone; `on` is refused.
+    assert_eq!(auto(models).expect("auto"), ModelPath::CoarseAlone);
+    let err = choose_path(models, CorrectorChoice::On).expect_err("no corrector");
+    assert!(err.to_string().contains("no corrector"), "{err}");
+    // A corrector and no manifest: the corrector.
+    std::fs::create_dir_all(models.join("corrector")).expect("mkdir");
+    std::fs::write(models.join("corrector/config.json"), "{}").expect("write");
+    assert_eq!(auto(models).expect("auto"), ModelPath::Corrector);
+    // A manifest: its better path, and the reason names both figures.
+    let manifest = |best: &str, corrector_mm: f64| {
+        format!(
+            r#"{{"format_version": 1, "scene": "s.usda", "held_out": "test", "protocol": "p",
+                "paths": {{"corrector": {{"fine_error_mm": {corrector_mm}}},
+                           "coarse_alone": {{"fine_error_mm": 3.85, "baseline_mm": 8.75}}}},
+                "best": "{best}"}}"#
+        )
+    };
+    let file = models.join(ModelsManifest::FILE);
+    std::fs::write(&file, manifest("coarse_alone", 7.39)).expect("write");
+    let (path, why) = choose_path(models, CorrectorChoice::Auto).expect("auto");
+    assert_eq!(path, ModelPath::CoarseAlone);
+    assert!(why.contains("3.85") && why.contains("7.39"), "{why}");
+    assert_eq!(
+        choose_path(models, CorrectorChoice::On).expect("on").0,
+        ModelPath::Corrector
+    );
+    std::fs::write(&file, manifest("corrector", 2.0)).expect("write");
+    assert_eq!(auto(models).expect("auto"), ModelPath::Corrector);
+    assert_eq!(
+        choose_path(models, CorrectorChoice::Off).expect("off").0,
+        ModelPath::CoarseAlone
+    );
+    // Refused, naming the file: a best that is not a path, a negative figure, an unknown
+    // path, another format version, a corrector's figures in a folder without one.
+    for (text, says) in [
+        (manifest("isr", 2.0), "best"),
+        (manifest("corrector", -1.0), "finite"),
+        (
+            manifest("corrector", 2.0).replace("\"coarse_alone\"", "\"coarse\""),
+            "unknown path",
+        ),
+        (
+            manifest("corrector", 2.0).replace("\"format_version\": 1", "\"format_version\": 7"),
+            "format_version 7",
+        ),
+    ] {
+        std::fs::write(&file, text).expect("write");
+        let err = auto(models).expect_err(says);
+        let msg = err.to_string();
+        assert!(msg.contains("models.json") && msg.contains(says), "{msg}");
+    }
+    std::fs::remove_dir_all(models.join("corrector")).expect("rm");
+    std::fs::write(&file, manifest("coarse_alone", 2.0)).expect("write");
+    assert!(auto(models)
+        .expect_err("no corrector")
+        .to_string()
+        .contains("no corrector"));
+    // The shipped folders' manifests are valid and their best path is what `run` takes.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/models");
+    for folder in ["three_balls", "table", "skirt"] {
+        let m = ModelsManifest::load(&root.join(folder))
+            .expect("valid")
+            .expect("every shipped folder has a models.json");
+        assert_eq!(auto(&root.join(folder)).expect("auto"), m.best(), "{folder}");
     }
 }

@@ -234,7 +234,7 @@ fn simulate_command_writes_a_valid_time_sampled_usd() {
 fn sheet_drapes_over_the_bunny_without_penetrating() {
     let mut scene = sheet_scene(0.4, 0.0, Fabric::preset("silk").expect("preset"));
     let bunny =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/colliders/bunny.obj");
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/colliders/bunny.obj");
     // The bunny is ~9.9 units tall: 0.025 makes it a 25 cm rabbit.
     scene
         .add_collider_file_transformed(&bunny, 0.025, Vector3::zeros())

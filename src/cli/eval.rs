@@ -16,21 +16,21 @@ use clothsr::viz::{colours, Recorder};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The ground truth: a fine simulation as USD (`clothsr simulate --edge-mm 2.5`), or a
-    /// `clothsr dataset` directory (its fine frames, matched to the prediction's frames 1..).
+    /// `clothsr lab dataset` directory (its fine frames, matched to the prediction's frames 1..).
     #[arg(long)]
     gt: PathBuf,
     /// The prediction: `clothsr run`'s output.
     #[arg(long)]
     pred: PathBuf,
-    /// Baselines on the same fine mesh (e.g. `clothsr run --upsampled-out`, or a run without
-    /// the corrector); NAME=FILE sets the label, else the file's name. A `clothsr dataset`
-    /// directory is read as its fine frames, like `--gt`: with a `clothsr fork` of the ground
+    /// Baselines on the same fine mesh (e.g. `clothsr lab run --upsampled-out`, or a run without
+    /// the corrector); NAME=FILE sets the label, else the file's name. A `clothsr lab dataset`
+    /// directory is read as its fine frames, like `--gt`: with a `clothsr lab fork` of the ground
     /// truth's data set (its garment moved a fraction of a millimetre), this baseline is the
     /// scene's predictability floor, which no prediction can be expected to beat (its frames
     /// up to the fork count as zero). Every baseline is measured over the prediction's frames.
     #[arg(long)]
     baseline: Vec<String>,
-    /// The ground truth's twin: a `clothsr fork` of its data set (or another fine simulation
+    /// The ground truth's twin: a `clothsr lab fork` of its data set (or another fine simulation
     /// whose start differs by a fraction of a millimetre). Adds the two ground truths' distance
     /// (the scene's predictability floor) as the series `floor`, the prediction's error against
     /// the twin, and the least error any prediction from their shared start can average over

@@ -1,19 +1,12 @@
 //! Command-line interface: one module per command; each turns its arguments into library calls.
 
-mod bench;
-mod calibrate;
 mod convert;
-mod dataset;
 mod eval;
-mod fork;
 mod inspect;
+mod lab;
 mod mesh;
-mod rollout;
 mod run;
-mod samples;
 mod simulate;
-mod sr;
-mod train;
 
 use std::path::{Path, PathBuf};
 
@@ -34,43 +27,23 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// What is in a pattern, mesh, scene or avatar file.
-    Inspect(inspect::Args),
-    /// GarmentCode JSON or OBJ (+ colliders, avatar) to a USD scene using clothsr's schema.
-    Convert(convert::Args),
-    /// Mesh a garment at a target edge length and write it with material coordinates.
-    Mesh(mesh::Args),
-    /// Regenerate the sample scenes shipped in samples/.
-    Samples(samples::Args),
-    /// Simulate a scene's cloth and write the animation to USD.
-    Simulate(simulate::Args),
-    /// Benchmarks (the simulator, side by side with Newton 1.8).
-    Bench(bench::Args),
-    /// Training data: a fine simulation, its coarse downsampling (M_int) and one coarse step
-    /// from each (M_c).
-    Dataset(dataset::Args),
-    /// Continue a data set from one of its frames with the fine garment moved a little: the
-    /// ground truth's predictability floor (`rollout --floor`).
-    Fork(fork::Args),
-    /// Train a network (the corrector or the ISR network) on data sets.
-    Train(train::Args),
-    /// Roll the corrector out against a data set's ground truth, beside the coarse simulation
-    /// alone and the corrector without interleaving.
-    Rollout(rollout::Args),
-    /// Choose the coarse model (membrane compression and its knee, friction, wrinkle bending,
-    /// bending stiffness, crease contacts) that keeps
-    /// the coarse simulation alone closest to a scene's M_int, on its data sets, and write it
-    /// as a models folder's coarse.json.
-    Calibrate(calibrate::Args),
     /// The whole pipeline on a scene: coarse simulation, corrector, mesh super-resolution,
     /// fine garments to time-sampled USD.
     Run(run::Args),
     /// Errors of a run's fine meshes (and baselines) against a fine simulation: table, CSV,
     /// plot over time, Rerun heat map.
     Eval(eval::Args),
-    /// Super-resolve a data set's M_int sequence with an ISR model and measure the fine meshes
-    /// against the fine simulation, beside the upsampled coarse mesh.
-    Sr(sr::Args),
+    /// What is in a pattern, mesh, scene or avatar file.
+    Inspect(inspect::Args),
+    /// GarmentCode JSON or OBJ (+ colliders, avatar) to a USD scene using clothsr's schema.
+    Convert(convert::Args),
+    /// Mesh a garment at a target edge length and write it with material coordinates.
+    Mesh(mesh::Args),
+    /// Simulate a scene's cloth and write the animation to USD.
+    Simulate(simulate::Args),
+    /// Research tools: training data, training, rollouts, calibration, benchmarks.
+    #[command(subcommand)]
+    Lab(lab::Command),
 }
 
 /// Runs the command line and returns the exit code; errors are printed by `main` with their
@@ -90,20 +63,13 @@ pub fn run() -> anyhow::Result<i32> {
         .with_target(false)
         .init();
     match cli.command {
+        Command::Run(a) => run::run(a),
+        Command::Eval(a) => eval::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Mesh(a) => mesh::run(a),
-        Command::Samples(a) => samples::run(a),
         Command::Simulate(a) => simulate::run(a),
-        Command::Bench(a) => bench::run(a),
-        Command::Dataset(a) => dataset::run(a),
-        Command::Fork(a) => fork::run(a),
-        Command::Train(a) => train::run(a),
-        Command::Rollout(a) => rollout::run(a),
-        Command::Sr(a) => sr::run(a),
-        Command::Calibrate(a) => calibrate::run(a),
-        Command::Run(a) => run::run(a),
-        Command::Eval(a) => eval::run(a),
+        Command::Lab(c) => lab::run(c),
     }?;
     Ok(0)
 }
@@ -144,7 +110,7 @@ pub(crate) fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
 }
 
 /// Three numbers x,y,z from a comma-separated option; zero when absent.
-fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
+pub(crate) fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
     match v {
         None => Ok([0.0; 3]),
         Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
@@ -152,7 +118,7 @@ fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
     }
 }
 
-/// A scene's extra inputs, as `clothsr dataset` records them and `clothsr run` replays them.
+/// A scene's extra inputs, as `clothsr lab dataset` records them and `clothsr run` replays them.
 #[derive(Debug, clap::Args)]
 pub(crate) struct SceneInputs {
     /// Extra colliders (OBJ, OBJ sequence, USD).
@@ -178,7 +144,7 @@ impl SceneInputs {
     }
 }
 
-/// A variation of a scene, as `clothsr dataset` makes training sequences and `clothsr run`
+/// A variation of a scene, as `clothsr lab dataset` makes training sequences and `clothsr run`
 /// replays them.
 #[derive(Debug, clap::Args)]
 pub(crate) struct VariationArgs {

@@ -2,6 +2,7 @@
 //! [`clothsr::pipeline`]) — coarse simulation, corrector, mesh super-resolution — writing the
 //! fine garments as time-sampled points frame by frame, with an optional Rerun recording. A
 //! killed run continues from its last published frame when called again with the same settings.
+//! `lab run` adds the pipeline's research settings ([`Knobs`]).
 
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -11,45 +12,74 @@ use clothsr::data::Variation;
 use clothsr::eval::Animation;
 use clothsr::msr::Isr;
 use clothsr::pipeline::{
-    run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Progress,
+    choose_path, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath, Options, Outputs,
+    Pipeline, Preview, Progress,
 };
 use clothsr::viz::Recorder;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
-/// Arguments of `run`.
+/// Arguments of `run`: what a user needs.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Scenes: USD (garments, colliders, solver), GarmentCode JSON or OBJ cloth. Several need
     /// --out-dir.
     #[arg(required = true)]
     scenes: Vec<PathBuf>,
+    #[command(flatten, next_help_heading = "Input")]
+    inputs: super::SceneInputs,
     /// Output USD file of a single scene: the fine garments (and the colliders), one time
     /// sample per frame.
-    #[arg(short, long, conflicts_with = "out_dir")]
+    #[arg(short, long, conflicts_with = "out_dir", help_heading = "Output")]
     output: Option<PathBuf>,
     /// Output folder for several scenes: DIR/<scene name>.usdc (and .rrd with --rrd).
-    #[arg(long)]
+    #[arg(long, help_heading = "Output")]
     out_dir: Option<PathBuf>,
-    /// Model directory: `isr/` (required, `clothsr train isr`), `corrector/` (used when
-    /// present, `clothsr train corrector`) and `coarse.json` (without a corrector: the coarse
-    /// model's defaults, e.g. `{"compression": 0.03}`; the options below override it).
-    #[arg(long)]
+    /// Frames to run (default: the scene's frame range).
+    #[arg(long, help_heading = "Output")]
+    frames: Option<usize>,
+    /// Write text USD even for a .usd file.
+    #[arg(long, help_heading = "Output")]
+    ascii: bool,
+    /// Start over even when an interrupted run with the same settings left a resume point.
+    #[arg(long, help_heading = "Output")]
+    restart: bool,
+    /// Models folder: `isr/` (required), `corrector/` and `coarse.json` (optional), and
+    /// `models.json`, the held-out figures each path through them was validated with.
+    #[arg(long, help_heading = "Models")]
     models: PathBuf,
-    /// Save a Rerun recording (colliders, coarse M_c and M_int, fine meshes, stage timings on
-    /// a frame timeline): to FILE.rrd, or without a value beside each output as <name>.rrd.
-    /// Open it with `rerun FILE.rrd` (pip install rerun-sdk==0.36.3).
-    #[arg(long, num_args = 0..=1, default_missing_value = "")]
+    /// Whether the corrector runs: `auto` takes the path the folder's models.json validated
+    /// as better (the corrector where a folder without one has it), `on` or `off` forces it.
+    #[arg(long, value_name = "auto|on|off", default_value = "auto", help_heading = "Models")]
+    corrector: CorrectorChoice,
+    /// Save a Rerun recording (colliders, coarse and fine meshes, stage timings on a frame
+    /// timeline): to FILE.rrd, or without a value beside each output as <name>.rrd. Open it
+    /// with `rerun FILE.rrd` (pip install rerun-sdk==0.36.3).
+    #[arg(long, num_args = 0..=1, default_missing_value = "", help_heading = "Preview")]
     rrd: Option<PathBuf>,
-    /// A fine simulation of the same scene (USD, or a `clothsr dataset` directory): the Rerun
-    /// preview then colours the fine mesh by its distance to it and plots the mean.
-    #[arg(long)]
+    /// Stream live to a Rerun viewer (started if none runs; needs `rerun` on the PATH).
+    #[arg(long, conflicts_with = "rrd", help_heading = "Preview")]
+    spawn: bool,
+    /// A fine simulation of the same scene (USD, or a `clothsr lab dataset` directory): the
+    /// Rerun preview then colours the fine mesh by its distance to it and plots the mean.
+    #[arg(long, help_heading = "Preview")]
     gt: Option<PathBuf>,
-    /// Distance shown red in that heat map, mm.
+}
+
+/// Arguments of `lab run`: the same, and every research setting of the pipeline.
+#[derive(Debug, clap::Args)]
+pub struct LabArgs {
+    #[command(flatten)]
+    user: Args,
+    #[command(flatten, next_help_heading = "Research")]
+    knobs: Knobs,
+}
+
+/// The pipeline's research settings (`lab run`); a user's `run` takes their defaults.
+#[derive(Debug, clap::Args)]
+pub struct Knobs {
+    /// Distance shown red in the --gt heat map, mm.
     #[arg(long, default_value_t = 5.0)]
     heat_max_mm: f64,
-    /// Stream live to a Rerun viewer (started if none runs; needs `rerun` on the PATH).
-    #[arg(long, conflicts_with = "rrd")]
-    spawn: bool,
     /// Also write the coarse mesh the MSR module saw (M_int, or M_c without corrector).
     #[arg(long)]
     coarse_out: Option<PathBuf>,
@@ -57,21 +87,9 @@ pub struct Args {
     /// detail), for `clothsr eval --baseline`.
     #[arg(long)]
     upsampled_out: Option<PathBuf>,
-    /// Run without the corrector even when the models have one (the simulator alone drives
-    /// the coarse mesh).
-    #[arg(long)]
-    no_corrector: bool,
-    /// Frames to run (default: the scene's frame range).
-    #[arg(long)]
-    frames: Option<usize>,
-    /// Start over even when an interrupted run with the same settings left a resume point.
-    #[arg(long)]
-    restart: bool,
     /// Coarse edge length, millimetres.
     #[arg(long, default_value_t = 20.0)]
     coarse_mm: f64,
-    #[command(flatten)]
-    inputs: super::SceneInputs,
     #[command(flatten)]
     variation: super::VariationArgs,
     /// Skip sewing and settling garments with seams before the first frame.
@@ -95,10 +113,9 @@ pub struct Args {
     /// corrector's, else `coarse.json`'s, else none).
     #[arg(long)]
     coarse_compression_knee: Option<f64>,
-    /// The coarse simulator's Coulomb friction coefficient against bodies (on the three balls
-    /// the coarse sheet comes closest to the fine one at several times the fine cloth's;
-    /// default: the corrector's, else `coarse.json`'s, else the simulator's 0.3; a corrector
-    /// trained with another is an error)
+    /// The coarse simulator's Coulomb friction coefficient against bodies (default: the
+    /// corrector's, else `coarse.json`'s, else the simulator's 0.3; a corrector trained with
+    /// another is an error)
     #[arg(long)]
     coarse_friction: Option<f64>,
     /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
@@ -125,9 +142,29 @@ pub struct Args {
     /// wrinkles cut into a body the cloth wraps)
     #[arg(long)]
     no_push_out: bool,
-    /// Write text USD even for a .usd file.
-    #[arg(long)]
-    ascii: bool,
+}
+
+impl Default for Knobs {
+    /// The settings a user's `run` takes: those `lab run` has when none is given.
+    fn default() -> Self {
+        Knobs {
+            heat_max_mm: 5.0,
+            coarse_out: None,
+            upsampled_out: None,
+            coarse_mm: 20.0,
+            variation: super::VariationArgs::default(),
+            no_dress: false,
+            converged: false,
+            self_collision: false,
+            coarse_compression: None,
+            coarse_compression_knee: None,
+            coarse_friction: None,
+            coarse_wrinkle_bending: None,
+            coarse_bending: None,
+            coarse_crease_contacts: None,
+            no_push_out: false,
+        }
+    }
 }
 
 /// One scene's files.
@@ -137,7 +174,7 @@ struct Job {
     rrd: Option<PathBuf>,
 }
 
-fn jobs(args: &Args) -> anyhow::Result<Vec<Job>> {
+fn jobs(args: &Args, knobs: &Knobs) -> anyhow::Result<Vec<Job>> {
     let rrd_beside = |out: &Path| out.with_extension("rrd");
     match (&args.output, &args.out_dir) {
         (Some(out), None) => {
@@ -171,7 +208,7 @@ fn jobs(args: &Args) -> anyhow::Result<Vec<Job>> {
                 "with --out-dir, give --rrd without a file: each scene's recording goes beside its USD"
             );
             anyhow::ensure!(
-                args.coarse_out.is_none() && args.upsampled_out.is_none(),
+                knobs.coarse_out.is_none() && knobs.upsampled_out.is_none(),
                 "--coarse-out and --upsampled-out name one file: run scenes one at a time for them"
             );
             let mut seen = std::collections::HashSet::new();
@@ -202,21 +239,30 @@ fn jobs(args: &Args) -> anyhow::Result<Vec<Job>> {
 
 /// Runs `run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    run_with(args, Knobs::default())
+}
+
+/// Runs `lab run`.
+pub fn run_lab(args: LabArgs) -> anyhow::Result<()> {
+    run_with(args.user, args.knobs)
+}
+
+fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
     anyhow::ensure!(
-        args.coarse_mm.is_finite() && args.coarse_mm > 0.0,
+        knobs.coarse_mm.is_finite() && knobs.coarse_mm > 0.0,
         "--coarse-mm must be positive"
     );
     anyhow::ensure!(
-        args.heat_max_mm.is_finite() && args.heat_max_mm > 0.0,
+        knobs.heat_max_mm.is_finite() && knobs.heat_max_mm > 0.0,
         "--heat-max-mm must be positive"
     );
-    if let Some(s) = args.coarse_compression_knee {
+    if let Some(s) = knobs.coarse_compression_knee {
         anyhow::ensure!(
             s >= 0.0 && s.is_finite(),
             "--coarse-compression-knee must be a shortening > 0 (0: none), got {s}"
         );
     }
-    if let Some(b) = args.coarse_bending {
+    if let Some(b) = knobs.coarse_bending {
         anyhow::ensure!(
             b > 0.0 && b.is_finite(),
             "--coarse-bending must be a factor > 0, got {b}"
@@ -226,9 +272,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
     );
-    let variation = args.variation.variation()?;
-    let jobs = jobs(&args)?;
-    for extra in [&args.coarse_out, &args.upsampled_out]
+    let variation = knobs.variation.variation()?;
+    let jobs = jobs(&args, &knobs)?;
+    for extra in [&knobs.coarse_out, &knobs.upsampled_out]
         .into_iter()
         .flatten()
     {
@@ -237,27 +283,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let isr_dir = args.models.join("isr");
     anyhow::ensure!(
         isr_dir.join("config.json").exists(),
-        "{}: no ISR model here (expected {}/config.json; train one with 'clothsr train isr')",
+        "{}: no ISR model here (expected {}/config.json; train one with 'clothsr lab train isr')",
         args.models.display(),
         isr_dir.display()
     );
     let isr = Isr::load(&isr_dir)?;
     let corrector_dir = args.models.join("corrector");
-    let corrector = (!args.no_corrector && corrector_dir.join("config.json").exists())
-        .then_some(corrector_dir.as_path());
+    let (path, why) = choose_path(&args.models, args.corrector)?;
+    tracing::info!("path: {path} ({why})");
+    let corrector = (path == ModelPath::Corrector).then_some(corrector_dir.as_path());
     let given = Options {
-        coarse_edge_m: args.coarse_mm * 1e-3,
-        fast: !args.converged,
-        self_collision: args.self_collision,
+        coarse_edge_m: knobs.coarse_mm * 1e-3,
+        fast: !knobs.converged,
+        self_collision: knobs.self_collision,
         match_contact_thickness: true,
-        dress: !args.no_dress,
-        coarse_compression: args.coarse_compression,
-        coarse_compression_knee: args.coarse_compression_knee,
-        coarse_friction: args.coarse_friction,
-        coarse_wrinkle_bending: args.coarse_wrinkle_bending,
-        coarse_bending: args.coarse_bending,
-        coarse_crease_contacts: args.coarse_crease_contacts,
-        push_out: !args.no_push_out,
+        dress: !knobs.no_dress,
+        coarse_compression: knobs.coarse_compression,
+        coarse_compression_knee: knobs.coarse_compression_knee,
+        coarse_friction: knobs.coarse_friction,
+        coarse_wrinkle_bending: knobs.coarse_wrinkle_bending,
+        coarse_bending: knobs.coarse_bending,
+        coarse_crease_contacts: knobs.coarse_crease_contacts,
+        push_out: !knobs.no_push_out,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
     let (opts, cal) = CoarseCalibration::for_run(&args.models, corrector, given)?;
@@ -281,7 +328,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(o) = &overall {
             o.set_message(job.scene.display().to_string());
         }
-        run_one(&args, job, &isr, corrector, variation, opts, &multi)
+        run_one(&args, &knobs, job, &isr, corrector, variation, opts, &multi)
             .with_context(|| format!("{}", job.scene.display()))?;
         if let Some(o) = &overall {
             o.inc(1);
@@ -296,6 +343,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[allow(clippy::too_many_arguments)]
 fn run_one(
     args: &Args,
+    knobs: &Knobs,
     job: &Job,
     isr: &Isr,
     corrector: Option<&Path>,
@@ -348,7 +396,7 @@ fn run_one(
     let preview = rec.as_ref().map(|r| Preview {
         recorder: r,
         ground_truth: gt.as_ref(),
-        heat_max_m: args.heat_max_mm * 1e-3,
+        heat_max_m: knobs.heat_max_mm * 1e-3,
     });
     let fingerprint = format!(
         "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
@@ -362,8 +410,8 @@ fn run_one(
     );
     let outputs = Outputs {
         fine: job.output.clone(),
-        coarse: args.coarse_out.clone(),
-        upsampled: args.upsampled_out.clone(),
+        coarse: knobs.coarse_out.clone(),
+        upsampled: knobs.upsampled_out.clone(),
         ascii: args.ascii,
         doc: format!(
             "clothsr run {} with models {} (corrector {})",

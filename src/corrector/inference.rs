@@ -68,8 +68,8 @@ pub fn load_weights<M: Module>(module: M, path: &Path) -> Result<M> {
 }
 
 /// The device networks run on, chosen at run time by `CLOTHSR_DEVICE`: `flex` (the default:
-/// burn's pure-Rust CPU backend, the fastest CPU backend measured here,
-/// `../shared/RECIPES.md`), or `cuda` / `wgpu` in builds with those cargo features.
+/// burn's pure-Rust CPU backend, the fastest of burn's CPU backends here), or `cuda` / `wgpu`
+/// in builds with those cargo features.
 pub fn default_device() -> Result<Device> {
     let name = std::env::var("CLOTHSR_DEVICE").unwrap_or_else(|_| "flex".into());
     match name.as_str() {
@@ -167,7 +167,7 @@ pub fn load_net(
         return Err(Error::bad_input(
             dir,
             "not a corrector model directory (no config.json); train one with \
-             'clothsr train corrector'",
+             'clothsr lab train corrector'",
         ));
     }
     let config = TrainingConfig::load(&config_path)
@@ -183,7 +183,7 @@ pub fn load_net(
             &norm_path,
             format!(
                 "the model has {} node and {} edge features, this clothsr's corrector {} and {}: \
-                 it was made by an older clothsr; train it again with 'clothsr train corrector'",
+                 it was made by an older clothsr; train it again with 'clothsr lab train corrector'",
                 norm.nodes.mean.len(),
                 norm.edges.mean.len(),
                 NODE_FEATURES,
@@ -260,7 +260,7 @@ impl Corrector {
     }
 
     /// Runs the network on burn from now on (the same function as the fused pass, to the
-    /// rounding of its sums): for comparing the two (`clothsr bench pipeline`, the tests).
+    /// rounding of its sums): for comparing the two (`clothsr lab bench pipeline`, the tests).
     pub fn use_burn(&mut self) {
         self.fused = None;
     }

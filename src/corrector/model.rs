@@ -517,7 +517,7 @@ impl CorrectorNet {
     /// (each of whole edge pairs) whose edge MLPs run as parallel rayon tasks: the same
     /// function, up to the order of the floating-point sums at each receiver. At inference
     /// the edge MLPs are most of the work, and their matrix products are too small for the
-    /// matrix kernels to use more than one core (`clothsr rollout` on the three balls,
+    /// matrix kernels to use more than one core (`clothsr lab rollout` on the three balls,
     /// latent 32: see the corrector's README). Training keeps one part. On burn's CPU device
     /// inference runs [`super::fused::FusedNet`] instead, the same function evaluated tile by
     /// tile outside burn; this runs it on other devices.

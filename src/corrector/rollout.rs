@@ -370,7 +370,7 @@ pub fn jitter_directions(gravity: Vector3<f64>, n: usize) -> Vec<Vector3<f64>> {
 /// [`evaluate_from`] with the start of the simulation alone and of the interleaved run moved
 /// rigidly by `shift`, m, while the ground truth stays: a start a fraction of a millimetre
 /// away, to measure how much of a rollout's error is a draw of a chaotic scene (contact,
-/// folds and friction decide between fold layouts on such differences; `clothsr rollout
+/// folds and friction decide between fold layouts on such differences; `clothsr lab rollout
 /// --jitter`). The one-step check starts from the ground truth as ever.
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate_shifted(

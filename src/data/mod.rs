@@ -571,7 +571,7 @@ pub fn generate(
 /// from) moved by `offset_m`, and a manifest that records the fork. [`generate`] with
 /// [`Manifest::options`] then continues it from that moved state: the distance between the
 /// two data sets' later frames is how far a change of `offset_m` carries, the ground truth's
-/// own predictability floor (`clothsr rollout --floor`).
+/// own predictability floor (`clothsr lab rollout --floor`).
 ///
 /// The copy is made beside `dst` and renamed into place, so a killed or failed fork leaves no
 /// data set. Forking again into a `dst` that already holds the same fork returns its manifest

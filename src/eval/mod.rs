@@ -80,7 +80,7 @@ impl Animation {
         Ok(anim)
     }
 
-    /// The fine simulation of a `clothsr dataset` directory: frame k (k = 1..) at time code
+    /// The fine simulation of a `clothsr lab dataset` directory: frame k (k = 1..) at time code
     /// `start + k` (a run's frame k starts from the same scene frame); the rest frame is not
     /// stored.
     pub fn read_dataset(dir: &Path, start: f64) -> Result<Animation> {
@@ -333,7 +333,7 @@ pub fn compare(gt: &Animation, pred: &Animation, pred_path: &Path) -> Result<Vec
 }
 
 /// A prediction measured against two ground truths that share a start: a fine simulation and
-/// its twin (`clothsr fork`: the same simulation continued from one of its frames with the
+/// its twin (`clothsr lab fork`: the same simulation continued from one of its frames with the
 /// garment moved a fraction of a millimetre). Neither is more right than the other, so no
 /// prediction made from their shared start can be closer to both than half their distance on
 /// average: per vertex and frame |a − p| + |p − b| ≥ |a − b| (the triangle inequality).

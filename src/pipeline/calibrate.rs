@@ -1,4 +1,4 @@
-//! Calibrating the coarse model on a scene's own training drops (`clothsr calibrate`).
+//! Calibrating the coarse model on a scene's own training drops (`clothsr lab calibrate`).
 //!
 //! Without a corrector the coarse simulation itself has to land near M_int, the downsampled
 //! fine simulation (§3.1.2). A 20 mm sheet cannot wrinkle as a 2.5 mm one does, so some of its
@@ -142,7 +142,7 @@ pub fn sim_alone_errors(
     Ok(errors)
 }
 
-/// A data set to calibrate on: its scene (as given to `clothsr dataset`), its loaded
+/// A data set to calibrate on: its scene (as given to `clothsr lab dataset`), its loaded
 /// sequence and the frames to run.
 pub struct CalibrationSet {
     /// The scene the data set was made from, before its variation.

@@ -2,7 +2,7 @@
 //! is given) the corrector, whose output M_int the next step starts from (§3.1.3); per frame the
 //! MSR module on M_int with the previous frame's fine output as initialisation (§3.2).
 //!
-//! The coarse simulation is set up as `clothsr dataset` set up the training data's: the same
+//! The coarse simulation is set up as `clothsr lab dataset` set up the training data's: the same
 //! mesher and solver settings, and by default the fine simulation's contact thickness d̂, so a
 //! model sees at run time the kind of coarse mesh it was trained on.
 
@@ -23,8 +23,10 @@ use crate::sim::driver::Simulation;
 use crate::sim::step::SimState;
 
 pub mod calibrate;
+pub mod models;
 mod run;
 use crate::transfer::Transfer;
+pub use models::{choose_path, CorrectorChoice, ModelPath, ModelsManifest};
 pub use run::{resume_path, run_to_files, Outputs, Preview, Progress, Report};
 
 /// How to set up the coarse simulation.
@@ -36,10 +38,10 @@ pub struct Options {
     pub fast: bool,
     /// Cloth self-collision.
     pub self_collision: bool,
-    /// Give the coarse simulation the fine one's contact thickness (as `clothsr dataset` does
+    /// Give the coarse simulation the fine one's contact thickness (as `clothsr lab dataset` does
     /// by default).
     pub match_contact_thickness: bool,
-    /// Sew and settle garments with seams before the first frame (as `clothsr dataset` does).
+    /// Sew and settle garments with seams before the first frame (as `clothsr lab dataset` does).
     pub dress: bool,
     /// The coarse membrane's stiffness under compression as a factor of its stretch stiffness
     /// ([`crate::sim::model::ClothModel::set_membrane_compression`]): below 1 the coarse mesh
@@ -98,12 +100,12 @@ impl Default for Options {
 /// calibration the folder's figures were measured with, since the best coarse model differs
 /// from scene to scene (the three balls' grip and wrinkle bending make the table worse). A
 /// corrector carries its own coarse model, so this file is read only when none runs (the
-/// folder has none, or `clothsr run --no-corrector`). Each field is optional; `clothsr run`'s
+/// folder has none, or `clothsr run --corrector off`). Each field is optional; `clothsr lab run`'s
 /// options override it.
 ///
 /// `{"compression": 0.03}` is the table's: [`Options::coarse_compression`]; likewise
 /// `compression_knee`, `friction`, `wrinkle_bending` (0: off), `bending` and
-/// `crease_contacts`. `clothsr calibrate` writes it ([`calibrate`]).
+/// `crease_contacts`. `clothsr lab calibrate` writes it ([`calibrate`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoarseCalibration {

@@ -235,7 +235,7 @@ impl ClothModel {
     }
 
     /// Sets every hinge's bending stiffness to `factor` (> 0) times the fabric's (1: the
-    /// fabric's own; a coarse model's calibration, `clothsr calibrate`). With wrinkle bending on,
+    /// fabric's own; a coarse model's calibration, `clothsr lab calibrate`). With wrinkle bending on,
     /// the scaled weights become its own, which each step stiffens anew.
     pub fn set_bending_scale(&mut self, factor: f64) -> Result<()> {
         if !(factor > 0.0 && factor.is_finite()) {

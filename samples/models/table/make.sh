@@ -16,31 +16,31 @@ OUT=${OUT:-samples/models/table}
 SCENE=samples/sheet_table.usda
 COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
 
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 -o "$DATA/train_a"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 40 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 -o "$DATA/train_a"
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 40 \
   --garment-offset 0.02,0.03,-0.01 -o "$DATA/train_b"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 20 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 20 \
   --garment-offset 0.015,0.01,-0.025 -o "$DATA/test"
 
 mkdir -p "$OUT"
 # The ISR: geometry channels, no initialisation input, the Swin body on 4 × 4 pixel blocks.
-"$BIN" train isr --data "$DATA/train_a" --data "$DATA/train_b" --frames 150 -o "$OUT/isr" \
+"$BIN" lab train isr --data "$DATA/train_a" --data "$DATA/train_b" --frames 150 -o "$OUT/isr" \
   --steps 8000 --no-init --unshuffle 4 --depths 2,2,2
 # No corrector: make.sh's three-balls recipe trained here (on all 150 frames, or on the first
 # 60) slid the sheet off the table in the interleaved rollout (README.md), so none ships and
 # `clothsr run` with this folder runs the simulator alone. One trained on the regenerated drops
 # (session 34) keeps the sheet on the table but does no better than the calibrated simulator.
 
-# The coarse model `clothsr run` uses with this folder, chosen by `clothsr calibrate` on the two
+# The coarse model `clothsr run` uses with this folder, chosen by `clothsr lab calibrate` on the two
 # training drops (README.md, session 36): it picks c = 0.01, wrinkle bending 1, the fabric's
 # bending and no crease contacts (20 mm edges may cut the table's corner as M_int's do). The
 # crease contacts and the bending factors are the table's own list; the default grid has
 # neither.
-"$BIN" calibrate --data "$DATA/train_a" --data "$DATA/train_b" --compression 0.1,0.03,0.01 \
+"$BIN" lab calibrate --data "$DATA/train_a" --data "$DATA/train_b" --compression 0.1,0.03,0.01 \
   --friction scene --wrinkle-bending 0,1 --bending 0.1,0.25,0.5,1 --crease-contacts on,off \
   -o "$OUT/coarse.json"
 
 for d in train_a train_b test; do
-  cp "$DATA/$d/manifest.json" "$OUT/data_$d.manifest.json"
+  sed "s|$(pwd)/||g" "$DATA/$d/manifest.json" > "$OUT/data_$d.manifest.json"
 done
 rm -rf "$OUT/isr/checkpoint"

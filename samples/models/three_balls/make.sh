@@ -21,21 +21,21 @@ COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
 
 # Two training drops and one held-out test drop (other yaw and offset), as in the paper's §4:
 # "we modify the initial states of the cloth pieces to generate distinct simulation data".
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 -o "$DATA/train_a"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 40 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 -o "$DATA/train_a"
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 40 \
   --garment-offset 0.02,0.03,-0.01 -o "$DATA/train_b"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 300 --garment-yaw-deg 20 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 300 --garment-yaw-deg 20 \
   --garment-offset 0.015,0.01,-0.025 -o "$DATA/test"
 # Four more drops at other yaws and offsets, for the corrector only: two of 150 frames (the
 # shipped corrector's were made in session 23 by resuming session 22's 60-frame drops with
 # --frames 150) and two of 60.
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 90 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg 90 \
   --garment-offset=-0.02,-0.01,0.0 -o "$DATA/train_e"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg -60 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 150 --garment-yaw-deg -60 \
   --garment-offset=0.0,0.02,0.02 -o "$DATA/train_f"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 60 --garment-yaw-deg 130 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 60 --garment-yaw-deg 130 \
   --garment-offset=0.025,-0.015,0.01 -o "$DATA/train_g"
-"$BIN" dataset "$SCENE" "${COMMON[@]}" --frames 60 --garment-yaw-deg -15 \
+"$BIN" lab dataset "$SCENE" "${COMMON[@]}" --frames 60 --garment-yaw-deg -15 \
   --garment-offset=-0.015,-0.025,-0.02 -o "$DATA/train_h"
 
 mkdir -p "$OUT"
@@ -43,14 +43,14 @@ mkdir -p "$OUT"
 # no initialisation input (measured better than the paper's previous-frame input, whose own
 # errors the network copies forward; see README.md); the Swin body on 4 × 4 pixel blocks
 # (within 7 % of the error on 2 × 2 blocks at a third of the time; see README.md).
-"$BIN" train isr --data "$DATA/train_a" --data "$DATA/train_b" --frames 150 -o "$OUT/isr" \
+"$BIN" lab train isr --data "$DATA/train_a" --data "$DATA/train_b" --frames 150 -o "$OUT/isr" \
   --steps 8000 --no-init --unshuffle 4 --depths 2,2,2 &
 # The corrector (session 23): the gated decoder, no training noise, phase 1 only (in session
 # 22 window rollouts after it made its error on a validation drop worse in both runs), on every
 # frame of the six drops; at inference it takes back half of the learned share and smooths its
 # correction by 2 rounds over each vertex's neighbours. Seed 8: the shipped draw (see
 # README.md for the spread between seeds).
-"$BIN" train corrector --data "$DATA/train_a" --data "$DATA/train_b" --data "$DATA/train_e" \
+"$BIN" lab train corrector --data "$DATA/train_a" --data "$DATA/train_b" --data "$DATA/train_e" \
   --data "$DATA/train_f" --data "$DATA/train_g" --data "$DATA/train_h" -o "$OUT/corrector" \
   --steps 2000 --batch 2 --lr-start 1e-3 --lr-end 1e-5 --mp-steps 4 --rollout-iters 0 \
   --take-back 0.5 --smoothing 2 --seed 8 &
@@ -59,11 +59,11 @@ wait
 # The coarse model `clothsr run --no-corrector` uses with this folder (coarse.json), chosen by
 # its simulation alone against M_int on the four 150-frame training drops (the default grid:
 # 24 candidates, about 17 min on 2 cores; session 32 in README.md).
-"$BIN" calibrate --data "$DATA/train_a" --data "$DATA/train_b" --data "$DATA/train_e" \
+"$BIN" lab calibrate --data "$DATA/train_a" --data "$DATA/train_b" --data "$DATA/train_e" \
   --data "$DATA/train_f" -o "$OUT/coarse.json" --csv "$DATA/calibration.csv"
 
 # What the models came from, and no training leftovers in the repository.
 for d in train_a train_b train_e train_f train_g train_h test; do
-  cp "$DATA/$d/manifest.json" "$OUT/data_$d.manifest.json"
+  sed "s|$(pwd)/||g" "$DATA/$d/manifest.json" > "$OUT/data_$d.manifest.json"
 done
 rm -rf "$OUT/isr/checkpoint" "$OUT/corrector/checkpoint"

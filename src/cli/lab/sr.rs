@@ -1,4 +1,4 @@
-//! `clothsr sr --model DIR --data DIR`: super-resolves a data set's M_int sequence with an ISR
+//! `clothsr lab sr --model DIR --data DIR`: super-resolves a data set's M_int sequence with an ISR
 //! model and measures the fine meshes against the fine simulation, beside the upsampled coarse
 //! mesh (see [`clothsr::msr::eval`]).
 
@@ -13,10 +13,10 @@ use clothsr::msr::Isr;
 /// Arguments of `sr`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// ISR model directory (`clothsr train isr`).
+    /// ISR model directory (`clothsr lab train isr`).
     #[arg(long)]
     model: PathBuf,
-    /// Data set directory (`clothsr dataset`) with the ground truth; not one trained on.
+    /// Data set directory (`clothsr lab dataset`) with the ground truth; not one trained on.
     #[arg(long)]
     data: PathBuf,
     /// First frame (1-based); it starts from the coarse map, as a new shot.

@@ -1,4 +1,4 @@
-//! `clothsr rollout --model DIR --data DIR`: the corrector's rollout error against a data set's
+//! `clothsr lab rollout --model DIR --data DIR`: the corrector's rollout error against a data set's
 //! M_int, beside the coarse simulation alone and the corrector without interleaving (see
 //! [`clothsr::corrector::rollout`]).
 
@@ -19,10 +19,10 @@ use nalgebra::Vector3;
 /// Arguments of `rollout`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Corrector model directory (`clothsr train corrector`).
+    /// Corrector model directory (`clothsr lab train corrector`).
     #[arg(long)]
     model: PathBuf,
-    /// Data set directory (`clothsr dataset`) with the ground truth; not one trained on.
+    /// Data set directory (`clothsr lab dataset`) with the ground truth; not one trained on.
     /// Repeat it for several held-out drops: each is rolled out and reported, then the errors
     /// are pooled over all their frames (one chaotic drop cannot rank two correctors).
     #[arg(long, required = true)]
@@ -38,8 +38,8 @@ pub struct Args {
     #[arg(long)]
     csv: Option<PathBuf>,
     /// A second data set of the same scene and coarse mesh, started next to the first (a
-    /// `clothsr dataset` run whose `--garment-offset` differs by a fraction of a millimetre,
-    /// or a `clothsr fork` of the first: its shared frames count as zero, so start at the
+    /// `clothsr lab dataset` run whose `--garment-offset` differs by a fraction of a millimetre,
+    /// or a `clothsr lab fork` of the first: its shared frames count as zero, so start at the
     /// fork's frame): the distance between the two ground truths is reported beside the errors
     /// as the predictability floor, which no predictor of the first from its start can be
     /// expected to beat where the scene is chaotic (folds, contact and friction are).
@@ -87,7 +87,7 @@ pub struct Args {
     coarse_bending: Option<f64>,
     /// Crease contacts (`on` or `off`) of the coarse simulation, for every variant, in place
     /// of the corrector's.
-    #[arg(long, value_name = "on|off", value_parser = super::on_off)]
+    #[arg(long, value_name = "on|off", value_parser = crate::cli::on_off)]
     coarse_crease_contacts: Option<bool>,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool

@@ -1,4 +1,4 @@
-//! `clothsr bench sim`: the simulator's benchmark (a 1 m² sheet dropped 2 cm above a sphere of
+//! `clothsr lab bench sim`: the simulator's benchmark (a 1 m² sheet dropped 2 cm above a sphere of
 //! radius 0.3 m, dt 1/300 s, at ~3K and ~40K vertices), side by side with Newton 1.8 on the same
 //! scene when `benches/setup-newton.sh` has been run.
 

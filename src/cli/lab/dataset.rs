@@ -1,4 +1,4 @@
-//! `clothsr dataset SCENE --coarse-mm 20 --fine-mm 2.5 --frames N -o DIR`: training data
+//! `clothsr lab dataset SCENE --coarse-mm 20 --fine-mm 2.5 --frames N -o DIR`: training data
 //! (the paper's §3.3.1) from a fine simulation; see [`clothsr::data`] for the format.
 
 use std::path::{Path, PathBuf};
@@ -26,9 +26,9 @@ pub struct Args {
     #[arg(long)]
     frames: usize,
     #[command(flatten)]
-    inputs: super::SceneInputs,
+    inputs: crate::cli::SceneInputs,
     #[command(flatten)]
-    variation: super::VariationArgs,
+    variation: crate::cli::VariationArgs,
     /// Disable cloth self-collision.
     #[arg(long)]
     no_self_collision: bool,
@@ -70,18 +70,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fast: args.fast,
         match_contact_thickness: !args.coarse_contact_thickness,
         source: Some(SceneSource {
-            scene: super::absolute(&args.scene)?,
+            scene: crate::cli::absolute(&args.scene)?,
             colliders: args
                 .inputs
                 .collider
                 .iter()
-                .map(|c| super::absolute(c))
+                .map(|c| crate::cli::absolute(c))
                 .collect::<anyhow::Result<_>>()?,
             avatar: args
                 .inputs
                 .avatar
                 .as_deref()
-                .map(super::absolute)
+                .map(crate::cli::absolute)
                 .transpose()?,
             fabric: args.inputs.fabric.clone(),
         }),

@@ -1,4 +1,4 @@
-//! `clothsr calibrate --data DIR... -o MODELS/coarse.json`: the coarse model chosen on a
+//! `clothsr lab calibrate --data DIR... -o MODELS/coarse.json`: the coarse model chosen on a
 //! scene's own data sets (see [`clothsr::pipeline::calibrate`]).
 
 use std::path::{Path, PathBuf};
@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 /// Arguments of `calibrate`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Data set directory (`clothsr dataset`) of the scene to calibrate for; repeat it for
+    /// Data set directory (`clothsr lab dataset`) of the scene to calibrate for; repeat it for
     /// several drops (the candidates are ranked on all their frames pooled). Measure the choice
     /// on a drop not given here.
     #[arg(long, required = true)]
@@ -44,7 +44,7 @@ pub struct Args {
     bending: Vec<f64>,
     /// Crease contacts to try: `on` (the simulator's) and or `off` (coarse edges may cut the
     /// colliders' sharp edges, as M_int's do).
-    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = super::on_off)]
+    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = crate::cli::on_off)]
     crease_contacts: Vec<bool>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where

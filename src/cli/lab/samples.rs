@@ -1,4 +1,4 @@
-//! `clothsr samples -o samples/`: regenerates the sample scenes (usda) shipped in the repository.
+//! `clothsr lab samples -o samples/`: regenerates the sample scenes (usda) shipped in the repository.
 
 use std::path::PathBuf;
 

@@ -1,6 +1,6 @@
-//! `clothsr fork DATA --frame K [--offset x,y,z] -o DIR`: a data set continued from one of
+//! `clothsr lab fork DATA --frame K [--offset x,y,z] -o DIR`: a data set continued from one of
 //! its frames with the fine garment moved a little (by default 0.1 mm), to measure how far
-//! such a change carries: the ground truth's predictability floor (`clothsr rollout --floor`).
+//! such a change carries: the ground truth's predictability floor (`clothsr lab rollout --floor`).
 
 use std::path::PathBuf;
 
@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 /// Arguments of `fork`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The data set to fork (a `clothsr dataset` directory made from scene files).
+    /// The data set to fork (a `clothsr lab dataset` directory made from scene files).
     data: PathBuf,
     /// Its last frame the fork shares: the fine garment is moved at the end of this frame.
     #[arg(long)]
@@ -33,7 +33,7 @@ pub struct Args {
 
 /// Runs `fork`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let offset = super::triple(&Some(args.offset))?;
+    let offset = crate::cli::triple(&Some(args.offset))?;
     let source = clothsr::data::read_manifest(&args.data)?;
     let frames = args.frames.unwrap_or(source.frames_done);
     anyhow::ensure!(

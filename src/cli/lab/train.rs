@@ -1,5 +1,5 @@
-//! `clothsr train corrector --data DIR… -o MODEL`: trains the corrector on data sets made by
-//! `clothsr dataset` (see [`clothsr::corrector::training`]).
+//! `clothsr lab train corrector --data DIR… -o MODEL`: trains the corrector on data sets made by
+//! `clothsr lab dataset` (see [`clothsr::corrector::training`]).
 
 use std::path::PathBuf;
 
@@ -32,7 +32,7 @@ enum What {
 /// Arguments of `train isr`.
 #[derive(Debug, clap::Args)]
 pub struct IsrArgs {
-    /// Data set directories (`clothsr dataset`); repeat for several sequences.
+    /// Data set directories (`clothsr lab dataset`); repeat for several sequences.
     #[arg(long, required = true)]
     data: Vec<PathBuf>,
     /// Output model directory (an interrupted run there with the same settings resumes).
@@ -110,7 +110,7 @@ pub struct IsrArgs {
 /// Arguments of `train corrector`.
 #[derive(Debug, clap::Args)]
 pub struct CorrectorArgs {
-    /// Data set directories (`clothsr dataset`); repeat for several sequences.
+    /// Data set directories (`clothsr lab dataset`); repeat for several sequences.
     #[arg(long, required = true)]
     data: Vec<PathBuf>,
     /// Output model directory (an interrupted run there with the same settings resumes).
@@ -246,7 +246,7 @@ pub struct CorrectorArgs {
     /// Crease contacts of the coarse simulation trained beside, `on` or `off` (off: coarse
     /// cloth edges may cut the colliders' sharp edges, as M_int's do); saved with the model,
     /// which then runs so. [default: on, or as the `--init` model was trained]
-    #[arg(long, value_name = "on|off", value_parser = super::on_off)]
+    #[arg(long, value_name = "on|off", value_parser = crate::cli::on_off)]
     coarse_crease_contacts: Option<bool>,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
