@@ -11,19 +11,19 @@
 //!    simulator goes on from it; [`msr`] turns meshes into coordinate maps and patches and back;
 //! 4. [`pipeline`] runs these stages per frame; [`io`] writes time-sampled USD and [`viz`]
 //!    streams previews to Rerun; [`eval`] measures results against fine simulations.
+//!
+//! The stages below the pipeline are crates of their own, each using only those before it:
+//! `clothsr-geometry` ([`garment`], [`mesh`], [`scene`], [`transfer`], [`metrics`]) →
+//! `clothsr-sim` ([`sim`]) → `clothsr-io` ([`io`], [`data`]) → `clothsr-nn` ([`corrector`],
+//! [`msr`]) → this crate ([`pipeline`], [`eval`], [`viz`]) → the `clothsr` command.
 
-pub mod corrector;
-pub mod data;
-pub mod error;
 pub mod eval;
-pub mod garment;
-pub mod io;
-pub mod mesh;
-pub mod msr;
 pub mod pipeline;
-pub mod scene;
-pub mod sim;
-pub mod transfer;
 pub mod viz;
 
-pub use error::{Error, Result};
+pub use clothsr_geometry::{error, garment, mesh, metrics, scene, transfer, Error, Result};
+pub use clothsr_io as io;
+pub use clothsr_io::data;
+pub use clothsr_nn as nn;
+pub use clothsr_nn::{corrector, msr};
+pub use clothsr_sim as sim;

@@ -8,7 +8,7 @@ mod common;
 use clothsr::corrector::data::{vectors, Sequence};
 use clothsr::corrector::fused::{FusedInputs, FusedNet};
 use clothsr::corrector::graph::MeshGraph;
-use clothsr::corrector::inference::{default_device, features, Corrector, WEIGHTS_FILE};
+use clothsr::corrector::inference::{features, Corrector, WEIGHTS_FILE};
 use clothsr::corrector::model::{Decoder, GraphTensors, DEFAULT_TENSION_RAMP};
 use clothsr::corrector::rollout::{
     evaluate, evaluate_from, interleaved_errors, jitter_directions, sequence_distance_mm,
@@ -20,6 +20,7 @@ use clothsr::corrector::training::{
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
 use clothsr::data::{coarse_simulation, flat32, generate, Options, Variation};
 use clothsr::garment::Fabric;
+use clothsr::nn::common::default_device;
 use clothsr::pipeline::calibrate::{score, sim_alone_errors, CalibrationSet};
 use clothsr::pipeline::CoarseCalibration;
 use clothsr::scene::samples::flat_sheet;

@@ -8,7 +8,6 @@ mod common;
 use std::ops::ControlFlow;
 
 use burn::tensor::{Tensor, TensorData};
-use clothsr::corrector::inference::default_device;
 use clothsr::data::{generate, Options, Variation};
 use clothsr::msr::data::IsrSequence;
 use clothsr::msr::eval::evaluate;
@@ -24,6 +23,7 @@ use clothsr::msr::training::{
     gradient_mask, isr_loss, save_model, train, Batch, IsrTrainingConfig,
 };
 use clothsr::msr::{Isr, SuperResolver};
+use clothsr::nn::common::default_device;
 use clothsr::scene::Scene;
 use nalgebra::Vector3;
 use ndarray::{Array2, Array3};

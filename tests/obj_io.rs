@@ -4,9 +4,11 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use clothsr::garment::Fabric;
+use clothsr::io::scene_files::cloth_from_obj;
+use clothsr::io::SceneFiles;
 use clothsr::mesh::{mesh_garment, MeshOptions};
 use clothsr::scene::samples::skirt;
-use clothsr::scene::{cloth_from_obj, Scene};
+use clothsr::scene::Scene;
 
 /// Writes `mesh` as OBJ with `vt` = material coordinates, welding seam pairs into one `v` so the
 /// file looks like a DCC export (one position, several texture coordinates along seams).

@@ -8,12 +8,13 @@ mod common;
 use std::ops::ControlFlow;
 use std::path::Path;
 
-use clothsr::corrector::inference::default_device;
 use clothsr::eval::{compare, summarise, Animation, Bodies, INSIDE_SEARCH_M};
 use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
+use clothsr::io::SceneFiles;
 use clothsr::msr::model::IsrConfig;
 use clothsr::msr::training::IsrTrainingConfig;
 use clothsr::msr::Isr;
+use clothsr::nn::common::default_device;
 use clothsr::pipeline::{
     resume_path, run_to_files, CoarseCalibration, Options, Outputs, Pipeline, Preview, Report,
 };
@@ -465,8 +466,9 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
         // Without a corrector, the folder's own coarse model (the table's, chosen by
         // `clothsr calibrate` on its training drops: c = 0.01, wrinkle bending 1, the
         // fabric's bending, no crease contacts), as `clothsr run` and `clothsr bench` take it.
-        let (opts, cal) = CoarseCalibration::for_run(&models, corrector, Options::default())
-            .expect("a valid coarse.json, if any");
+        let (opts, cal) =
+            clothsr::pipeline::options_for_run(&models, corrector, Options::default())
+                .expect("a valid coarse.json, if any");
         let mut p = Pipeline::new(&scene, &isr, corrector, opts).expect("set up");
         if !ships_corrector {
             let table = CoarseCalibration {
@@ -484,7 +486,7 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
         if ships_corrector {
             // Without its corrector (`run --no-corrector`), the coarse model `clothsr
             // calibrate` chose on the three balls' training drops.
-            let (opts, cal) = CoarseCalibration::for_run(&models, None, Options::default())
+            let (opts, cal) = clothsr::pipeline::options_for_run(&models, None, Options::default())
                 .expect("a valid coarse.json");
             let chosen = CoarseCalibration {
                 compression: Some(0.01),
@@ -518,43 +520,6 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
     }
 }
 
-/// The skirt's shipped models (`samples/models/skirt/`): GarmentCode's pencil skirt dressed on
-/// the walking avatar fixture (`tests/data/avatars`), its corrector interleaved with the coarse
-/// simulator and its ISR on the 99,796-vertex fine mesh, for one frame.
-#[test]
-fn shipped_skirt_models_run_a_frame_on_the_walking_avatar() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let data = root.join("tests/data");
-    let models = root.join("samples/models/skirt");
-    let isr = Isr::load(&models.join("isr")).expect("the shipped ISR model loads");
-    let mut scene = Scene::load(
-        &data.join("patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json"),
-        &clothsr::garment::Fabric::preset("cotton").expect("preset"),
-    )
-    .expect("pattern");
-    scene
-        .add_collider_file(&data.join("avatars/mh_walk_train_baked_2s.usdc"))
-        .expect("avatar");
-    let corrector = models.join("corrector");
-    let mut p = Pipeline::new(&scene, &isr, Some(&corrector), Options::default()).expect("set up");
-    assert!(p.has_corrector());
-    assert_eq!(p.coarse.sim.model.num_vertices(), 1_686);
-    assert_eq!(p.fine.num_vertices(), 99_796);
-    let first: Vec<Vector3<f64>> = p.super_resolve().expect("frame 0").to_vec();
-    let x = p.advance_frame().expect("frame 1");
-    assert!(x.iter().all(|q| q.iter().all(|c| c.is_finite())));
-    // Dressed around the hips (about 0.8-1 m up), the skirt moves with the body in the first
-    // frame by millimetres, not metres.
-    let y = x.iter().map(|q| q.y).sum::<f64>() / x.len() as f64;
-    assert!((0.5..1.2).contains(&y), "mean height {y}");
-    let moved = x
-        .iter()
-        .zip(&first)
-        .map(|(a, b)| (a - b).norm())
-        .fold(0.0, f64::max);
-    assert!(moved > 1e-5 && moved < 0.05, "{moved}");
-}
-
 /// A models folder's `coarse.json`: absent is none; fields fill only unset options; a bad
 /// value or an unknown field is refused, naming the file.
 #[test]
@@ -579,7 +544,7 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
         coarse_friction: Some(0.3),
         ..Options::default()
     };
-    let filled = cal.fill(given);
+    let filled = given.filled_from(&cal);
     assert_eq!(filled.coarse_compression, Some(0.01));
     assert_eq!(filled.coarse_compression_knee, None);
     assert_eq!(filled.coarse_friction, Some(0.3), "an option given wins");
@@ -588,10 +553,11 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
     assert_eq!(filled.coarse_crease_contacts, Some(false));
     assert_eq!(filled.coarse_edge_m, given.coarse_edge_m);
     // As a run takes it: filled without a corrector, untouched beside one.
-    let (run_opts, used) = CoarseCalibration::for_run(dir.path(), None, given).expect("run");
+    let (run_opts, used) =
+        clothsr::pipeline::options_for_run(dir.path(), None, given).expect("run");
     assert_eq!((run_opts, used), (filled, Some(cal)));
     let (run_opts, used) =
-        CoarseCalibration::for_run(dir.path(), Some(dir.path()), given).expect("run");
+        clothsr::pipeline::options_for_run(dir.path(), Some(dir.path()), given).expect("run");
     assert_eq!((run_opts, used), (given, None));
     // A knee of 0 is none, in the file as in the options.
     std::fs::write(&file, r#"{"compression": 0.03, "compression_knee": 0}"#).expect("write");
@@ -704,6 +670,10 @@ fn the_run_takes_the_better_validated_path_of_a_models_folder() {
         let m = ModelsManifest::load(&root.join(folder))
             .expect("valid")
             .expect("every shipped folder has a models.json");
-        assert_eq!(auto(&root.join(folder)).expect("auto"), m.best(), "{folder}");
+        assert_eq!(
+            auto(&root.join(folder)).expect("auto"),
+            m.best(),
+            "{folder}"
+        );
     }
 }

@@ -3,6 +3,7 @@
 use nalgebra::Vector3;
 
 use clothsr::garment::Fabric;
+use clothsr::io::SceneFiles;
 use clothsr::mesh::{mesh_garment, MeshOptions};
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::{Collider, Scene};
@@ -803,7 +804,7 @@ fn without_crease_contacts_coarse_edges_cut_the_tables_corner_and_the_sheet_stay
 
 /// With crease contacts (the default) a 20 mm edge spanning the table's edge is held off it.
 /// They act one-sided: an edge that has crossed the crease is left to its vertices' contacts.
-/// When they held crossed edges from inside (session 35), an edge ended 2.7 mm deep in the
+/// When they held crossed edges from inside, an edge ended 2.7 mm deep in the
 /// table's corner and the part on the table slid 3.9 mm towards the edge; now no edge is
 /// inside and it slides 2.9 mm (the edges held out at the corner take more cloth round it
 /// than the fine sheet's fold does: `--coarse-crease-contacts off` is the coarse models'

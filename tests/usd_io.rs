@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use clothsr::garment::{garmentcode, Fabric};
 use clothsr::io::usd::{read_usd, validate_usd, write_usd, MeshOut, MeshRole, StageOut, UvData};
+use clothsr::io::SceneFiles;
 use clothsr::mesh::{mesh_garment, MeshOptions};
 use clothsr::scene::Scene;
 

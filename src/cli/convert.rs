@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use clothsr::io::SceneFiles;
 use clothsr::scene::Scene;
 
 /// Arguments of `convert`.

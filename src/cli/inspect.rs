@@ -4,9 +4,9 @@
 use std::path::PathBuf;
 
 use clothsr::garment::{garmentcode, Garment};
+use clothsr::io::scene_files::{cloth_from_obj, FileKind};
 use clothsr::io::{obj, usd};
 use clothsr::mesh::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
-use clothsr::scene::{cloth_from_obj, FileKind};
 
 /// Arguments of `inspect`.
 #[derive(Debug, clap::Args)]

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use anyhow::bail;
 use clothsr::io::usd::{write_usd, MeshOut, StageOut};
+use clothsr::io::SceneFiles;
 use clothsr::mesh::{mesh_garment, MeshOptions};
 use clothsr::scene::Scene;
 

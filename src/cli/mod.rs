@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
 use clothsr::garment::{Fabric, PRESET_NAMES};
+use clothsr::io::SceneFiles;
 
 /// Super-resolution cloth animation: coarse simulation, learned correction, fine wrinkles.
 #[derive(Debug, Parser)]
@@ -43,7 +44,7 @@ enum Command {
     Simulate(simulate::Args),
     /// Research tools: training data, training, rollouts, calibration, benchmarks.
     #[command(subcommand)]
-    Lab(lab::Command),
+    Lab(Box<lab::Command>),
 }
 
 /// Runs the command line and returns the exit code; errors are printed by `main` with their
@@ -69,7 +70,7 @@ pub fn run() -> anyhow::Result<i32> {
         Command::Convert(a) => convert::run(a),
         Command::Mesh(a) => mesh::run(a),
         Command::Simulate(a) => simulate::run(a),
-        Command::Lab(c) => lab::run(c),
+        Command::Lab(c) => lab::run(*c),
     }?;
     Ok(0)
 }
@@ -146,7 +147,7 @@ impl SceneInputs {
 
 /// A variation of a scene, as `clothsr lab dataset` makes training sequences and `clothsr run`
 /// replays them.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Default, clap::Args)]
 pub(crate) struct VariationArgs {
     /// Variation: move the garments by x,y,z metres (e.g. a drop height).
     #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]

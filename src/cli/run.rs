@@ -12,8 +12,8 @@ use clothsr::data::Variation;
 use clothsr::eval::Animation;
 use clothsr::msr::Isr;
 use clothsr::pipeline::{
-    choose_path, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath, Options, Outputs,
-    Pipeline, Preview, Progress,
+    choose_path, options_for_run, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath,
+    Options, Outputs, Pipeline, Preview, Progress,
 };
 use clothsr::viz::Recorder;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -49,7 +49,12 @@ pub struct Args {
     models: PathBuf,
     /// Whether the corrector runs: `auto` takes the path the folder's models.json validated
     /// as better (the corrector where a folder without one has it), `on` or `off` forces it.
-    #[arg(long, value_name = "auto|on|off", default_value = "auto", help_heading = "Models")]
+    #[arg(
+        long,
+        value_name = "auto|on|off",
+        default_value = "auto",
+        help_heading = "Models"
+    )]
     corrector: CorrectorChoice,
     /// Save a Rerun recording (colliders, coarse and fine meshes, stage timings on a frame
     /// timeline): to FILE.rrd, or without a value beside each output as <name>.rrd. Open it
@@ -307,11 +312,11 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
         push_out: !knobs.no_push_out,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
-    let (opts, cal) = CoarseCalibration::for_run(&args.models, corrector, given)?;
+    let (opts, cal) = options_for_run(&args.models, corrector, given)?;
     if cal.is_some() {
         tracing::info!(
             "coarse model: {} ({} under the options given)",
-            CoarseCalibration::of(&opts),
+            opts.coarse(),
             args.models.join(CoarseCalibration::FILE).display()
         );
     }

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clothsr::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
+use clothsr::io::SceneFiles;
 use clothsr::scene::Scene;
 use clothsr::sim::driver::Simulation;
 use indicatif::{ProgressBar, ProgressStyle};

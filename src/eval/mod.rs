@@ -7,10 +7,11 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 
-use crate::corrector::rollout::mean_distance_mm;
 use crate::error::{Error, Result};
 use crate::io::usd::{read_usd, MeshRole};
-use crate::transfer::vertex_normals;
+pub use crate::metrics::{
+    jitter_m, mean_distance_mm, mean_max_std, normal_angle_deg, vertex_errors,
+};
 
 /// The cloth of an animation file: every cloth mesh of the stage, concatenated in prim order.
 #[derive(Debug, Clone, PartialEq)]
@@ -240,52 +241,6 @@ pub struct FrameMetrics {
     pub jitter_mm: Option<f64>,
     /// The same of the ground truth, mm.
     pub gt_jitter_mm: Option<f64>,
-}
-
-/// Per-vertex distances between two position sets, metres.
-pub fn vertex_errors(gt: &[Vector3<f64>], pred: &[Vector3<f64>]) -> Vec<f64> {
-    gt.iter().zip(pred).map(|(a, b)| (a - b).norm()).collect()
-}
-
-/// Mean, max and standard deviation of `v`.
-pub fn mean_max_std(v: &[f64]) -> (f64, f64, f64) {
-    if v.is_empty() {
-        return (0.0, 0.0, 0.0);
-    }
-    let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let max = v.iter().copied().fold(0.0, f64::max);
-    let var = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
-    (mean, max, var.sqrt())
-}
-
-/// Mean angle between the vertex normals of two positions of one mesh, degrees.
-pub fn normal_angle_deg(triangles: &[[u32; 3]], gt: &[Vector3<f64>], pred: &[Vector3<f64>]) -> f64 {
-    let (a, b) = (
-        vertex_normals(triangles, gt),
-        vertex_normals(triangles, pred),
-    );
-    let angles: Vec<f64> = a
-        .iter()
-        .zip(&b)
-        .filter(|(p, q)| p.norm_squared() > 0.0 && q.norm_squared() > 0.0)
-        .map(|(p, q)| p.normalize().dot(&q.normalize()).clamp(-1.0, 1.0).acos())
-        .collect();
-    if angles.is_empty() {
-        return 0.0;
-    }
-    angles.iter().sum::<f64>() / angles.len() as f64 * 180.0 / std::f64::consts::PI
-}
-
-/// Mean ‖x_{t+1} − 2x_t + x_{t−1}‖ over vertices, metres.
-pub fn jitter_m(prev: &[Vector3<f64>], cur: &[Vector3<f64>], next: &[Vector3<f64>]) -> f64 {
-    let n = cur.len().max(1) as f64;
-    prev.iter()
-        .zip(cur)
-        .zip(next)
-        .map(|((a, b), c)| (c - 2.0 * b + a).norm())
-        .sum::<f64>()
-        / n
 }
 
 /// Compares `pred` with `gt` at every time code they share. Fails when they share none or

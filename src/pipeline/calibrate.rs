@@ -16,8 +16,9 @@ use rayon::prelude::*;
 
 use super::CoarseCalibration;
 use crate::corrector::data::{vectors, Sequence};
-use crate::corrector::rollout::{check_frames, mean_distance_mm};
+use crate::corrector::rollout::check_frames;
 use crate::error::{Error, Result};
+use crate::metrics::mean_distance_mm;
 use crate::scene::Scene;
 use crate::sim::driver::Simulation;
 
@@ -39,8 +40,8 @@ pub struct Grid {
 }
 
 impl Default for Grid {
-    /// The settings that mattered on the sample scenes (sessions 13–31 of
-    /// `samples/models/three_balls/README.md`): 24 candidates.
+    /// The settings that mattered on the sample scenes
+    /// (`docs/experiments/three_balls.md`): 24 candidates.
     fn default() -> Self {
         Grid {
             compression: vec![1.0, 0.1, 0.03, 0.01],
@@ -88,30 +89,6 @@ impl Grid {
             }
         }
         Ok(out)
-    }
-}
-
-impl CoarseCalibration {
-    /// Sets a coarse simulation's model to this calibration (unset fields: the simulator's own
-    /// model), but for an unset friction, which leaves the simulation's as it is (a fresh
-    /// simulation's: the scene's).
-    pub fn apply(&self, sim: &mut Simulation) -> Result<()> {
-        self.check().map_err(Error::Invalid)?;
-        let knee = self.compression_knee.filter(|&k| k != 0.0);
-        sim.sim
-            .model
-            .set_membrane_compression(self.compression.unwrap_or(1.0), knee)?;
-        if let Some(mu) = self.friction {
-            crate::corrector::training::set_friction(sim, mu)?;
-        }
-        sim.sim
-            .model
-            .set_bending_scale(self.bending.unwrap_or(1.0))?;
-        sim.sim.detector_mut().crease_contacts = self.crease_contacts.unwrap_or(true);
-        let gain = self.wrinkle_bending.filter(|&g| g != 0.0);
-        sim.sim
-            .model
-            .set_wrinkle_bending(gain.map(crate::sim::WrinkleBending::with_gain))
     }
 }
 

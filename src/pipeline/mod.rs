@@ -25,6 +25,7 @@ use crate::sim::step::SimState;
 pub mod calibrate;
 pub mod models;
 mod run;
+pub use crate::sim::coarse::{crease_label, CoarseCalibration};
 use crate::transfer::Transfer;
 pub use models::{choose_path, CorrectorChoice, ModelPath, ModelsManifest};
 pub use run::{resume_path, run_to_files, Outputs, Preview, Progress, Report};
@@ -96,154 +97,47 @@ impl Default for Options {
     }
 }
 
-/// A models folder's coarse model for runs without a corrector (`DIR/coarse.json`): the
-/// calibration the folder's figures were measured with, since the best coarse model differs
-/// from scene to scene (the three balls' grip and wrinkle bending make the table worse). A
-/// corrector carries its own coarse model, so this file is read only when none runs (the
-/// folder has none, or `clothsr run --corrector off`). Each field is optional; `clothsr lab run`'s
-/// options override it.
-///
-/// `{"compression": 0.03}` is the table's: [`Options::coarse_compression`]; likewise
-/// `compression_knee`, `friction`, `wrinkle_bending` (0: off), `bending` and
-/// `crease_contacts`. `clothsr lab calibrate` writes it ([`calibrate`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct CoarseCalibration {
-    /// [`Options::coarse_compression`], in (0, 1].
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub compression: Option<f64>,
-    /// [`Options::coarse_compression_knee`], a shortening > 0 (0: none).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub compression_knee: Option<f64>,
-    /// [`Options::coarse_friction`], ≥ 0.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub friction: Option<f64>,
-    /// [`Options::coarse_wrinkle_bending`], ≥ 0 (0: off).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub wrinkle_bending: Option<f64>,
-    /// [`Options::coarse_bending`], > 0 (1: the fabric's).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub bending: Option<f64>,
-    /// [`Options::coarse_crease_contacts`] (`false`: coarse edges may cut colliders' creases).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub crease_contacts: Option<bool>,
+/// The options a run with the models folder `models` uses: with a corrector (`corrector`: its
+/// directory) `given` as it is, else `given` filled from `models/coarse.json` where there is
+/// one, which is returned too.
+pub fn options_for_run(
+    models: &std::path::Path,
+    corrector: Option<&std::path::Path>,
+    given: Options,
+) -> Result<(Options, Option<CoarseCalibration>)> {
+    if corrector.is_some() {
+        return Ok((given, None));
+    }
+    Ok(match CoarseCalibration::load(models)? {
+        Some(cal) => (given.filled_from(&cal), Some(cal)),
+        None => (given, None),
+    })
 }
 
-/// A crease-contacts setting as `on` or `off` (`None`: on, the simulator's).
-pub fn crease_label(setting: Option<bool>) -> &'static str {
-    if setting.unwrap_or(true) {
-        "on"
-    } else {
-        "off"
-    }
-}
-
-impl CoarseCalibration {
-    /// Its file name in a models folder.
-    pub const FILE: &'static str = "coarse.json";
-
-    /// The calibration in `models/coarse.json`, checked; `None` where there is no such file.
-    pub fn load(models: &std::path::Path) -> Result<Option<CoarseCalibration>> {
-        let path = models.join(Self::FILE);
-        if !path.exists() {
-            return Ok(None);
-        }
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let cal: CoarseCalibration = serde_json::from_str(&text)
-            .map_err(|e| Error::bad_input(&path, format!("not a coarse calibration: {e}")))?;
-        cal.check().map_err(|m| Error::bad_input(&path, m))?;
-        Ok(Some(cal))
-    }
-
-    /// Why these settings are unusable, if they are.
-    pub fn check(&self) -> std::result::Result<(), String> {
-        if let Some(c) = self.compression {
-            if !(c > 0.0 && c <= 1.0) {
-                return Err(format!("compression must be in (0, 1], got {c}"));
-            }
-        }
-        if let Some(k) = self.compression_knee {
-            if !(k >= 0.0 && k.is_finite()) {
-                return Err(format!(
-                    "compression_knee must be a shortening > 0 (0: none), got {k}"
-                ));
-            }
-        }
-        if let Some(mu) = self.friction {
-            crate::corrector::training::check_friction(mu).map_err(|m| format!("friction: {m}"))?;
-        }
-        if let Some(g) = self.wrinkle_bending {
-            crate::sim::WrinkleBending::gain_option(g)
-                .map_err(|m| format!("wrinkle_bending: {m}"))?;
-        }
-        if let Some(b) = self.bending {
-            if !(b > 0.0 && b.is_finite()) {
-                return Err(format!("bending must be a factor > 0, got {b}"));
-            }
-        }
-        Ok(())
-    }
-
-    /// The options a run with `models` uses: with a corrector (`corrector`: its directory)
-    /// `given` as it is, else `given` filled from `models/coarse.json` where there is one,
-    /// which is returned too.
-    pub fn for_run(
-        models: &std::path::Path,
-        corrector: Option<&std::path::Path>,
-        given: Options,
-    ) -> Result<(Options, Option<CoarseCalibration>)> {
-        if corrector.is_some() {
-            return Ok((given, None));
-        }
-        Ok(match Self::load(models)? {
-            Some(cal) => (cal.fill(given), Some(cal)),
-            None => (given, None),
-        })
-    }
-
-    /// The coarse settings of `opts`.
-    pub fn of(opts: &Options) -> CoarseCalibration {
+impl Options {
+    /// The coarse settings of these options.
+    pub fn coarse(&self) -> CoarseCalibration {
         CoarseCalibration {
-            compression: opts.coarse_compression,
-            compression_knee: opts.coarse_compression_knee,
-            friction: opts.coarse_friction,
-            wrinkle_bending: opts.coarse_wrinkle_bending,
-            bending: opts.coarse_bending,
-            crease_contacts: opts.coarse_crease_contacts,
+            compression: self.coarse_compression,
+            compression_knee: self.coarse_compression_knee,
+            friction: self.coarse_friction,
+            wrinkle_bending: self.coarse_wrinkle_bending,
+            bending: self.coarse_bending,
+            crease_contacts: self.coarse_crease_contacts,
         }
     }
 
-    /// `opts` with each of its coarse settings that is unset (`None`) taken from here.
-    pub fn fill(&self, opts: Options) -> Options {
+    /// These options with each of their coarse settings that is unset (`None`) taken from
+    /// `cal`.
+    pub fn filled_from(self, cal: &CoarseCalibration) -> Options {
         Options {
-            coarse_compression: opts.coarse_compression.or(self.compression),
-            coarse_compression_knee: opts.coarse_compression_knee.or(self.compression_knee),
-            coarse_friction: opts.coarse_friction.or(self.friction),
-            coarse_wrinkle_bending: opts.coarse_wrinkle_bending.or(self.wrinkle_bending),
-            coarse_bending: opts.coarse_bending.or(self.bending),
-            coarse_crease_contacts: opts.coarse_crease_contacts.or(self.crease_contacts),
-            ..opts
-        }
-    }
-}
-
-impl std::fmt::Display for CoarseCalibration {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let parts: Vec<String> = [
-            ("compression", self.compression),
-            ("compression knee", self.compression_knee),
-            ("friction", self.friction),
-            ("wrinkle bending", self.wrinkle_bending),
-            ("bending", self.bending),
-        ]
-        .iter()
-        .filter_map(|(name, v)| v.map(|v| format!("{name} {v}")))
-        .chain((self.crease_contacts == Some(false)).then(|| "no crease contacts".to_string()))
-        .collect();
-        if parts.is_empty() {
-            f.write_str("the simulator's")
-        } else {
-            f.write_str(&parts.join(", "))
+            coarse_compression: self.coarse_compression.or(cal.compression),
+            coarse_compression_knee: self.coarse_compression_knee.or(cal.compression_knee),
+            coarse_friction: self.coarse_friction.or(cal.friction),
+            coarse_wrinkle_bending: self.coarse_wrinkle_bending.or(cal.wrinkle_bending),
+            coarse_bending: self.coarse_bending.or(cal.bending),
+            coarse_crease_contacts: self.coarse_crease_contacts.or(cal.crease_contacts),
+            ..self
         }
     }
 }
@@ -435,7 +329,7 @@ impl<'a> Pipeline<'a> {
                 )));
             }
             (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
-            (None, _) => CoarseCalibration::of(&opts).apply(&mut coarse)?,
+            (None, _) => opts.coarse().apply(&mut coarse)?,
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {

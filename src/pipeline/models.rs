@@ -120,7 +120,8 @@ impl ModelsManifest {
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
         let m: ModelsManifest = serde_json::from_str(&text)
             .map_err(|e| Error::bad_input(&path, format!("not a models manifest: {e}")))?;
-        m.check(models).map_err(|msg| Error::bad_input(&path, msg))?;
+        m.check(models)
+            .map_err(|msg| Error::bad_input(&path, msg))?;
         Ok(Some(m))
     }
 
@@ -218,10 +219,7 @@ pub fn choose_path(models: &Path, choice: CorrectorChoice) -> Result<(ModelPath,
                     .unwrap_or_default();
                 (
                     best,
-                    format!(
-                        "the better validated path{}{against}",
-                        figures(best)
-                    ),
+                    format!("the better validated path{}{against}", figures(best)),
                 )
             }
         },

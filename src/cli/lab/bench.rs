@@ -7,6 +7,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use clothsr::garment::Fabric;
+use clothsr::io::SceneFiles;
 use clothsr::scene::samples::flat_sheet;
 use clothsr::scene::{Collider, Scene};
 use clothsr::sim::driver::Simulation;
@@ -340,7 +341,7 @@ fn pipeline_row(
     isr: &clothsr::msr::Isr,
     scene_path: &Path,
 ) -> anyhow::Result<TableRow> {
-    use clothsr::pipeline::{CoarseCalibration, Options, Pipeline};
+    use clothsr::pipeline::{options_for_run, Options, Pipeline};
     let scene = Scene::load(scene_path, &Fabric::default())?;
     let corrector_dir = models.join("corrector");
     let corrector = corrector_dir
@@ -348,7 +349,7 @@ fn pipeline_row(
         .exists()
         .then_some(corrector_dir.as_path());
     // The coarse model `clothsr run` would use with these models.
-    let (opts, _) = CoarseCalibration::for_run(models, corrector, Options::default())?;
+    let (opts, _) = options_for_run(models, corrector, Options::default())?;
     let mut p = Pipeline::new(&scene, isr, corrector, opts)?;
     p.super_resolve()?;
     let steps = p.coarse.steps_per_frame;

@@ -69,7 +69,7 @@ fn frictions(given: &[String]) -> anyhow::Result<Vec<Option<f64>>> {
                 let mu: f64 = t.parse().with_context(|| {
                     format!("--friction {t}: not a number (or 'scene' for the scene's own)")
                 })?;
-                clothsr::corrector::training::check_friction(mu)
+                clothsr::sim::coarse::check_friction(mu)
                     .map_err(|e| anyhow::anyhow!("--friction {t}: {e}"))?;
                 Ok(Some(mu))
             }

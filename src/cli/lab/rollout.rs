@@ -134,7 +134,7 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
         corrector.training.coarse_compression_knee = (s > 0.0).then_some(s);
     }
     if let Some(mu) = args.coarse_friction {
-        clothsr::corrector::training::check_friction(mu)
+        clothsr::sim::coarse::check_friction(mu)
             .map_err(|e| anyhow::anyhow!("--coarse-friction: {e}"))?;
         corrector.training.coarse_friction = Some(mu);
     }

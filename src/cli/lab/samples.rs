@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use clothsr::io::SceneFiles;
 use clothsr::scene::samples::{sample, SAMPLE_NAMES};
 
 /// Arguments of `samples`.
