@@ -36,7 +36,9 @@ def meshes(path, frame):
             for j in range(1, c - 1):
                 tris.append((idx[k], idx[k + j], idx[k + j + 1]))
             k += c
-        collider = "Collider" in str(prim.GetPath()) or "collider" in str(prim.GetPath())
+        collider = "Colliders" in str(prim.GetPath())
+        if collider and np.ptp(p[:, 1]) < 0.03:
+            continue  # a floor: it would hide the rest
         out.append((p, np.asarray(tris), collider))
     return out
 
@@ -46,11 +48,11 @@ def draw(ax, parts, title):
     for p, t, collider in parts:
         # USD is y up; matplotlib's 3D axes are z up.
         x, y, z = p[:, 0], -p[:, 2], p[:, 1]
-        colour = (0.75, 0.75, 0.78) if collider else (0.85, 0.35, 0.3)
+        colour = (0.7, 0.72, 0.78) if collider else (0.86, 0.42, 0.36)
         ax.plot_trisurf(x, y, z, triangles=t, color=colour, linewidth=0, antialiased=False,
-                        shade=True, lightsource=light, alpha=0.55 if collider else 1.0)
+                        shade=True, lightsource=light)
     ax.set_title(title)
-    ax.view_init(elev=28, azim=-60)
+    ax.view_init(elev=38, azim=-62)
     ax.set_axis_off()
     ax.set_box_aspect((1, 1, 0.55))
 
@@ -61,15 +63,14 @@ def main(coarse, fine, frame, png):
     a = fig.add_subplot(1, 2, 1, projection="3d")
     b = fig.add_subplot(1, 2, 2, projection="3d")
     fine_parts = meshes(fine, frame)
-    colliders = [m for m in fine_parts if m[2]]
-    draw(a, meshes(coarse, frame) + colliders, "coarse simulation (20 mm)")
+    draw(a, meshes(coarse, frame), "coarse simulation (20 mm)")
     draw(b, fine_parts, "clothsr's fine mesh (2.5 mm)")
     for ax in (a, b):
         lim = np.concatenate([m[0] for m in fine_parts if not m[2]])
         lo, hi = lim.min(axis=0), lim.max(axis=0)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(-hi[2], -lo[2])
-        ax.set_zlim(lo[1] - 0.15, hi[1])
+        ax.set_zlim(lo[1], hi[1])
     fig.tight_layout()
     fig.savefig(png)
 
