@@ -108,24 +108,36 @@ fn the_coarse_compression_option_sets_up_the_coarse_membrane() {
         .iter()
         .all(|&c| c == (1.0, f64::INFINITY)));
     let soft = Options {
-        coarse_compression: Some(0.1),
+        coarse: CoarseCalibration {
+            compression: Some(0.1),
+            ..CoarseCalibration::default()
+        },
         ..options()
     };
     assert!(factors(soft).iter().all(|&c| c == (0.1, f64::INFINITY)));
     let knee = Options {
-        coarse_compression: Some(0.1),
-        coarse_compression_knee: Some(0.2),
+        coarse: CoarseCalibration {
+            compression: Some(0.1),
+            compression_knee: Some(0.2),
+            ..CoarseCalibration::default()
+        },
         ..options()
     };
     assert!(factors(knee).iter().all(|&c| c == (0.1, 0.2)));
     for bad in [
         Options {
-            coarse_compression: Some(0.0),
+            coarse: CoarseCalibration {
+                compression: Some(0.0),
+                ..CoarseCalibration::default()
+            },
             ..options()
         },
         Options {
-            coarse_compression: Some(0.1),
-            coarse_compression_knee: Some(-0.2),
+            coarse: CoarseCalibration {
+                compression: Some(0.1),
+                compression_knee: Some(-0.2),
+                ..CoarseCalibration::default()
+            },
             ..options()
         },
     ] {
@@ -146,13 +158,19 @@ fn the_coarse_friction_option_sets_up_the_coarse_contact() {
     let default = clothsr::sim::SimParams::for_edge(0.02).friction;
     assert_eq!(friction(options()), Ok(default));
     let grip = Options {
-        coarse_friction: Some(1.0),
+        coarse: CoarseCalibration {
+            friction: Some(1.0),
+            ..CoarseCalibration::default()
+        },
         ..options()
     };
     assert_eq!(friction(grip), Ok(1.0));
     for bad in [-0.1, f64::NAN, f64::INFINITY] {
         let o = Options {
-            coarse_friction: Some(bad),
+            coarse: CoarseCalibration {
+                friction: Some(bad),
+                ..CoarseCalibration::default()
+            },
             ..options()
         };
         let e = friction(o).expect_err("a bad friction coefficient");
@@ -168,7 +186,10 @@ fn the_coarse_wrinkle_bending_option_sets_up_the_coarse_hinges() {
     let (scene, isr) = (scene(), tiny_isr());
     let wrinkles = |g: Option<f64>| {
         let o = Options {
-            coarse_wrinkle_bending: g,
+            coarse: CoarseCalibration {
+                wrinkle_bending: g,
+                ..CoarseCalibration::default()
+            },
             ..options()
         };
         Pipeline::new(&scene, &isr, None, o)
@@ -415,35 +436,50 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             for (other, what) in [
                 (
                     Options {
-                        coarse_compression: Some(0.5),
+                        coarse: CoarseCalibration {
+                            compression: Some(0.5),
+                            ..CoarseCalibration::default()
+                        },
                         ..Options::default()
                     },
                     "compression factor",
                 ),
                 (
                     Options {
-                        coarse_friction: Some(0.9),
+                        coarse: CoarseCalibration {
+                            friction: Some(0.9),
+                            ..CoarseCalibration::default()
+                        },
                         ..Options::default()
                     },
                     "friction",
                 ),
                 (
                     Options {
-                        coarse_wrinkle_bending: Some(1.0),
+                        coarse: CoarseCalibration {
+                            wrinkle_bending: Some(1.0),
+                            ..CoarseCalibration::default()
+                        },
                         ..Options::default()
                     },
                     "wrinkle bending",
                 ),
                 (
                     Options {
-                        coarse_bending: Some(1.5),
+                        coarse: CoarseCalibration {
+                            bending: Some(1.5),
+                            ..CoarseCalibration::default()
+                        },
                         ..Options::default()
                     },
                     "bending stiffness",
                 ),
                 (
                     Options {
-                        coarse_crease_contacts: Some(false),
+                        coarse: CoarseCalibration {
+                            crease_contacts: Some(false),
+                            ..CoarseCalibration::default()
+                        },
                         ..Options::default()
                     },
                     "crease contacts",
@@ -458,7 +494,10 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
         if corrector.is_some() {
             // A gain of 0 is no wrinkle bending, as the corrector was trained.
             let off = Options {
-                coarse_wrinkle_bending: Some(0.0),
+                coarse: CoarseCalibration {
+                    wrinkle_bending: Some(0.0),
+                    ..CoarseCalibration::default()
+                },
                 ..Options::default()
             };
             assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
@@ -541,16 +580,19 @@ fn coarse_calibration_files_are_checked_and_fill_only_unset_options() {
         "compression 0.01, friction 2.5, wrinkle bending 1, bending 1.5, no crease contacts"
     );
     let given = Options {
-        coarse_friction: Some(0.3),
+        coarse: CoarseCalibration {
+            friction: Some(0.3),
+            ..CoarseCalibration::default()
+        },
         ..Options::default()
     };
     let filled = given.filled_from(&cal);
-    assert_eq!(filled.coarse_compression, Some(0.01));
-    assert_eq!(filled.coarse_compression_knee, None);
-    assert_eq!(filled.coarse_friction, Some(0.3), "an option given wins");
-    assert_eq!(filled.coarse_wrinkle_bending, Some(1.0));
-    assert_eq!(filled.coarse_bending, Some(1.5));
-    assert_eq!(filled.coarse_crease_contacts, Some(false));
+    assert_eq!(filled.coarse.compression, Some(0.01));
+    assert_eq!(filled.coarse.compression_knee, None);
+    assert_eq!(filled.coarse.friction, Some(0.3), "an option given wins");
+    assert_eq!(filled.coarse.wrinkle_bending, Some(1.0));
+    assert_eq!(filled.coarse.bending, Some(1.5));
+    assert_eq!(filled.coarse.crease_contacts, Some(false));
     assert_eq!(filled.coarse_edge_m, given.coarse_edge_m);
     // As a run takes it: filled without a corrector, untouched beside one.
     let (run_opts, used) =

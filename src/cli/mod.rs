@@ -75,14 +75,7 @@ pub fn run() -> anyhow::Result<i32> {
     Ok(0)
 }
 
-/// `on` or `off` (a clap value parser).
-pub(crate) fn on_off(v: &str) -> Result<bool, String> {
-    match v.trim() {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        t => Err(format!("{t}: 'on' or 'off'")),
-    }
-}
+pub(crate) use clothsr::sim::coarse::on_off;
 
 /// The fabric named on the command line.
 pub(crate) fn fabric(name: &str) -> anyhow::Result<Fabric> {

@@ -107,40 +107,10 @@ pub struct Knobs {
     /// Cloth self-collision in the coarse simulation.
     #[arg(long)]
     self_collision: bool,
-    /// The coarse membrane's stiffness under compression, as a factor (0, 1] of its stretch
-    /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
-    /// in wrinkles (default: the corrector's, else the models folder's `coarse.json`'s, else 1;
-    /// a corrector trained with another is an error).
-    #[arg(long)]
-    coarse_compression: Option<f64>,
-    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
-    /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none; default: the
-    /// corrector's, else `coarse.json`'s, else none).
-    #[arg(long)]
-    coarse_compression_knee: Option<f64>,
-    /// The coarse simulator's Coulomb friction coefficient against bodies (default: the
-    /// corrector's, else `coarse.json`'s, else the simulator's 0.3; a corrector trained with
-    /// another is an error)
-    #[arg(long)]
-    coarse_friction: Option<f64>,
-    /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
-    /// membrane is shortened (as a fine cloth's wrinkles stiffen it), up to this multiple of
-    /// the fabric's, fading in linearly as the cloth's mean speed falls from 6 cm/s to rest
-    /// (0: off; default: the corrector's, else `coarse.json`'s, else off; a corrector trained
-    /// with another is an error)
-    #[arg(long, value_name = "GAIN")]
-    coarse_wrinkle_bending: Option<f64>,
-    /// The coarse hinges' bending stiffness as a factor of the fabric's (default: the
-    /// corrector's, else `coarse.json`'s, else 1; beside a corrector trained with another, an
-    /// error)
-    #[arg(long, value_name = "FACTOR")]
-    coarse_bending: Option<f64>,
-    /// Coarse cloth edges against the colliders' sharp edges, `on` or `off`; off, they may cut
-    /// a table's corner as the downsampled fine cloth's do, and only coarse vertices meet
-    /// colliders (default: the corrector's, else `coarse.json`'s, else on; beside a corrector
-    /// trained with the other, an error)
-    #[arg(long, value_name = "on|off", value_parser = super::on_off)]
-    coarse_crease_contacts: Option<bool>,
+    // The coarse model (unset: the corrector's, else the models folder's `coarse.json`'s, else
+    // the simulator's; a corrector trained beside another is an error).
+    #[command(flatten)]
+    coarse: CoarseCalibration,
     /// Write the MSR module's fine meshes as the network gives them. By default every fine
     /// vertex found inside a collider, or nearer it than half the fine simulation's contact
     /// thickness, is moved out to that distance (the 20 mm mesh's chords and the network's
@@ -161,12 +131,7 @@ impl Default for Knobs {
             no_dress: false,
             converged: false,
             self_collision: false,
-            coarse_compression: None,
-            coarse_compression_knee: None,
-            coarse_friction: None,
-            coarse_wrinkle_bending: None,
-            coarse_bending: None,
-            coarse_crease_contacts: None,
+            coarse: CoarseCalibration::default(),
             no_push_out: false,
         }
     }
@@ -261,18 +226,7 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
         knobs.heat_max_mm.is_finite() && knobs.heat_max_mm > 0.0,
         "--heat-max-mm must be positive"
     );
-    if let Some(s) = knobs.coarse_compression_knee {
-        anyhow::ensure!(
-            s >= 0.0 && s.is_finite(),
-            "--coarse-compression-knee must be a shortening > 0 (0: none), got {s}"
-        );
-    }
-    if let Some(b) = knobs.coarse_bending {
-        anyhow::ensure!(
-            b > 0.0 && b.is_finite(),
-            "--coarse-bending must be a factor > 0, got {b}"
-        );
-    }
+    knobs.coarse.check_flags().map_err(anyhow::Error::msg)?;
     anyhow::ensure!(
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
@@ -303,12 +257,7 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
         self_collision: knobs.self_collision,
         match_contact_thickness: true,
         dress: !knobs.no_dress,
-        coarse_compression: knobs.coarse_compression,
-        coarse_compression_knee: knobs.coarse_compression_knee,
-        coarse_friction: knobs.coarse_friction,
-        coarse_wrinkle_bending: knobs.coarse_wrinkle_bending,
-        coarse_bending: knobs.coarse_bending,
-        coarse_crease_contacts: knobs.coarse_crease_contacts,
+        coarse: knobs.coarse,
         push_out: !knobs.no_push_out,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
@@ -316,7 +265,7 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
     if cal.is_some() {
         tracing::info!(
             "coarse model: {} ({} under the options given)",
-            opts.coarse(),
+            opts.coarse,
             args.models.join(CoarseCalibration::FILE).display()
         );
     }

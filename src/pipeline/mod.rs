@@ -44,32 +44,9 @@ pub struct Options {
     pub match_contact_thickness: bool,
     /// Sew and settle garments with seams before the first frame (as `clothsr lab dataset` does).
     pub dress: bool,
-    /// The coarse membrane's stiffness under compression as a factor of its stretch stiffness
-    /// ([`crate::sim::model::ClothModel::set_membrane_compression`]): below 1 the coarse mesh
-    /// gives way to the shortening that the fine cloth takes up in wrinkles. `None`: the
-    /// corrector's (the one it was trained beside), else 1. A corrector trained with another
-    /// factor is an error.
-    pub coarse_compression: Option<f64>,
-    /// The shortening beyond which the compression-soft coarse membrane is stiff again
-    /// (0: none; `None`: the corrector's, else soft however short). A corrector trained with
-    /// another is an error.
-    pub coarse_compression_knee: Option<f64>,
-    /// The coarse simulator's Coulomb friction coefficient against bodies (`None`: the
-    /// corrector's, else the simulator's). A corrector trained with another is an error.
-    pub coarse_friction: Option<f64>,
-    /// The coarse simulator's wrinkle bending gain ([`crate::sim::WrinkleBending::with_gain`];
-    /// 0: off; `None`: the corrector's, else off). A corrector trained with another is an
-    /// error.
-    pub coarse_wrinkle_bending: Option<f64>,
-    /// The coarse hinges' bending stiffness as a factor of the fabric's
-    /// ([`crate::sim::model::ClothModel::set_bending_scale`]; `None`: the corrector's, else
-    /// 1). A corrector trained with another is an error.
-    pub coarse_bending: Option<f64>,
-    /// Whether coarse cloth edges meet the colliders' sharp edges
-    /// ([`crate::sim::collide::CollisionDetector::crease_contacts`]; `None`: the corrector's,
-    /// else yes). Off, a 20 mm edge may cut a table's corner as M_int's does. A corrector
-    /// trained with the other is an error.
-    pub coarse_crease_contacts: Option<bool>,
+    /// The coarse model's settings (unset: the corrector's, the one it was trained beside, else
+    /// the simulator's own). A setting that differs from the corrector's is an error.
+    pub coarse: CoarseCalibration,
     /// Push the fine output's vertices out of the colliders (to half the fine simulation's
     /// contact thickness; [`crate::sim::collide::push_out`]): the MSR module places them
     /// from the coarse surface, whose 20 mm chords and the network's wrinkles cut into a body
@@ -86,12 +63,7 @@ impl Default for Options {
             self_collision: false,
             match_contact_thickness: true,
             dress: true,
-            coarse_compression: None,
-            coarse_compression_knee: None,
-            coarse_friction: None,
-            coarse_wrinkle_bending: None,
-            coarse_bending: None,
-            coarse_crease_contacts: None,
+            coarse: CoarseCalibration::default(),
             push_out: true,
         }
     }
@@ -115,28 +87,10 @@ pub fn options_for_run(
 }
 
 impl Options {
-    /// The coarse settings of these options.
-    pub fn coarse(&self) -> CoarseCalibration {
-        CoarseCalibration {
-            compression: self.coarse_compression,
-            compression_knee: self.coarse_compression_knee,
-            friction: self.coarse_friction,
-            wrinkle_bending: self.coarse_wrinkle_bending,
-            bending: self.coarse_bending,
-            crease_contacts: self.coarse_crease_contacts,
-        }
-    }
-
-    /// These options with each of their coarse settings that is unset (`None`) taken from
-    /// `cal`.
+    /// These options with each of their coarse settings that is unset taken from `cal`.
     pub fn filled_from(self, cal: &CoarseCalibration) -> Options {
         Options {
-            coarse_compression: self.coarse_compression.or(cal.compression),
-            coarse_compression_knee: self.coarse_compression_knee.or(cal.compression_knee),
-            coarse_friction: self.coarse_friction.or(cal.friction),
-            coarse_wrinkle_bending: self.coarse_wrinkle_bending.or(cal.wrinkle_bending),
-            coarse_bending: self.coarse_bending.or(cal.bending),
-            coarse_crease_contacts: self.coarse_crease_contacts.or(cal.crease_contacts),
+            coarse: self.coarse.or(cal),
             ..self
         }
     }
@@ -248,88 +202,19 @@ impl<'a> Pipeline<'a> {
         let corrector = corrector_dir
             .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
             .transpose()?;
-        // A wrinkle bending gain of 0 is none.
-        let wrinkles = opts
-            .coarse_wrinkle_bending
-            .map(crate::sim::WrinkleBending::gain_option)
-            .transpose()
-            .map_err(Error::Invalid)?
-            .flatten();
-        // A compression knee of 0 is none.
-        let knee = opts.coarse_compression_knee.filter(|&s| s != 0.0);
+        opts.coarse.check().map_err(Error::Invalid)?;
         // After dressing: sewing is done with the full membrane.
-        match (&corrector, opts.coarse_compression) {
-            (Some(c), Some(f)) if c.training.compression_factor() != f => {
-                return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside a coarse membrane compression \
-                     factor of {}, not {f}",
-                    c.dir.display(),
-                    c.training.compression_factor()
-                )));
+        match &corrector {
+            Some(c) => {
+                if let Some(how) = opts.coarse.conflict_with(&c.training.coarse_calibration()) {
+                    return Err(Error::Invalid(format!(
+                        "the corrector in {} was trained {how}",
+                        c.dir.display()
+                    )));
+                }
+                c.training.prepare_coarse(&mut coarse)?
             }
-            (Some(c), _)
-                if opts.coarse_compression_knee.is_some()
-                    && c.training.coarse_compression_knee != knee =>
-            {
-                return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside a coarse membrane compression \
-                     knee of {:?}, not {:?}",
-                    c.dir.display(),
-                    c.training.coarse_compression_knee,
-                    opts.coarse_compression_knee
-                )));
-            }
-            (Some(c), _)
-                if opts.coarse_friction.is_some()
-                    && c.training.coarse_friction != opts.coarse_friction =>
-            {
-                return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside a coarse friction coefficient of \
-                     {}, not {:?}",
-                    c.dir.display(),
-                    c.training.friction_label(),
-                    opts.coarse_friction
-                )));
-            }
-            (Some(c), _)
-                if opts.coarse_wrinkle_bending.is_some()
-                    && c.training.coarse_wrinkle_bending.filter(|&g| g != 0.0) != wrinkles =>
-            {
-                return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside a coarse wrinkle bending gain of \
-                     {:?}, not {:?}",
-                    c.dir.display(),
-                    c.training.coarse_wrinkle_bending,
-                    opts.coarse_wrinkle_bending
-                )));
-            }
-            (Some(c), _)
-                if opts
-                    .coarse_bending
-                    .is_some_and(|b| b != c.training.coarse_bending.unwrap_or(1.0)) =>
-            {
-                return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained beside {} times the fabric's bending \
-                     stiffness, not {} times it",
-                    c.dir.display(),
-                    c.training.coarse_bending.unwrap_or(1.0),
-                    opts.coarse_bending.unwrap_or(1.0)
-                )));
-            }
-            (Some(c), _)
-                if opts
-                    .coarse_crease_contacts
-                    .is_some_and(|e| e != c.training.coarse_crease_contacts.unwrap_or(true)) =>
-            {
-                return Err(Error::Invalid(format!(
-                    "the corrector in {} was trained with crease contacts {}, not {}",
-                    c.dir.display(),
-                    crease_label(c.training.coarse_crease_contacts),
-                    crease_label(opts.coarse_crease_contacts)
-                )));
-            }
-            (Some(c), _) => c.training.prepare_coarse(&mut coarse)?,
-            (None, _) => opts.coarse().apply(&mut coarse)?,
+            None => opts.coarse.apply(&mut coarse)?,
         }
         let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
         Ok(Pipeline {

@@ -11,31 +11,53 @@ use crate::error::{Error, Result};
 /// corrector, since the best coarse model differs from scene to scene; a corrector carries the
 /// one it was trained beside. `{"compression": 0.03}` sets the membrane's compression factor
 /// alone; likewise `compression_knee`, `friction`, `wrinkle_bending` (0: off), `bending` and
-/// `crease_contacts`. [`CoarseCalibration::apply`] sets a simulation up with them.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+/// `crease_contacts`. On a command line the same settings are the `--coarse-*` options
+/// (flatten this type); [`CoarseCalibration::apply`] sets a simulation up with them.
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize, clap::Args,
+)]
 #[serde(deny_unknown_fields)]
 pub struct CoarseCalibration {
-    /// The membrane's stiffness under compression as a factor of its stretch stiffness
-    /// ([`crate::model::ClothModel::set_membrane_compression`]), in (0, 1].
+    /// The coarse membrane's stiffness under compression, as a factor in (0, 1] of its stretch
+    /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
+    /// in wrinkles.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "coarse-compression", value_name = "FACTOR")]
     pub compression: Option<f64>,
-    /// The shortening beyond which the compression-soft membrane is stiff again, > 0 (0: none).
+    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
+    /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "coarse-compression-knee", value_name = "SHORTENING")]
     pub compression_knee: Option<f64>,
-    /// The Coulomb friction coefficient against bodies, ≥ 0.
+    /// The coarse simulation's Coulomb friction coefficient against bodies, ≥ 0.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "coarse-friction", value_name = "MU")]
     pub friction: Option<f64>,
-    /// The wrinkle bending gain ([`crate::WrinkleBending::with_gain`]), ≥ 0 (0: off).
+    /// The wrinkle bending gain: extra bending stiffness where the coarse membrane is
+    /// shortened, up to this multiple of the fabric's, fading in as the cloth's mean speed
+    /// falls from 6 cm/s to rest (0: off).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "coarse-wrinkle-bending", value_name = "GAIN")]
     pub wrinkle_bending: Option<f64>,
-    /// The hinges' bending stiffness as a factor of the fabric's, > 0 (1: the fabric's).
+    /// The coarse hinges' bending stiffness as a factor of the fabric's, > 0 (1: the
+    /// fabric's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "coarse-bending", value_name = "FACTOR")]
     pub bending: Option<f64>,
-    /// Whether cloth edges meet the colliders' sharp edges
-    /// ([`crate::collide::CollisionDetector::crease_contacts`]; `false`: coarse edges may cut
-    /// colliders' creases).
+    /// Whether coarse cloth edges meet the colliders' sharp edges, `on` or `off`; off, a 20 mm
+    /// edge may cut a table's corner as the downsampled fine cloth's do.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = on_off)]
     pub crease_contacts: Option<bool>,
+}
+
+/// `on` or `off` (a command-line value parser).
+pub fn on_off(v: &str) -> std::result::Result<bool, String> {
+    match v.trim() {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        t => Err(format!("{t}: 'on' or 'off'")),
+    }
 }
 
 /// A crease-contacts setting as `on` or `off` (`None`: on, the simulator's).
@@ -64,32 +86,157 @@ impl CoarseCalibration {
         Ok(Some(cal))
     }
 
-    /// Why these settings are unusable, if they are.
+    /// Why these settings are unusable, if they are, naming the setting as `coarse.json` does.
     pub fn check(&self) -> std::result::Result<(), String> {
-        if let Some(c) = self.compression {
-            if !(c > 0.0 && c <= 1.0) {
-                return Err(format!("compression must be in (0, 1], got {c}"));
+        match self.problem() {
+            Some((key, why)) => Err(format!("{key}{why}")),
+            None => Ok(()),
+        }
+    }
+
+    /// Why these settings are unusable, if they are, naming the command-line option.
+    pub fn check_flags(&self) -> std::result::Result<(), String> {
+        match self.problem() {
+            Some((key, why)) => Err(format!("--coarse-{}{why}", key.replace('_', "-"))),
+            None => Ok(()),
+        }
+    }
+
+    /// The first unusable setting: its name and what is wrong.
+    fn problem(&self) -> Option<(&'static str, String)> {
+        if let Some(c) = self.compression.filter(|c| !(*c > 0.0 && *c <= 1.0)) {
+            return Some(("compression", format!(" must be in (0, 1], got {c}")));
+        }
+        if let Some(k) = self
+            .compression_knee
+            .filter(|k| !(*k >= 0.0 && k.is_finite()))
+        {
+            return Some((
+                "compression_knee",
+                format!(" must be a shortening > 0 (0: none), got {k}"),
+            ));
+        }
+        if let Some(Err(m)) = self.friction.map(check_friction) {
+            return Some(("friction", format!(": {m}")));
+        }
+        if let Some(Err(m)) = self.wrinkle_bending.map(crate::WrinkleBending::gain_option) {
+            return Some(("wrinkle_bending", format!(": {m}")));
+        }
+        if let Some(b) = self.bending.filter(|b| !(*b > 0.0 && b.is_finite())) {
+            return Some(("bending", format!(" must be a factor > 0, got {b}")));
+        }
+        None
+    }
+
+    /// These settings where set, else `base`'s.
+    pub fn or(&self, base: &CoarseCalibration) -> CoarseCalibration {
+        CoarseCalibration {
+            compression: self.compression.or(base.compression),
+            compression_knee: self.compression_knee.or(base.compression_knee),
+            friction: self.friction.or(base.friction),
+            wrinkle_bending: self.wrinkle_bending.or(base.wrinkle_bending),
+            bending: self.bending.or(base.bending),
+            crease_contacts: self.crease_contacts.or(base.crease_contacts),
+        }
+    }
+
+    /// The same model with each setting that is the simulator's own unset (a compression or a
+    /// bending factor of 1, a knee or a wrinkle bending gain of 0, crease contacts on), as
+    /// configurations record them; `None` where a setting is unusable.
+    pub fn normalised(&self) -> Option<CoarseCalibration> {
+        self.check().ok()?;
+        Some(CoarseCalibration {
+            compression: self.compression.filter(|&c| c != 1.0),
+            compression_knee: self.compression_knee.filter(|&k| k != 0.0),
+            friction: self.friction,
+            wrinkle_bending: self.wrinkle_bending.filter(|&g| g != 0.0),
+            bending: self.bending.filter(|&b| b != 1.0),
+            crease_contacts: self.crease_contacts.filter(|&on| !on),
+        })
+    }
+
+    /// `base` with each setting given here in place of its own, normalised (a setting given as
+    /// the simulator's own, such as a compression factor of 1, unsets it); `None` where a given
+    /// setting is unusable.
+    pub fn replacing(&self, base: &CoarseCalibration) -> Option<CoarseCalibration> {
+        let n = self.normalised()?;
+        fn pick<T>(given: &Option<T>, normalised: Option<T>, base: Option<T>) -> Option<T> {
+            if given.is_some() {
+                normalised
+            } else {
+                base
             }
         }
-        if let Some(k) = self.compression_knee {
-            if !(k >= 0.0 && k.is_finite()) {
-                return Err(format!(
-                    "compression_knee must be a shortening > 0 (0: none), got {k}"
-                ));
-            }
+        Some(CoarseCalibration {
+            compression: pick(&self.compression, n.compression, base.compression),
+            compression_knee: pick(
+                &self.compression_knee,
+                n.compression_knee,
+                base.compression_knee,
+            ),
+            friction: pick(&self.friction, n.friction, base.friction),
+            wrinkle_bending: pick(
+                &self.wrinkle_bending,
+                n.wrinkle_bending,
+                base.wrinkle_bending,
+            ),
+            bending: pick(&self.bending, n.bending, base.bending),
+            crease_contacts: pick(
+                &self.crease_contacts,
+                n.crease_contacts,
+                base.crease_contacts,
+            ),
+        })
+    }
+
+    /// Where the settings given here differ from the model a corrector was `trained` beside:
+    /// how, completing "the corrector was trained …". Unset settings here agree with anything.
+    pub fn conflict_with(&self, trained: &CoarseCalibration) -> Option<String> {
+        let given = self.normalised().unwrap_or(*self);
+        let trained_factor = trained.compression.unwrap_or(1.0);
+        if let Some(f) = self.compression.filter(|&f| f != trained_factor) {
+            return Some(format!(
+                "beside a coarse membrane compression factor of {trained_factor}, not {f}"
+            ));
         }
-        if let Some(mu) = self.friction {
-            check_friction(mu).map_err(|m| format!("friction: {m}"))?;
+        if self.compression_knee.is_some() && trained.compression_knee != given.compression_knee {
+            return Some(format!(
+                "beside a coarse membrane compression knee of {:?}, not {:?}",
+                trained.compression_knee, self.compression_knee
+            ));
         }
-        if let Some(g) = self.wrinkle_bending {
-            crate::WrinkleBending::gain_option(g).map_err(|m| format!("wrinkle_bending: {m}"))?;
+        if self.friction.is_some() && trained.friction != self.friction {
+            return Some(format!(
+                "beside a coarse friction coefficient of {}, not {:?}",
+                trained
+                    .friction
+                    .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string()),
+                self.friction
+            ));
         }
-        if let Some(b) = self.bending {
-            if !(b > 0.0 && b.is_finite()) {
-                return Err(format!("bending must be a factor > 0, got {b}"));
-            }
+        if self.wrinkle_bending.is_some()
+            && trained.wrinkle_bending.filter(|&g| g != 0.0) != given.wrinkle_bending
+        {
+            return Some(format!(
+                "beside a coarse wrinkle bending gain of {:?}, not {:?}",
+                trained.wrinkle_bending, self.wrinkle_bending
+            ));
         }
-        Ok(())
+        let trained_bending = trained.bending.unwrap_or(1.0);
+        if let Some(b) = self.bending.filter(|&b| b != trained_bending) {
+            return Some(format!(
+                "beside {trained_bending} times the fabric's bending stiffness, not {b} times it"
+            ));
+        }
+        let trained_creases = trained.crease_contacts.unwrap_or(true);
+        if let Some(on) = self.crease_contacts.filter(|&on| on != trained_creases) {
+            return Some(format!(
+                "with crease contacts {}, not {}",
+                crease_label(Some(trained_creases)),
+                crease_label(Some(on))
+            ));
+        }
+        None
     }
 
     /// Sets a coarse simulation's model to this calibration (unset fields: the simulator's own
@@ -153,4 +300,114 @@ pub fn set_friction(sim: &mut Simulation, mu: f64) -> Result<()> {
     check_friction(mu).map_err(Error::Invalid)?;
     sim.sim.params.friction = mu;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cal(compression: Option<f64>, bending: Option<f64>) -> CoarseCalibration {
+        CoarseCalibration {
+            compression,
+            bending,
+            ..CoarseCalibration::default()
+        }
+    }
+
+    #[test]
+    fn problems_name_the_setting_as_the_file_or_the_option_does() {
+        let bad = cal(Some(2.0), None);
+        assert_eq!(
+            bad.check().unwrap_err(),
+            "compression must be in (0, 1], got 2"
+        );
+        assert_eq!(
+            bad.check_flags().unwrap_err(),
+            "--coarse-compression must be in (0, 1], got 2"
+        );
+        let knee = CoarseCalibration {
+            compression_knee: Some(-1.0),
+            ..CoarseCalibration::default()
+        };
+        assert!(knee
+            .check_flags()
+            .unwrap_err()
+            .starts_with("--coarse-compression-knee must be"));
+        let gain = CoarseCalibration {
+            wrinkle_bending: Some(-1.0),
+            ..CoarseCalibration::default()
+        };
+        assert!(gain
+            .check_flags()
+            .unwrap_err()
+            .starts_with("--coarse-wrinkle-bending: the wrinkle bending gain"));
+        assert!(cal(Some(0.5), Some(2.0)).check_flags().is_ok());
+    }
+
+    #[test]
+    fn given_settings_replace_the_base_normalised() {
+        let base = CoarseCalibration {
+            compression: Some(0.1),
+            friction: Some(2.5),
+            crease_contacts: Some(false),
+            ..CoarseCalibration::default()
+        };
+        // A factor of 1 given is the simulator's own: unset; what is not given stays.
+        let given = CoarseCalibration {
+            compression: Some(1.0),
+            bending: Some(1.5),
+            crease_contacts: Some(true),
+            ..CoarseCalibration::default()
+        };
+        let got = given.replacing(&base).expect("usable");
+        assert_eq!(
+            got,
+            CoarseCalibration {
+                compression: None,
+                friction: Some(2.5),
+                bending: Some(1.5),
+                crease_contacts: None,
+                ..CoarseCalibration::default()
+            }
+        );
+        assert_eq!(cal(Some(0.0), None).replacing(&base), None);
+        // `or` keeps given values as they are.
+        assert_eq!(given.or(&base).compression, Some(1.0));
+        assert_eq!(given.or(&base).friction, Some(2.5));
+    }
+
+    #[test]
+    fn only_given_settings_that_differ_from_the_trained_model_conflict() {
+        let trained = CoarseCalibration {
+            compression: Some(0.1),
+            wrinkle_bending: Some(1.0),
+            ..CoarseCalibration::default()
+        };
+        assert_eq!(CoarseCalibration::default().conflict_with(&trained), None);
+        assert_eq!(cal(Some(0.1), Some(1.0)).conflict_with(&trained), None);
+        let how = cal(Some(0.5), None)
+            .conflict_with(&trained)
+            .expect("differs");
+        assert!(how.contains("compression factor of 0.1, not 0.5"), "{how}");
+        let how = cal(None, Some(2.0))
+            .conflict_with(&trained)
+            .expect("differs");
+        assert!(how.contains("bending stiffness"), "{how}");
+        let off = CoarseCalibration {
+            wrinkle_bending: Some(0.0),
+            ..CoarseCalibration::default()
+        };
+        assert!(off
+            .conflict_with(&trained)
+            .expect("differs")
+            .contains("wrinkle"));
+        let creases = CoarseCalibration {
+            crease_contacts: Some(false),
+            ..CoarseCalibration::default()
+        };
+        assert_eq!(
+            creases.conflict_with(&trained).as_deref(),
+            Some("with crease contacts on, not off")
+        );
+    }
 }

@@ -14,6 +14,7 @@ use clothsr::corrector::Corrector;
 use clothsr::data::{coarse_simulation, read_manifest};
 use clothsr::mesh::ClothMesh;
 use clothsr::scene::Scene;
+use clothsr::sim::coarse::CoarseCalibration;
 use nalgebra::Vector3;
 
 /// Arguments of `rollout`.
@@ -62,33 +63,10 @@ pub struct Args {
     /// model's (0: none): to choose the value `train corrector --smoothing` saves.
     #[arg(long)]
     smoothing: Option<usize>,
-    /// Run the coarse simulator (all three variants) with this membrane compression factor,
-    /// in (0, 1], instead of the one the corrector was trained beside: to measure a corrector
-    /// beside a compression-soft coarse membrane without retraining it.
-    #[arg(long)]
-    coarse_compression: Option<f64>,
-    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
-    /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none), instead of the
-    /// one the corrector was trained beside.
-    #[arg(long)]
-    coarse_compression_knee: Option<f64>,
-    /// Run the coarse simulator (all three variants) with this Coulomb friction coefficient
-    /// against bodies instead of the one the corrector was trained beside.
-    #[arg(long)]
-    coarse_friction: Option<f64>,
-    /// The coarse simulator's wrinkle bending gain (extra bending stiffness where the coarse
-    /// membrane is shortened, fading in as the cloth's mean speed falls from 6 cm/s to rest;
-    /// 0: off), for every variant, in place of the corrector's
-    #[arg(long, value_name = "GAIN")]
-    coarse_wrinkle_bending: Option<f64>,
-    /// The coarse hinges' bending stiffness as a factor of the fabric's, for every variant, in
-    /// place of the corrector's.
-    #[arg(long, value_name = "FACTOR")]
-    coarse_bending: Option<f64>,
-    /// Crease contacts (`on` or `off`) of the coarse simulation, for every variant, in place
-    /// of the corrector's.
-    #[arg(long, value_name = "on|off", value_parser = crate::cli::on_off)]
-    coarse_crease_contacts: Option<bool>,
+    // The coarse model of all three variants, in place of the one the corrector was trained
+    // beside: to measure a corrector beside another coarse model without retraining it.
+    #[command(flatten)]
+    coarse: CoarseCalibration,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
     /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
@@ -119,38 +97,15 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     if let Some(n) = args.smoothing {
         corrector.config.smoothing = (n > 0).then_some(n);
     }
-    if let Some(c) = args.coarse_compression {
-        anyhow::ensure!(
-            c > 0.0 && c <= 1.0,
-            "--coarse-compression {c}: the factor must be in (0, 1]"
-        );
-        corrector.training.coarse_compression = (c != 1.0).then_some(c);
-    }
-    if let Some(s) = args.coarse_compression_knee {
-        anyhow::ensure!(
-            s >= 0.0 && s.is_finite(),
-            "--coarse-compression-knee {s}: the shortening must be > 0 (0: none)"
-        );
-        corrector.training.coarse_compression_knee = (s > 0.0).then_some(s);
-    }
-    if let Some(mu) = args.coarse_friction {
-        clothsr::sim::coarse::check_friction(mu)
-            .map_err(|e| anyhow::anyhow!("--coarse-friction: {e}"))?;
-        corrector.training.coarse_friction = Some(mu);
-    }
-    if let Some(g) = args.coarse_wrinkle_bending {
-        corrector.training.coarse_wrinkle_bending = clothsr::sim::WrinkleBending::gain_option(g)
-            .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?;
-    }
-    if let Some(b) = args.coarse_bending {
-        anyhow::ensure!(
-            b > 0.0 && b.is_finite(),
-            "--coarse-bending {b}: the factor must be > 0"
-        );
-        corrector.training.coarse_bending = (b != 1.0).then_some(b);
-    }
-    if let Some(on) = args.coarse_crease_contacts {
-        corrector.training.coarse_crease_contacts = (!on).then_some(false);
+    args.coarse.check_flags().map_err(anyhow::Error::msg)?;
+    let t = &mut corrector.training;
+    if let Some(c) = args.coarse.replacing(&t.coarse_calibration()) {
+        t.coarse_compression = c.compression;
+        t.coarse_compression_knee = c.compression_knee;
+        t.coarse_friction = c.friction;
+        t.coarse_wrinkle_bending = c.wrinkle_bending;
+        t.coarse_bending = c.bending;
+        t.coarse_crease_contacts = c.crease_contacts;
     }
     Ok(corrector)
 }

@@ -12,6 +12,7 @@ use clothsr::corrector::training::{
 };
 use clothsr::corrector::CorrectorConfig;
 use clothsr::data::coarse_simulation;
+use clothsr::sim::coarse::CoarseCalibration;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `train`.
@@ -218,36 +219,10 @@ pub struct CorrectorArgs {
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     seed: u64,
-    /// The coarse simulator's membrane stiffness under compression, as a factor (0, 1] of its
-    /// stretch stiffness: below 1 the coarse mesh gives way to the shortening that the fine
-    /// cloth takes up in wrinkles; saved with the model, which then runs with it.
-    /// [default: 1, or the `--init` model's]
-    #[arg(long)]
-    coarse_compression: Option<f64>,
-    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
-    /// membrane is stiff again, as the fine cloth's wrinkles pack tight; saved
-    /// with the model. [default: none, or the `--init` model's]
-    #[arg(long)]
-    coarse_compression_knee: Option<f64>,
-    /// The coarse simulator's Coulomb friction coefficient against bodies, saved with the
-    /// model, which then runs with it. [default: the simulator's, 0.3, or the `--init` model's]
-    #[arg(long)]
-    coarse_friction: Option<f64>,
-    /// The coarse simulator's wrinkle bending gain: extra bending stiffness where the coarse
-    /// membrane is shortened, up to this multiple of the fabric's, fading in as the cloth's
-    /// mean speed falls from 6 cm/s to rest; saved with the model, which then runs with it
-    /// (0: off). [default: off, or the `--init` model's]
-    #[arg(long, value_name = "GAIN")]
-    coarse_wrinkle_bending: Option<f64>,
-    /// The coarse hinges' bending stiffness as a factor of the fabric's; saved with the model,
-    /// which then runs with it. [default: 1, or the `--init` model's]
-    #[arg(long, value_name = "FACTOR")]
-    coarse_bending: Option<f64>,
-    /// Crease contacts of the coarse simulation trained beside, `on` or `off` (off: coarse
-    /// cloth edges may cut the colliders' sharp edges, as M_int's do); saved with the model,
-    /// which then runs so. [default: on, or as the `--init` model was trained]
-    #[arg(long, value_name = "on|off", value_parser = crate::cli::on_off)]
-    coarse_crease_contacts: Option<bool>,
+    // The coarse model trained beside, saved with the model, which then runs with it
+    // (unset: the `--init` model's, else the simulator's).
+    #[command(flatten)]
+    coarse: CoarseCalibration,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -340,22 +315,15 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         );
         model = model.with_share_min((m != 0.0).then_some(m));
     }
-    if let Some(b) = a.coarse_bending {
-        anyhow::ensure!(
-            b > 0.0 && b.is_finite(),
-            "--coarse-bending must be a factor > 0, got {b}"
-        );
-    }
-    let wrinkles = a
-        .coarse_wrinkle_bending
-        .map(clothsr::sim::WrinkleBending::gain_option)
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("--coarse-wrinkle-bending: {e}"))?
-        .flatten();
-    let compression = a
-        .coarse_compression
-        .or_else(|| init.as_ref().map(TrainingConfig::compression_factor))
-        .unwrap_or(1.0);
+    a.coarse.check_flags().map_err(anyhow::Error::msg)?;
+    let trained_beside = init
+        .as_ref()
+        .map(TrainingConfig::coarse_calibration)
+        .unwrap_or_default();
+    let coarse = a
+        .coarse
+        .replacing(&trained_beside)
+        .unwrap_or(trained_beside);
     let cfg = TrainingConfig::new(model)
         .with_steps(a.steps)
         .with_batch(a.batch)
@@ -370,30 +338,12 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
         .with_target_steps((a.target_steps != 1).then_some(a.target_steps))
         .with_seed(a.seed)
-        .with_coarse_compression((compression != 1.0).then_some(compression))
-        .with_coarse_compression_knee(
-            a.coarse_compression_knee
-                .or_else(|| init.as_ref().and_then(|c| c.coarse_compression_knee)),
-        )
-        .with_coarse_friction(
-            a.coarse_friction
-                .or_else(|| init.as_ref().and_then(|c| c.coarse_friction)),
-        )
-        .with_coarse_wrinkle_bending(match a.coarse_wrinkle_bending {
-            // 0 is none (and an `--init` model trained with a gain is then refused).
-            Some(_) => wrinkles,
-            None => init.as_ref().and_then(|c| c.coarse_wrinkle_bending),
-        })
-        .with_coarse_bending(
-            a.coarse_bending
-                .or_else(|| init.as_ref().and_then(|c| c.coarse_bending))
-                .filter(|&b| b != 1.0),
-        )
-        .with_coarse_crease_contacts(
-            a.coarse_crease_contacts
-                .or_else(|| init.as_ref().and_then(|c| c.coarse_crease_contacts))
-                .filter(|&on| !on),
-        )
+        .with_coarse_compression(coarse.compression)
+        .with_coarse_compression_knee(coarse.compression_knee)
+        .with_coarse_friction(coarse.friction)
+        .with_coarse_wrinkle_bending(coarse.wrinkle_bending)
+        .with_coarse_bending(coarse.bending)
+        .with_coarse_crease_contacts(coarse.crease_contacts)
         .with_init_from(a.init.clone())
         .with_distil_from(a.distil.clone())
         .with_average_from(a.average_from)
