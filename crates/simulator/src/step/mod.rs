@@ -1,0 +1,346 @@
+//! One implicit-Euler step as minimisation of the incremental potential
+//!
+//! x⁺ = argmin ½h⁻²‖x − x̃‖²_M + E(x) + D(x),  x̃ = xₙ + h vₙ + h² g,
+//!
+//! with E the membrane, bending, sewing and contact-repulsion energies, and D the dissipation:
+//! Coulomb friction against bodies (IPC's lagged friction potential, [`FrictionPoint`]) plus a
+//! Rayleigh-style damping potential Σ_c β k_c / (2h) · (∇C_c(xₙ) · (x − xₙ))² over every
+//! elastic condition C_c (weft, warp, shear of each triangle, angle of each hinge), i.e.
+//! stiffness-proportional damping of the strain rates (Baraff & Witkin 1998 §5), written as a
+//! potential so that line search stays consistent. Newton's method with a PSD Hessian, a
+//! block-Jacobi PCG linear solve and a backtracking line search; contacts are re-detected every iteration within
+//! d̂ + margin (a margin that widens with the cloth's speed) and each iteration moves no vertex
+//! more than margin / 2, so no contact can appear unseen; pairs already found close by at most
+//! 0.8 of their gap (see `ClosingPair`), so cloth never passes through cloth. A step that
+//! yields NaN, cannot decrease the energy or still has moves cut short after the iteration cap
+//! is retried as two half steps.
+
+mod contacts;
+mod damping;
+mod friction;
+mod line_search;
+mod linear;
+mod newton;
+mod params;
+mod potential;
+mod state;
+
+pub use friction::FrictionPoint;
+pub use line_search::FAST_CONTACT_MOVE_M;
+pub use params::{LinearSolver, SimParams};
+pub use state::{ColliderFrame, Pin, PinTarget, SimState, StepStats};
+
+use nalgebra::Vector3;
+
+use super::collide::{edge_triangle_crossings, CollisionDetector};
+use super::model::ClothModel;
+use super::scatter::ColouredElements;
+use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg, TwoLevel};
+use crate::error::{Error, Result};
+use contacts::{seam_rings, self_margin_cap};
+use linear::SERIAL_BELOW_VERTICES;
+use state::BodyMotion;
+
+/// Triangles (3 vertices, 9 blocks) and hinges (4 vertices, 16 blocks) for the coloured scatter.
+type MembraneSet = ColouredElements<3, 9>;
+type HingeSet = ColouredElements<4, 16>;
+
+/// The simulator: rest data, settings, pins and reusable buffers.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    /// The cloth.
+    pub model: ClothModel,
+    /// Settings.
+    pub params: SimParams,
+    /// Attached vertices.
+    pub pins: Vec<Pin>,
+    matrix: BlockCsr,
+    pcg: Pcg,
+    free: Vec<bool>,
+    grad: Vec<Vector3<f64>>,
+    dx: Vec<Vector3<f64>>,
+    rhs: Vec<Vector3<f64>>,
+    /// Membranes and hinges in colours that share no vertex, with their matrix slots.
+    mem_set: MembraneSet,
+    hinge_set: HingeSet,
+    detector: CollisionDetector,
+    /// For sewn vertices: the vertices sewn to them (sorted; see [`seam_rings`]).
+    seam_ring: std::collections::HashMap<u32, Vec<u32>>,
+    cholesky: Option<CholeskyPreconditioner>,
+    two_level: Option<TwoLevel>,
+    last_cg_iters: usize,
+    /// Rest length of each seam pair after the last successful step, m.
+    seam_rest_m: Vec<f64>,
+    /// Rest lengths of the step being solved, m.
+    seam_rest_step_m: Vec<f64>,
+    /// Detection margin for cloth–collider contacts, m: at least `detection_margin_m`, widened
+    /// to 2.5× the largest Newton displacement of the previous step (at most 1 cm), so that
+    /// cloth hitting a body at speed can take its full Newton step.
+    obstacle_margin_m: f64,
+    /// Upper bound of the cloth–cloth detection margin, m (see [`Simulator::self_margin_m`]).
+    self_margin_cap_m: f64,
+}
+/// Upper bound of the adaptive cloth–collider detection margin, m.
+const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
+impl Simulator {
+    /// A simulator for `model` with `params`.
+    pub fn new(model: ClothModel, params: SimParams) -> Simulator {
+        let n = model.num_vertices();
+        let matrix = BlockCsr::with_pattern(n, model.coupled_pairs());
+        Simulator {
+            free: vec![true; n],
+            grad: vec![Vector3::zeros(); n],
+            dx: vec![Vector3::zeros(); n],
+            rhs: Vec::with_capacity(n),
+            mem_set: MembraneSet::new(model.membranes.iter().map(|m| m.v).collect(), &matrix),
+            hinge_set: HingeSet::new(model.hinges.iter().map(|h| h.v).collect(), &matrix),
+            detector: CollisionDetector::new(),
+            seam_ring: seam_rings(&model),
+            cholesky: None,
+            two_level: None,
+            last_cg_iters: usize::MAX,
+            seam_rest_step_m: Vec::new(),
+            seam_rest_m: model
+                .mesh
+                .seam_pairs
+                .iter()
+                .map(|p| {
+                    (model.mesh.positions[p[0] as usize] - model.mesh.positions[p[1] as usize])
+                        .norm()
+                })
+                .collect(),
+            obstacle_margin_m: params.detection_margin_m,
+            self_margin_cap_m: self_margin_cap(&model),
+            model,
+            params,
+            pins: Vec::new(),
+            matrix,
+            // Small meshes solve their Newton systems on the step's own thread: rayon's
+            // hand-offs cost more than CG's short passes there (3K vertices: 0.27 vs 0.14 ms
+            // an iteration on two threads; a one-thread pool of its own took 9–11 ms a solve
+            // against 7 ms inline: the matrix then lives in the other core's cache).
+            // Detection, assembly and the line search use every thread at any size; their sums
+            // are taken in fixed chunks ([`super::reduce`]), so a run gives the same bits on
+            // any number of threads (a step's sums used to follow rayon's splits: the pencil
+            // skirt's rounding-sensitive dressing ended 65 mm open on two threads, 36 on one).
+            pcg: {
+                let mut pcg = Pcg::default();
+                pcg.set_single_threaded(n < SERIAL_BELOW_VERTICES);
+                pcg
+            },
+        }
+    }
+
+    /// Current rest length of every seam pair, m (they shrink as seams close).
+    pub fn seam_rest(&self) -> &[f64] {
+        &self.seam_rest_m
+    }
+
+    /// Sets the seam rest lengths (resuming a run, or following a state set from outside).
+    pub fn set_seam_rest(&mut self, rest: &[f64]) -> Result<()> {
+        if rest.len() != self.seam_rest_m.len() {
+            return Err(Error::Invalid(format!(
+                "{} seam rest lengths for {} seam pairs",
+                rest.len(),
+                self.seam_rest_m.len()
+            )));
+        }
+        self.seam_rest_m.copy_from_slice(rest);
+        Ok(())
+    }
+
+    /// The cloth–collider detection margin the next step starts with, m (adapted to the last
+    /// step's largest move; part of what a resumed run must restore to continue exactly).
+    pub fn obstacle_margin_m(&self) -> f64 {
+        self.obstacle_margin_m
+    }
+
+    /// The cloth–cloth detection margin of the next step, m: pairs closer than d̂ plus this are
+    /// contact candidates, so a vertex may move half of it per Newton iteration. It follows the
+    /// obstacle margin (2.5× the last step's largest move), from `detection_margin_m` up to
+    /// half the mesh's short edges (see `self_margin_cap`). With the fixed
+    /// `detection_margin_m` (d̂) every vertex moved at most ½ d̂ (0.075 edge lengths) per Newton
+    /// iteration; found cloth–cloth pairs now close by at most 0.8 of their gap instead (see
+    /// `ClosingPair`).
+    pub fn self_margin_m(&self) -> f64 {
+        self.obstacle_margin_m
+            .min(self.self_margin_cap_m)
+            .max(self.params.detection_margin_m)
+    }
+
+    /// Sets the detection margin of the next step (resuming a run); clamped to the allowed range.
+    pub fn set_obstacle_margin_m(&mut self, margin_m: f64) {
+        if margin_m.is_finite() {
+            self.obstacle_margin_m = margin_m
+                .min(MAX_OBSTACLE_MARGIN_M)
+                .max(self.params.detection_margin_m);
+        }
+    }
+
+    /// The cloth's edge–triangle crossings at `x` ([`edge_triangle_crossings`]), leaving out
+    /// pairs next to each other through a seam (sewn panels meet there within the seam gap):
+    /// 0 for cloth that never passed through itself.
+    pub fn self_intersections(&self, x: &[Vector3<f64>]) -> usize {
+        edge_triangle_crossings(x, &self.model.mesh.triangles, &self.model.edges, |e, t| {
+            !self.sewn_together(&e, &t)
+        })
+        .len()
+    }
+
+    /// Whether a vertex of `a` is sewn to a vertex of `b` ([`seam_rings`]).
+    pub(super) fn sewn_together(&self, a: &[u32], b: &[u32]) -> bool {
+        a.iter().any(|p| {
+            self.seam_ring
+                .get(p)
+                .is_some_and(|r| b.iter().any(|q| r.binary_search(q).is_ok()))
+        })
+    }
+
+    /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
+    pub fn max_seam_gap_m(&self, x: &[Vector3<f64>]) -> f64 {
+        self.model
+            .mesh
+            .seam_pairs
+            .iter()
+            .map(|p| (x[p[0] as usize] - x[p[1] as usize]).norm())
+            .fold(0.0, f64::max)
+    }
+
+    /// The rest state: mesh positions, zero velocity, t = 0.
+    pub fn initial_state(&self) -> SimState {
+        let n = self.model.num_vertices();
+        SimState {
+            x: self.model.mesh.positions.clone(),
+            v: vec![Vector3::zeros(); n],
+            t_s: 0.0,
+        }
+    }
+
+    /// Sets the pins (replacing earlier ones).
+    pub fn set_pins(&mut self, pins: Vec<Pin>) {
+        self.free.iter_mut().for_each(|f| *f = true);
+        for p in &pins {
+            self.free[p.v as usize] = false;
+        }
+        self.pins = pins;
+    }
+
+    pub(super) fn pin_position(&self, pin: &Pin, colliders: &[ColliderFrame<'_>]) -> Vector3<f64> {
+        match pin.target {
+            PinTarget::Fixed(p) => p,
+            PinTarget::Body {
+                collider,
+                triangle,
+                bary,
+            } => {
+                let c = &colliders[collider];
+                let t = c.triangles[triangle as usize];
+                c.points[t[0] as usize] * bary.x
+                    + c.points[t[1] as usize] * bary.y
+                    + c.points[t[2] as usize] * bary.z
+            }
+        }
+    }
+
+    /// The collision detector (its counters).
+    pub fn detector(&self) -> &CollisionDetector {
+        &self.detector
+    }
+
+    /// The collision detector (its tuning).
+    pub fn detector_mut(&mut self) -> &mut CollisionDetector {
+        &mut self.detector
+    }
+
+    /// Advances `state` by one time step; colliders are given at the start and the end of the
+    /// step (linearly interpolated inside when the step is subdivided).
+    pub fn step(
+        &mut self,
+        state: &SimState,
+        colliders_start: &[ColliderFrame<'_>],
+        colliders_end: &[ColliderFrame<'_>],
+    ) -> Result<(SimState, StepStats)> {
+        self.model.update_wrinkle_bending(&state.x, &state.v);
+        let mut stats = StepStats::default();
+        let h = self.params.dt_s;
+        // On a worker of rayon's pool: the step's many short parallel passes then start from
+        // inside the pool instead of each waking it from the caller's thread.
+        let next = rayon::scope(|_| {
+            self.advance(
+                state,
+                colliders_start,
+                colliders_end,
+                0.0,
+                1.0,
+                h,
+                0,
+                &mut stats,
+            )
+        })?;
+        Ok((next, stats))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn advance(
+        &mut self,
+        state: &SimState,
+        c0: &[ColliderFrame<'_>],
+        c1: &[ColliderFrame<'_>],
+        a: f64,
+        b: f64,
+        h: f64,
+        depth: u32,
+        stats: &mut StepStats,
+    ) -> Result<SimState> {
+        // Colliders at the end of this sub-step.
+        let lerp = |w: f64| -> Vec<Vec<Vector3<f64>>> {
+            c0.iter()
+                .zip(c1)
+                .map(|(p, q)| {
+                    p.points
+                        .iter()
+                        .zip(q.points)
+                        .map(|(x, y)| x * (1.0 - w) + y * w)
+                        .collect()
+                })
+                .collect()
+        };
+        let owned;
+        let end: Vec<ColliderFrame<'_>> = if b >= 1.0 {
+            c1.to_vec()
+        } else {
+            owned = lerp(b);
+            owned
+                .iter()
+                .zip(c1)
+                .map(|(p, c)| ColliderFrame {
+                    points: p,
+                    triangles: c.triangles,
+                })
+                .collect()
+        };
+        // Colliders move linearly over the whole step: their velocity is (c1 − c0) / dt.
+        let motion = BodyMotion {
+            start: c0,
+            end: c1,
+            dt_s: h / (b - a),
+            from: a,
+            to: b,
+        };
+        let last_resort = depth >= self.params.max_halvings;
+        match self.solve_step(state, &end, &motion, h, last_resort, stats) {
+            Ok(s) => Ok(s),
+            Err(e) if depth < self.params.max_halvings => {
+                tracing::debug!(
+                    "step at t = {:.5} s failed ({e}); halving dt to {:.2e} s",
+                    state.t_s,
+                    h / 2.0
+                );
+                let mid = 0.5 * (a + b);
+                let half = self.advance(state, c0, c1, a, mid, h / 2.0, depth + 1, stats)?;
+                self.advance(&half, c0, c1, mid, b, h / 2.0, depth + 1, stats)
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
