@@ -359,8 +359,44 @@ pub fn generate(
         ));
     }
     let transfer = Transfer::new(cm, fm)?;
-    let dressed = opts.dress && !fm.seam_pairs.is_empty();
-    let mut manifest = Manifest {
+    let mut manifest = new_manifest(scene_name, opts, &coarse, &fine, coarse_dhat_m);
+    let manifest_path = dir.join("manifest.json");
+    std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
+    let start_frame = resume_point(dir, &mut manifest)?;
+    if start_frame > 0 {
+        restore(dir, start_frame, &mut fine, &mut coarse)?;
+    } else {
+        start_new(dir, &manifest, &transfer, &mut fine, &mut coarse)?;
+    }
+    manifest.frames_done = start_frame;
+    progress(Progress {
+        frames_done: start_frame,
+        frames: opts.frames,
+    });
+    let mut prev_int = downsample(&transfer, &fine.state);
+    for k in start_frame + 1..=opts.frames {
+        let buf = simulate_frame(&mut fine, &mut coarse, &transfer, &mut prev_int)?;
+        write_frame(&frame_path(dir, k), &buf, &fine, &coarse)?;
+        manifest.frames_done = k;
+        crate::write_atomic(&manifest_path, &manifest_json(&manifest)?)?;
+        progress(Progress {
+            frames_done: k,
+            frames: opts.frames,
+        });
+    }
+    Ok(manifest)
+}
+
+/// The manifest of a data set made with `opts` before any frame is done.
+fn new_manifest(
+    scene_name: &str,
+    opts: &Options,
+    coarse: &Simulation,
+    fine: &Simulation,
+    coarse_dhat_m: Option<f64>,
+) -> Manifest {
+    let (cm, fm) = (&coarse.sim.model.mesh, &fine.sim.model.mesh);
+    Manifest {
         format_version: FORMAT_VERSION,
         scene: scene_name.to_string(),
         variation: opts.variation,
@@ -385,186 +421,220 @@ pub fn generate(
             .iter()
             .map(|p| p.fabric.name.clone())
             .collect(),
-        dressed,
+        dressed: opts.dress && !fm.seam_pairs.is_empty(),
         git_revision: env!("CLOTHSR_GIT_REVISION").to_string(),
-        fast,
-        self_collision,
+        fast: opts.fast,
+        self_collision: opts.self_collision,
         source: opts.source.clone(),
         coarse_dhat_m,
         fork: None,
-    };
-    let manifest_path = dir.join("manifest.json");
-    std::fs::create_dir_all(dir.join("frames")).map_err(|e| Error::io(dir, e))?;
-
-    // Resume when a compatible run is on disk.
-    let mut start_frame = 0;
-    if manifest_path.exists() {
-        let old = read_manifest(dir)?;
-        let same = Manifest {
-            frames_done: old.frames_done,
-            frames_requested: old.frames_requested,
-            git_revision: old.git_revision.clone(),
-            fork: old.fork.clone(),
-            ..manifest.clone()
-        };
-        if same != old {
-            return Err(Error::bad_input(
-                &manifest_path,
-                "a different data set is already here (scene, variation, resolutions or meshes \
-                 differ); choose another directory",
-            ));
-        }
-        start_frame = old.frames_done;
-        manifest.fork = old.fork;
     }
-    let int_of = |s: &SimState| SimState {
+}
+
+/// The frame a run in `dir` starts after: 0 for a new data set, or the frames done of the
+/// compatible run on disk (its fork record then carries over to `manifest`).
+fn resume_point(dir: &Path, manifest: &mut Manifest) -> Result<usize> {
+    // Resume when a compatible run is on disk.
+    let manifest_path = dir.join("manifest.json");
+    if !manifest_path.exists() {
+        return Ok(0);
+    }
+    let old = read_manifest(dir)?;
+    let same = Manifest {
+        frames_done: old.frames_done,
+        frames_requested: old.frames_requested,
+        git_revision: old.git_revision.clone(),
+        fork: old.fork.clone(),
+        ..manifest.clone()
+    };
+    if same != old {
+        return Err(Error::bad_input(
+            &manifest_path,
+            "a different data set is already here (scene, variation, resolutions or meshes \
+             differ); choose another directory",
+        ));
+    }
+    manifest.fork = old.fork;
+    Ok(old.frames_done)
+}
+
+/// M_int of a fine state: downsampled to the coarse mesh.
+fn downsample(transfer: &Transfer, s: &SimState) -> SimState {
+    SimState {
         x: transfer.downsample(&s.x),
         v: transfer.downsample(&s.v),
         t_s: s.t_s,
-    };
-    if start_frame > 0 {
-        let path = frame_path(dir, start_frame);
-        let r = TensorReader::open(&path)?;
-        let x = unflat(&r.f64("resume_fine_x")?.1);
-        let v = unflat(&r.f64("resume_fine_v")?.1);
-        if x.len() != fm.num_vertices() || v.len() != x.len() {
-            return Err(Error::bad_input(
-                &path,
-                "resume state has the wrong vertex count",
-            ));
-        }
-        fine.state.x = x;
-        fine.state.v = v;
-        fine.state.t_s += (start_frame * fine.steps_per_frame) as f64 * fine.sim.params.dt_s;
-        fine.sim.set_seam_rest(&r.f64("resume_fine_seam_rest")?.1)?;
+    }
+}
+
+/// Restores both simulations to the end of frame `start_frame` from its frame file in `dir`.
+fn restore(
+    dir: &Path,
+    start_frame: usize,
+    fine: &mut Simulation,
+    coarse: &mut Simulation,
+) -> Result<()> {
+    let path = frame_path(dir, start_frame);
+    let r = TensorReader::open(&path)?;
+    let x = unflat(&r.f64("resume_fine_x")?.1);
+    let v = unflat(&r.f64("resume_fine_v")?.1);
+    if x.len() != fine.sim.model.mesh.num_vertices() || v.len() != x.len() {
+        return Err(Error::bad_input(
+            &path,
+            "resume state has the wrong vertex count",
+        ));
+    }
+    fine.state.x = x;
+    fine.state.v = v;
+    fine.state.t_s += (start_frame * fine.steps_per_frame) as f64 * fine.sim.params.dt_s;
+    fine.sim.set_seam_rest(&r.f64("resume_fine_seam_rest")?.1)?;
+    coarse
+        .sim
+        .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
+    // The detection margins follow the last step's largest move, and a step's Newton
+    // displacement is bounded by them: a run resumed without them takes a different first
+    // step (millimetres on a walking skirt).
+    if r.has("resume_fine_margin") || r.has("resume_coarse_margin") {
+        let margin = |name: &str| -> Result<f64> {
+            r.f64(name)?
+                .1
+                .first()
+                .copied()
+                .ok_or_else(|| Error::bad_input(&path, format!("tensor '{name}' is empty")))
+        };
+        fine.sim
+            .set_obstacle_margin_m(margin("resume_fine_margin")?);
         coarse
             .sim
-            .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
-        // The detection margins follow the last step's largest move, and a step's Newton
-        // displacement is bounded by them: a run resumed without them takes a different first
-        // step (millimetres on a walking skirt).
-        if r.has("resume_fine_margin") || r.has("resume_coarse_margin") {
-            let margin = |name: &str| -> Result<f64> {
-                r.f64(name)?
-                    .1
-                    .first()
-                    .copied()
-                    .ok_or_else(|| Error::bad_input(&path, format!("tensor '{name}' is empty")))
-            };
-            fine.sim
-                .set_obstacle_margin_m(margin("resume_fine_margin")?);
-            coarse
-                .sim
-                .set_obstacle_margin_m(margin("resume_coarse_margin")?);
-        } else {
-            tracing::warn!(
-                "{}: no detection margins (written by an older clothsr); the run continues \
-                 from its state but not exactly as it would have",
-                path.display()
-            );
-        }
+            .set_obstacle_margin_m(margin("resume_coarse_margin")?);
     } else {
-        if dressed {
-            // Dressed at the coarse resolution (rolled, sewn, draped), then carried onto the
-            // fine mesh (Phong-tessellated, so that it bulges with the body instead of cutting
-            // chords into it) where it sews its last millimetres and drapes again: the fine
-            // mesh dressed from its flat pattern took ~18 s a step for a pencil skirt at
-            // 2.5 mm, its steps halved under the move limits while the seams were open.
-            let c = coarse.dress(2.0, 0.3, 1e-3)?;
-            let x = transfer.upsample_phong(
-                &coarse.state.x,
-                &coarse.sim.model.mesh.triangles,
-                DRESS_PHONG_ALPHA,
-            );
-            tracing::info!(
-                "dressed the coarse mesh ({} sewing, {} settling steps, seams {:.1} mm); dressing \
-                 the fine mesh ({} vertices) from it",
-                c.sew_steps,
-                c.settle_steps,
-                c.seam_gap_m * 1e3,
-                x.len()
-            );
-            let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
-            tracing::info!(
-                "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
-                f.sew_steps,
-                f.settle_steps,
-                f.seam_gap_m * 1e3
-            );
-        }
-        let rest: Vec<f64> = {
-            let int = int_of(&fine.state);
-            coarse
-                .sim
-                .model
-                .mesh
-                .seam_pairs
-                .iter()
-                .zip(coarse.sim.seam_rest())
-                .map(|(p, r)| r.min((int.x[p[0] as usize] - int.x[p[1] as usize]).norm()))
-                .collect()
-        };
-        coarse.sim.set_seam_rest(&rest)?;
-        write_meshes(
-            &dir.join("meshes.safetensors"),
-            &coarse.sim.model.mesh,
-            &fine.sim.model.mesh,
-        )?;
-        crate::write_atomic(&manifest_path, &manifest_json(&manifest)?)?;
+        tracing::warn!(
+            "{}: no detection margins (written by an older clothsr); the run continues \
+             from its state but not exactly as it would have",
+            path.display()
+        );
     }
-    manifest.frames_done = start_frame;
-    progress(Progress {
-        frames_done: start_frame,
-        frames: opts.frames,
-    });
+    Ok(())
+}
+
+/// Starts a new data set in `dir`: dresses the garments when the manifest says so, starts the
+/// coarse seams no longer than the downsampled fine ones, and writes the meshes and the
+/// manifest.
+fn start_new(
+    dir: &Path,
+    manifest: &Manifest,
+    transfer: &Transfer,
+    fine: &mut Simulation,
+    coarse: &mut Simulation,
+) -> Result<()> {
+    if manifest.dressed {
+        // Dressed at the coarse resolution (rolled, sewn, draped), then carried onto the
+        // fine mesh (Phong-tessellated, so that it bulges with the body instead of cutting
+        // chords into it) where it sews its last millimetres and drapes again: the fine
+        // mesh dressed from its flat pattern took ~18 s a step for a pencil skirt at
+        // 2.5 mm, its steps halved under the move limits while the seams were open.
+        let c = coarse.dress(2.0, 0.3, 1e-3)?;
+        let x = transfer.upsample_phong(
+            &coarse.state.x,
+            &coarse.sim.model.mesh.triangles,
+            DRESS_PHONG_ALPHA,
+        );
+        tracing::info!(
+            "dressed the coarse mesh ({} sewing, {} settling steps, seams {:.1} mm); dressing \
+             the fine mesh ({} vertices) from it",
+            c.sew_steps,
+            c.settle_steps,
+            c.seam_gap_m * 1e3,
+            x.len()
+        );
+        let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
+        tracing::info!(
+            "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
+            f.sew_steps,
+            f.settle_steps,
+            f.seam_gap_m * 1e3
+        );
+    }
+    let rest: Vec<f64> = {
+        let int = downsample(transfer, &fine.state);
+        coarse
+            .sim
+            .model
+            .mesh
+            .seam_pairs
+            .iter()
+            .zip(coarse.sim.seam_rest())
+            .map(|(p, r)| r.min((int.x[p[0] as usize] - int.x[p[1] as usize]).norm()))
+            .collect()
+    };
+    coarse.sim.set_seam_rest(&rest)?;
+    write_meshes(
+        &dir.join("meshes.safetensors"),
+        &coarse.sim.model.mesh,
+        &fine.sim.model.mesh,
+    )?;
+    crate::write_atomic(&dir.join("manifest.json"), &manifest_json(manifest)?)
+}
+
+/// The steps of one output frame: the fine simulation's, each downsampled to M_int, and the
+/// coarse step from the previous M_int (`prev_int`, updated) to M_c; as `int_x`, `int_v`,
+/// `coarse_x`, `coarse_v`.
+fn simulate_frame(
+    fine: &mut Simulation,
+    coarse: &mut Simulation,
+    transfer: &Transfer,
+    prev_int: &mut SimState,
+) -> Result<[Vec<f32>; 4]> {
     let (nc, s) = (coarse.sim.model.num_vertices(), fine.steps_per_frame);
-    let mut prev_int = int_of(&fine.state);
-    for k in start_frame + 1..=opts.frames {
-        let mut buf: [Vec<f32>; 4] = std::array::from_fn(|_| Vec::with_capacity(s * nc * 3));
-        for _ in 0..s {
-            fine.step()?;
-            let int = int_of(&fine.state);
-            let (c, _) = coarse.step_from(&prev_int)?;
-            buf[0].extend(flat32(&int.x));
-            buf[1].extend(flat32(&int.v));
-            buf[2].extend(flat32(&c.x));
-            buf[3].extend(flat32(&c.v));
-            prev_int = int;
-        }
-        let nf = fine.state.x.len();
-        let mut w = TensorWriter::new();
-        for (name, data) in ["int_x", "int_v", "coarse_x", "coarse_v"].iter().zip(&buf) {
-            w.f32(name, &[s, nc, 3], data);
-        }
-        w.f32("fine_x", &[nf, 3], &flat32(&fine.state.x))
-            .f32("fine_v", &[nf, 3], &flat32(&fine.state.v))
-            .f64("resume_fine_x", &[nf, 3], &flat64(&fine.state.x))
-            .f64("resume_fine_v", &[nf, 3], &flat64(&fine.state.v))
-            .f64(
-                "resume_fine_seam_rest",
-                &[fine.sim.seam_rest().len()],
-                fine.sim.seam_rest(),
-            )
-            .f64(
-                "resume_coarse_seam_rest",
-                &[coarse.sim.seam_rest().len()],
-                coarse.sim.seam_rest(),
-            )
-            .f64("resume_fine_margin", &[1], &[fine.sim.obstacle_margin_m()])
-            .f64(
-                "resume_coarse_margin",
-                &[1],
-                &[coarse.sim.obstacle_margin_m()],
-            );
-        w.write(&frame_path(dir, k))?;
-        manifest.frames_done = k;
-        crate::write_atomic(&manifest_path, &manifest_json(&manifest)?)?;
-        progress(Progress {
-            frames_done: k,
-            frames: opts.frames,
-        });
+    let mut buf: [Vec<f32>; 4] = std::array::from_fn(|_| Vec::with_capacity(s * nc * 3));
+    for _ in 0..s {
+        fine.step()?;
+        let int = downsample(transfer, &fine.state);
+        let (c, _) = coarse.step_from(prev_int)?;
+        buf[0].extend(flat32(&int.x));
+        buf[1].extend(flat32(&int.v));
+        buf[2].extend(flat32(&c.x));
+        buf[3].extend(flat32(&c.v));
+        *prev_int = int;
     }
-    Ok(manifest)
+    Ok(buf)
+}
+
+/// Writes a frame file: the frame's steps `buf` ([`simulate_frame`]), the fine state at its
+/// end and what a resume needs.
+fn write_frame(
+    path: &Path,
+    buf: &[Vec<f32>; 4],
+    fine: &Simulation,
+    coarse: &Simulation,
+) -> Result<()> {
+    let (nc, s) = (coarse.sim.model.num_vertices(), fine.steps_per_frame);
+    let nf = fine.state.x.len();
+    let mut w = TensorWriter::new();
+    for (name, data) in ["int_x", "int_v", "coarse_x", "coarse_v"].iter().zip(buf) {
+        w.f32(name, &[s, nc, 3], data);
+    }
+    w.f32("fine_x", &[nf, 3], &flat32(&fine.state.x))
+        .f32("fine_v", &[nf, 3], &flat32(&fine.state.v))
+        .f64("resume_fine_x", &[nf, 3], &flat64(&fine.state.x))
+        .f64("resume_fine_v", &[nf, 3], &flat64(&fine.state.v))
+        .f64(
+            "resume_fine_seam_rest",
+            &[fine.sim.seam_rest().len()],
+            fine.sim.seam_rest(),
+        )
+        .f64(
+            "resume_coarse_seam_rest",
+            &[coarse.sim.seam_rest().len()],
+            coarse.sim.seam_rest(),
+        )
+        .f64("resume_fine_margin", &[1], &[fine.sim.obstacle_margin_m()])
+        .f64(
+            "resume_coarse_margin",
+            &[1],
+            &[coarse.sim.obstacle_margin_m()],
+        );
+    w.write(path)
 }
 
 /// Forks the data set in `src` at its frame `frame`: writes `dst` holding copies of frames
