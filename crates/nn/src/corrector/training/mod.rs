@@ -1,0 +1,503 @@
+//! Training the corrector (the paper's §3.3.2, §3.3.4).
+//!
+//! * **Phase 1**, one-step supervision: L = |p − p̄| (normalised units, mean over vertices and
+//!   components) with Adam and an exponential learning-rate decay from `lr_start` to `lr_end`
+//!   over `steps`. GNS-style training noise (Sanchez-Gonzalez et al. 2020): M_c's positions are
+//!   perturbed by δ ~ N(0, σ²), its velocities by δ/h (as if the step had ended there) and the
+//!   target becomes the correction that still lands on M_int. Optional random overlapping
+//!   sub-mesh patches (breadth-first balls of `patch_nodes` vertices; the loss skips each
+//!   patch's two outer rings, whose neighbourhoods are cut).
+//! * **Phase 2**, window rollout training (Kim et al. 2019): from a random ground-truth M_int
+//!   roll out `window` steps of the real coarse simulator interleaved with the corrector; the
+//!   loss is the mean over the window of |p_i − p̄_i|, with p̄_i = (x_int,i − x_c,i)/h the
+//!   correction that brings the rollout back onto the ground truth. Gradients flow through the
+//!   network at every step (the simulator's output is data).
+//!
+//! * Beyond the paper: a warm start from a trained corrector ([`TrainingConfig::init_from`]),
+//!   an average of the phase-2 weights ([`TrainingConfig::average_from`]), phase-2 windows
+//!   rolled out as at inference ([`TrainingConfig::rollout_as_inference`]) and phase 1
+//!   distilling a trained corrector ([`TrainingConfig::distil_from`]).
+//!
+//! The output directory holds `config.json`, `normalisation.json`, `model.bpk`, `log.csv`
+//! (phase, step, learning rate, loss, elapsed seconds) and, while training, `checkpoint/`
+//! (weights, optimiser state, position), from which an interrupted run resumes.
+
+mod checkpoint;
+mod config;
+mod phase1;
+mod phase2;
+mod start;
+mod validation;
+
+pub use checkpoint::{save_model, VALIDATION_LOG};
+pub use config::{TrainingConfig, DEFAULT_DRIFT_REFRESH, DEFAULT_DRIFT_TAU_STEPS};
+pub use phase2::pull_back_target;
+pub use validation::ValidationSet;
+
+use std::io::Write;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::config::Config;
+use burn::optim::AdamConfig;
+use burn::tensor::Device;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+use super::data::{vectors, Sequence};
+use super::inference::{read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
+use super::model::CorrectorNet;
+use super::normalise::{Normalisation, NormalisationBuilder};
+use crate::common::{default_device, write_json};
+use crate::error::{Error, Result};
+use crate::sim::coarse::check_friction;
+use crate::sim::driver::Simulation;
+use crate::sim::SimState;
+use crate::sim::WrinkleBending;
+use checkpoint::{Position, WeightAverage, AVERAGE_FILE, BEST_FILE, CHECKPOINT_DIR};
+use start::{teacher, warm_start};
+
+/// A training sequence and, for phase 2, the coarse simulation it was made with
+/// ([`crate::data::coarse_simulation`]).
+pub struct TrainSet {
+    /// The sequence.
+    pub seq: Sequence,
+    /// The coarse simulator (phase 2 only) and its time at the data set's frame 0, s.
+    pub sim: Option<(Simulation, f64)>,
+}
+
+/// Progress, reported after each optimiser step.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress {
+    /// 1 or 2.
+    pub phase: u8,
+    /// Steps done in this phase.
+    pub step: usize,
+    /// Steps in this phase.
+    pub total: usize,
+    /// Loss of the last step.
+    pub loss: f64,
+}
+
+/// What training did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Summary {
+    /// Mean phase-1 loss over the first 50 steps run and the last 50.
+    pub phase1_first_last: (f64, f64),
+    /// Mean phase-2 loss over the first 20 windows run and the last 20.
+    pub phase2_first_last: (f64, f64),
+    /// Phase-2 windows run.
+    pub phase2_iters: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+    /// Training-noise standard deviation used, m.
+    pub noise_std_m: f64,
+    /// Stopped by the progress callback before the end; resumable from the checkpoint.
+    pub interrupted: bool,
+    /// With validation: the saved network's pooled interleaved error on the validation sets,
+    /// mm, and where it was taken (phase, step or window).
+    pub validation_best: Option<(f64, u8, usize)>,
+    /// With validation: every validation's pooled error, (phase, step or window, mm; infinite
+    /// where the rollout diverged).
+    pub validations: Vec<(u8, usize, f64)>,
+    /// Phase-2 networks whose mean weights were saved ([`TrainingConfig::average_from`]; 0:
+    /// the last network's, or the best validated one's).
+    pub averaged: usize,
+    /// The interleaved runs made for drift windows ([`TrainingConfig::drift_share`]): the
+    /// phase-2 window each was made at and its mean distance to M_int over the training
+    /// sets' steps, mm.
+    pub drift_runs: Vec<(usize, f64)>,
+}
+
+struct Trainer<'a> {
+    cfg: &'a TrainingConfig,
+    out: PathBuf,
+    device: Device,
+    net: CorrectorNet,
+    optim: burn::optim::ModuleOptimizer,
+    norm: Normalisation,
+    noise_std_m: f64,
+    position: Position,
+    log: std::fs::File,
+    t0: Instant,
+    rng: StdRng,
+    stopped: bool,
+    /// The network of [`Position::best`].
+    best: Option<CorrectorNet>,
+    /// Every validation of this call, for the summary.
+    validations: Vec<(u8, usize, f64)>,
+    /// The running mean of the phase-2 weights ([`TrainingConfig::average_from`]), once begun.
+    average: Option<WeightAverage>,
+    /// Per training set, the last interleaved run's corrected states by sequence step (index
+    /// 0: the first step's M_int; [`TrainingConfig::drift_share`]); empty until the first
+    /// drift window.
+    drift: Vec<Vec<SimState>>,
+    /// Drift windows run since [`Self::drift`] was made.
+    drift_used: usize,
+    /// Per training set, its coarse simulation as it was before phase 2's first window: each
+    /// interleaved run for drift windows starts from a copy, as a run at inference would.
+    pristine: Vec<Option<Simulation>>,
+    /// [`Summary::drift_runs`].
+    drift_runs: Vec<(usize, f64)>,
+    /// The network distilled ([`TrainingConfig::distil_from`]).
+    teacher: Option<CorrectorNet>,
+}
+
+fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) -> Result<()> {
+    let bad = |m: &str| Err(Error::Invalid(format!("training configuration: {m}")));
+    if sets.is_empty() || sets.iter().all(|s| s.seq.steps.is_empty()) {
+        return bad("no training data");
+    }
+    match (cfg.validate_every, validation.is_empty()) {
+        (Some(0), _) => return bad("validate_every must be at least 1"),
+        (Some(_), true) => return bad("validation asked for without validation data"),
+        (None, false) => return bad("validation data given but validate_every not set"),
+        _ => {}
+    }
+    if let Some(v) = validation
+        .iter()
+        .find(|v| v.frames(cfg.validation_frames) == 0)
+    {
+        return bad(&format!(
+            "validation set {} has no whole frame to roll out",
+            v.seq.dir.display()
+        ));
+    }
+    let trained: Vec<PathBuf> = sets
+        .iter()
+        .filter_map(|s| s.seq.dir.canonicalize().ok())
+        .collect();
+    if let Some(v) = validation
+        .iter()
+        .find(|v| v.seq.dir.canonicalize().is_ok_and(|d| trained.contains(&d)))
+    {
+        return bad(&format!(
+            "{} is both a training and a validation set",
+            v.seq.dir.display()
+        ));
+    }
+    if cfg.batch == 0 || cfg.window == 0 {
+        return bad("batch and window must be at least 1");
+    }
+    let rates = [cfg.lr_start, cfg.lr_end, cfg.rollout_lr];
+    if rates.iter().any(|r| !(r.is_finite() && *r > 0.0)) {
+        return bad("learning rates must be positive");
+    }
+    if !(cfg.noise_ratio.is_finite() && cfg.noise_ratio >= 0.0) {
+        return bad("noise_ratio must not be negative");
+    }
+    if let Err(e) = cfg.model.check() {
+        return bad(&e);
+    }
+    if let Some(Err(e)) = cfg
+        .coarse_wrinkle_bending
+        .map(|g| WrinkleBending::with_gain(g).check())
+    {
+        return bad(&e);
+    }
+    if let Some(Err(e)) = cfg.coarse_friction.map(check_friction) {
+        return bad(&format!("coarse: {e}"));
+    }
+    if cfg
+        .coarse_bending
+        .is_some_and(|b| !(b > 0.0 && b.is_finite()))
+    {
+        return bad("coarse_bending must be a factor > 0");
+    }
+    if cfg
+        .rollout_tau_steps
+        .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
+    {
+        return bad("rollout_tau_steps must be at least 1");
+    }
+    if cfg.target_steps == Some(0) {
+        return bad("target_steps must be at least 1");
+    }
+    if cfg.rollout_iters > 0
+        && !sets
+            .iter()
+            .any(|s| s.sim.is_some() && s.seq.steps.len() > cfg.window)
+    {
+        return bad("phase 2 needs a coarse simulator and a sequence longer than the window");
+    }
+    if cfg
+        .drift_share
+        .is_some_and(|d| !(d.is_finite() && d > 0.0 && d <= 1.0))
+    {
+        return bad("drift_share must be in (0, 1]");
+    }
+    if cfg.drift_refresh == Some(0) {
+        return bad("drift_refresh must be at least 1");
+    }
+    if cfg
+        .drift_tau_steps
+        .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
+    {
+        return bad("drift_tau_steps must be at least 1");
+    }
+    if cfg.average_from.is_some_and(|k| k >= cfg.rollout_iters) {
+        return bad("average_from must be below rollout_iters (weights are averaged in phase 2)");
+    }
+    Ok(())
+}
+
+/// Trains a corrector on `sets` into `out` (resuming from `out/checkpoint` when the
+/// configuration there is the same); `progress` sees every optimiser step and may stop the
+/// run (`ControlFlow::Break`): the position is then checkpointed and the summary says
+/// `interrupted`, and a later call with the same arguments resumes.
+pub fn train(
+    cfg: &TrainingConfig,
+    sets: &mut [TrainSet],
+    validation: &[ValidationSet],
+    out: &Path,
+    mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<Summary> {
+    check(cfg, sets, validation)?;
+    // A run refused before it trained (an `--init` model it cannot start from) leaves no
+    // folder it made behind.
+    let made_out = !out.exists();
+    let (position, resuming) = open_run(cfg, out)?;
+    let norm_path = out.join(NORMALISATION_FILE);
+    let device = default_device()?.autodiff();
+    device.seed(cfg.seed);
+    let (start, teacher) = match starting_models(cfg, &device, resuming) {
+        Ok(loaded) => loaded,
+        Err(e) => {
+            if made_out {
+                // Best effort: the refusal is the error to report.
+                let _ = std::fs::remove_dir_all(out);
+            }
+            return Err(e);
+        }
+    };
+    let norm = if resuming {
+        read_json(&norm_path)?
+    } else {
+        let norm = match (&start, &teacher) {
+            (Some((_, norm)), _) | (None, Some((_, norm))) => norm.clone(),
+            (None, None) => fit_normalisation(sets),
+        };
+        write_json(&norm_path, &norm)?;
+        write_json(&out.join(CONFIG_FILE), cfg)?;
+        norm
+    };
+    let rms: f64 = sets.iter().map(|s| s.seq.rms_correction_m()).sum::<f64>() / sets.len() as f64;
+    let net = match start {
+        Some((net, _)) => net,
+        None => cfg.model.init(&device),
+    };
+    let (net, optim, average) = if resuming {
+        resume_weights(cfg, out, &device, net, &position)?
+    } else {
+        (net, AdamConfig::new().init(), None)
+    };
+    let log_path = out.join("log.csv");
+    let log = crate::io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
+    let best = match position.best {
+        Some(_) if resuming => Some(crate::common::load_weights(
+            cfg.model.init(&device),
+            &out.join(CHECKPOINT_DIR).join(BEST_FILE),
+        )?),
+        _ => None,
+    };
+    let mut t = Trainer {
+        cfg,
+        out: out.to_path_buf(),
+        rng: StdRng::seed_from_u64(
+            cfg.seed ^ (position.phase1_done as u64) << 20 ^ position.phase2_done as u64,
+        ),
+        device,
+        net,
+        optim,
+        norm,
+        noise_std_m: cfg.noise_ratio * rms,
+        position,
+        log,
+        t0: Instant::now(),
+        stopped: false,
+        best,
+        validations: Vec::new(),
+        average,
+        drift: Vec::new(),
+        drift_used: 0,
+        pristine: Vec::new(),
+        drift_runs: Vec::new(),
+        teacher: teacher.map(|(net, _)| net),
+    };
+    t.run(sets, validation, &mut progress)
+}
+
+/// Opens the run in `out`: the position to start from and whether it resumes one there.
+/// Refuses an output holding a run with another configuration, or a finished model.
+fn open_run(cfg: &TrainingConfig, out: &Path) -> Result<(Position, bool)> {
+    std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    let config_path = out.join(CONFIG_FILE);
+    let state_path = out.join(CHECKPOINT_DIR).join("state.json");
+    let mut position = Position::default();
+    let resuming = state_path.exists();
+    if resuming {
+        let old = TrainingConfig::load(&config_path)
+            .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+        if &old != cfg {
+            return Err(Error::bad_input(
+                &config_path,
+                "a training run with another configuration is here; choose another output",
+            ));
+        }
+        position = read_json(&state_path)?;
+    } else if out.join(WEIGHTS_FILE).exists() {
+        return Err(Error::bad_input(
+            out.join(WEIGHTS_FILE),
+            "a finished model is already here; choose another output",
+        ));
+    }
+    Ok((position, resuming))
+}
+
+/// A trained network and its normalisation.
+type Trained = (CorrectorNet, Normalisation);
+
+/// The models training starts from (none when `resuming`) and distils, each checked against
+/// `cfg`. A run refused here made nothing yet, so a folder it made goes again.
+fn starting_models(
+    cfg: &TrainingConfig,
+    device: &Device,
+    resuming: bool,
+) -> Result<(Option<Trained>, Option<Trained>)> {
+    let start = if resuming {
+        None
+    } else {
+        warm_start(cfg, device)?
+    };
+    let teacher = teacher(cfg, device)?;
+    // The teacher's statistics are the student's: a warm start must share them.
+    if let (Some((_, own)), Some((_, taught)), Some(dir)) = (&start, &teacher, &cfg.distil_from) {
+        if own != taught {
+            return Err(Error::bad_input(
+                dir.join(NORMALISATION_FILE),
+                "the teacher's normalisation is not the one of the network to start \
+                 from (a student starts fresh or from a student of this teacher)",
+            ));
+        }
+    }
+    Ok((start, teacher))
+}
+
+/// The checkpointed network, optimiser state and weight average of a resumed run.
+fn resume_weights(
+    cfg: &TrainingConfig,
+    out: &Path,
+    device: &Device,
+    net: CorrectorNet,
+    position: &Position,
+) -> Result<(
+    CorrectorNet,
+    burn::optim::ModuleOptimizer,
+    Option<WeightAverage>,
+)> {
+    let optim = AdamConfig::new().init();
+    let mut average = None;
+    let dir = out.join(CHECKPOINT_DIR);
+    let net = crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))?;
+    let optim = optim
+        .load(dir.join("optim.bpk"))
+        .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+    if position.averaged > 0 {
+        let avg = crate::common::load_weights(cfg.model.init(device), &dir.join(AVERAGE_FILE))?;
+        average = Some(WeightAverage::of(&avg, position.averaged));
+    }
+    tracing::info!(
+        "resuming: phase 1 at step {}, phase 2 at window {}",
+        position.phase1_done,
+        position.phase2_done
+    );
+    Ok((net, optim, average))
+}
+
+impl Trainer<'_> {
+    /// Runs both phases with their validations, then saves the kept network and removes the
+    /// checkpoint (unless stopped).
+    fn run(
+        &mut self,
+        sets: &mut [TrainSet],
+        validation: &[ValidationSet],
+        progress: &mut impl FnMut(&Progress) -> ControlFlow<()>,
+    ) -> Result<Summary> {
+        let (cfg, out) = (self.cfg, self.out.clone());
+        let mut summary = Summary {
+            noise_std_m: self.noise_std_m,
+            ..Summary::default()
+        };
+        summary.phase1_first_last = self.phase1(sets, progress)?;
+        // After phase 1, or before phase 2 of a warm start: a fine-tuned network is then kept
+        // only where it validates better than the model it started from.
+        let trained = cfg.steps > 0 || cfg.init_from.is_some();
+        if !self.stopped && trained && self.position.phase2_done == 0 {
+            self.validate(validation, 1, cfg.steps)?;
+        }
+        if !self.stopped {
+            let (first_last, iters) = self.phase2(sets, validation, progress)?;
+            summary.phase2_first_last = first_last;
+            summary.phase2_iters = iters;
+        }
+        summary.seconds = self.t0.elapsed().as_secs_f64();
+        summary.validations = std::mem::take(&mut self.validations);
+        summary.drift_runs = std::mem::take(&mut self.drift_runs);
+        if self.stopped {
+            summary.interrupted = true;
+            return Ok(summary);
+        }
+        summary.validation_best = self.position.best;
+        summary.averaged = self.average.as_ref().map_or(0, |a| a.count);
+        let kept = match &self.best {
+            Some(best) => best.clone(),
+            None => self.kept_net(),
+        };
+        save_model(&out, cfg, &self.norm, &kept)?;
+        std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(&out, e))?;
+        Ok(summary)
+    }
+}
+
+/// Statistics of the clean (noise-free) inputs and targets of every step.
+pub fn fit_normalisation(sets: &[TrainSet]) -> Normalisation {
+    let mut b = NormalisationBuilder::default();
+    for s in sets {
+        for (i, st) in s.seq.steps.iter().enumerate() {
+            let Some(dv) = &st.dv else { continue };
+            let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
+            let (mut nodes, mut edges) = (Vec::new(), Vec::new());
+            s.seq
+                .graph
+                .node_features(&v, &vectors(dv), &st.body, &mut nodes);
+            s.seq.graph.edge_features(&x, &v, &mut edges);
+            let targets = s.seq.target(i);
+            b.add(&nodes, &edges, &targets);
+        }
+    }
+    b.build()
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+fn first_last(losses: &[f64], k: usize) -> (f64, f64) {
+    (
+        mean(&losses[..k.min(losses.len())]),
+        mean(&losses[losses.len().saturating_sub(k)..]),
+    )
+}
+
+impl Trainer<'_> {
+    fn log(&mut self, phase: u8, step: usize, lr: f64, loss: f64) -> Result<()> {
+        let path = self.out.join("log.csv");
+        writeln!(
+            self.log,
+            "{phase},{step},{lr:.3e},{loss:.6},{:.1}",
+            self.t0.elapsed().as_secs_f64()
+        )
+        .map_err(|e| Error::io(path, e))
+    }
+}
