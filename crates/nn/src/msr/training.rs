@@ -263,6 +263,84 @@ pub fn train(
     mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Summary> {
     check(cfg, seqs)?;
+    let (mut position, resuming) = open_run(cfg, out)?;
+    let device = crate::common::default_device()?.autodiff();
+    device.seed(cfg.seed);
+    let mut net = cfg.model.init(&device);
+    let mut optim = AdamConfig::new().init();
+    if resuming {
+        let dir = out.join(CHECKPOINT_DIR);
+        net = crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))?;
+        optim = optim
+            .load(dir.join("optim.bpk"))
+            .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+        tracing::info!("resuming at step {}", position.done);
+    }
+    let mut log = LossLog::open(out, resuming)?;
+    let mut rng = StdRng::seed_from_u64(cfg.seed ^ (position.done as u64) << 20);
+    let t0 = Instant::now();
+    let mut losses = Vec::new();
+    let mut stopped = false;
+    while position.done < cfg.steps {
+        let step = position.done;
+        let lr =
+            cfg.lr_start * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
+        let unroll = if cfg.model.init_input && cfg.unroll_max > 0 {
+            rng.random_range(0..=cfg.unroll_max)
+        } else {
+            0
+        };
+        let batch = training_batch(cfg, seqs, &net, unroll, &device, &mut rng)?;
+        let (loss, step_losses) = batch_losses(cfg, &net, &batch);
+        let value = step_losses.loss;
+        if !value.is_finite() {
+            return Err(Error::Simulation(format!(
+                "ISR training diverged at step {step} (loss {value})"
+            )));
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(lr, net, grads);
+        position.done += 1;
+        losses.push(value);
+        log.add(&step_losses);
+        if log.count == 25 || position.done == cfg.steps {
+            log.flush(position.done, lr, t0)?;
+        }
+        let flow = progress(&Progress {
+            step: position.done,
+            total: cfg.steps,
+            loss: value,
+        });
+        if position.done.is_multiple_of(cfg.checkpoint_every.max(1)) || flow.is_break() {
+            checkpoint(out, &net, &optim, position)?;
+        }
+        if flow.is_break() {
+            stopped = true;
+            break;
+        }
+    }
+    let k = 50.min(losses.len()).max(1);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let summary = Summary {
+        first_last: (
+            mean(&losses[..k.min(losses.len())]),
+            mean(&losses[losses.len().saturating_sub(k)..]),
+        ),
+        seconds: t0.elapsed().as_secs_f64(),
+        interrupted: stopped,
+    };
+    if stopped {
+        return Ok(summary);
+    }
+    save_model(out, cfg, &net)?;
+    std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    Ok(summary)
+}
+
+/// Opens the run in `out`: the position to start from and whether it resumes one there
+/// (a new run writes its configuration). Refuses an output holding a run with another
+/// configuration, or a finished model.
+fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
     std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
     let config_path = out.join(CONFIG_FILE);
     let state_path = out.join(CHECKPOINT_DIR).join("state.json");
@@ -296,120 +374,114 @@ pub fn train(
     } else {
         write_json(&config_path, cfg)?;
     }
-    let device = crate::common::default_device()?.autodiff();
-    device.seed(cfg.seed);
-    let mut net = cfg.model.init(&device);
-    let mut optim = AdamConfig::new().init();
-    if resuming {
-        let dir = out.join(CHECKPOINT_DIR);
-        net = crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))?;
-        optim = optim
-            .load(dir.join("optim.bpk"))
-            .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
-        tracing::info!("resuming at step {}", position.done);
-    }
-    let log_path = out.join("log.csv");
-    let mut log = crate::io::open_log(
-        &log_path,
-        resuming,
-        "step,lr,loss,position,gradient,coarse_loss,init_loss,seconds",
-    )?;
-    let mut rng = StdRng::seed_from_u64(cfg.seed ^ (position.done as u64) << 20);
-    let t0 = Instant::now();
-    let mut losses = Vec::new();
-    let mut acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0usize);
-    let mut stopped = false;
-    while position.done < cfg.steps {
-        let step = position.done;
-        let lr =
-            cfg.lr_start * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
-        let unroll = if cfg.model.init_input && cfg.unroll_max > 0 {
-            rng.random_range(0..=cfg.unroll_max)
-        } else {
-            0
-        };
-        let batch = training_batch(cfg, seqs, &net, unroll, &device, &mut rng)?;
-        let pred = net.forward(batch.inputs.clone());
-        let (loss, d, c) = isr_loss(pred, &batch, cfg.alpha, cfg.beta);
-        // The same loss for the coarse map itself (the upsampled baseline: no detail), for
-        // the log.
-        let identity = batch.inputs.clone().narrow(1, 0, 3).zeros_like();
-        let (base, _, _) = isr_loss(identity, &batch, cfg.alpha, cfg.beta);
-        let base = f64::from(base.into_scalar::<f32>());
-        // And for the initialisation (the previous frame's map) as the prediction.
-        let init_base = if cfg.model.init_input {
-            let init = batch.inputs.clone().narrow(1, 3, 3).detach();
-            f64::from(
-                isr_loss(init, &batch, cfg.alpha, cfg.beta)
-                    .0
-                    .into_scalar::<f32>(),
-            )
-        } else {
-            base
-        };
-        let value = f64::from(loss.clone().into_scalar::<f32>());
-        if !value.is_finite() {
-            return Err(Error::Simulation(format!(
-                "ISR training diverged at step {step} (loss {value})"
-            )));
-        }
-        let grads = GradientsParams::from_grads(loss.backward(), &net);
-        net = optim.step(lr, net, grads);
-        position.done += 1;
-        losses.push(value);
-        acc = (
-            acc.0 + value,
-            acc.1 + d,
-            acc.2 + c,
-            acc.3 + base,
-            acc.4 + init_base,
-            acc.5 + 1,
-        );
-        if acc.5 == 25 || position.done == cfg.steps {
-            let k = acc.5 as f64;
-            writeln!(
-                log,
-                "{},{lr:.3e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.1}",
-                position.done,
-                acc.0 / k,
-                acc.1 / k,
-                acc.2 / k,
-                acc.3 / k,
-                acc.4 / k,
-                t0.elapsed().as_secs_f64()
-            )
-            .map_err(|e| Error::io(&log_path, e))?;
-            acc = (0.0, 0.0, 0.0, 0.0, 0.0, 0);
-        }
-        let flow = progress(&Progress {
-            step: position.done,
-            total: cfg.steps,
-            loss: value,
-        });
-        if position.done.is_multiple_of(cfg.checkpoint_every.max(1)) || flow.is_break() {
-            checkpoint(out, &net, &optim, position)?;
-        }
-        if flow.is_break() {
-            stopped = true;
-            break;
-        }
-    }
-    let k = 50.min(losses.len()).max(1);
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let summary = Summary {
-        first_last: (
-            mean(&losses[..k.min(losses.len())]),
-            mean(&losses[losses.len().saturating_sub(k)..]),
-        ),
-        seconds: t0.elapsed().as_secs_f64(),
-        interrupted: stopped,
+    Ok((position, resuming))
+}
+
+/// One optimiser step's losses, as logged.
+#[derive(Debug, Clone, Copy, Default)]
+struct StepLosses {
+    /// The loss.
+    loss: f64,
+    /// Its position term.
+    position: f64,
+    /// Its gradient term.
+    gradient: f64,
+    /// The loss of the coarse map itself as the prediction.
+    coarse: f64,
+    /// The loss of the initialisation as the prediction.
+    init: f64,
+}
+
+/// The network's loss on `batch` (to differentiate) and the step's losses.
+fn batch_losses(cfg: &IsrTrainingConfig, net: &IsrNet, batch: &Batch) -> (Tensor<1>, StepLosses) {
+    let pred = net.forward(batch.inputs.clone());
+    let (loss, d, c) = isr_loss(pred, batch, cfg.alpha, cfg.beta);
+    // The same loss for the coarse map itself (the upsampled baseline: no detail), for
+    // the log.
+    let identity = batch.inputs.clone().narrow(1, 0, 3).zeros_like();
+    let (base, _, _) = isr_loss(identity, batch, cfg.alpha, cfg.beta);
+    let base = f64::from(base.into_scalar::<f32>());
+    // And for the initialisation (the previous frame's map) as the prediction.
+    let init_base = if cfg.model.init_input {
+        let init = batch.inputs.clone().narrow(1, 3, 3).detach();
+        f64::from(
+            isr_loss(init, batch, cfg.alpha, cfg.beta)
+                .0
+                .into_scalar::<f32>(),
+        )
+    } else {
+        base
     };
-    if stopped {
-        return Ok(summary);
+    let value = f64::from(loss.clone().into_scalar::<f32>());
+    let losses = StepLosses {
+        loss: value,
+        position: d,
+        gradient: c,
+        coarse: base,
+        init: init_base,
+    };
+    (loss, losses)
+}
+
+/// `log.csv`: the mean losses over every 25 steps.
+struct LossLog {
+    file: std::fs::File,
+    path: std::path::PathBuf,
+    /// Sums of the steps' losses since the last line.
+    sum: StepLosses,
+    /// Steps since the last line.
+    count: usize,
+}
+
+impl LossLog {
+    /// Opens (or, resuming, appends to) `out/log.csv`.
+    fn open(out: &Path, resuming: bool) -> Result<LossLog> {
+        let path = out.join("log.csv");
+        let file = crate::io::open_log(
+            &path,
+            resuming,
+            "step,lr,loss,position,gradient,coarse_loss,init_loss,seconds",
+        )?;
+        Ok(LossLog {
+            file,
+            path,
+            sum: StepLosses::default(),
+            count: 0,
+        })
     }
-    save_model(out, cfg, &net)?;
-    std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
-    Ok(summary)
+
+    /// Adds a step's losses.
+    fn add(&mut self, l: &StepLosses) {
+        let s = &mut self.sum;
+        *s = StepLosses {
+            loss: s.loss + l.loss,
+            position: s.position + l.position,
+            gradient: s.gradient + l.gradient,
+            coarse: s.coarse + l.coarse,
+            init: s.init + l.init,
+        };
+        self.count += 1;
+    }
+
+    /// Writes the mean losses since the last line, at `done` steps, learning rate `lr`.
+    fn flush(&mut self, done: usize, lr: f64, t0: Instant) -> Result<()> {
+        let (s, k) = (self.sum, self.count as f64);
+        writeln!(
+            self.file,
+            "{},{lr:.3e},{:.6},{:.6},{:.6},{:.6},{:.6},{:.1}",
+            done,
+            s.loss / k,
+            s.position / k,
+            s.gradient / k,
+            s.coarse / k,
+            s.init / k,
+            t0.elapsed().as_secs_f64()
+        )
+        .map_err(|e| Error::io(&self.path, e))?;
+        self.sum = StepLosses::default();
+        self.count = 0;
+        Ok(())
+    }
 }
 
 /// Writes a model directory: `config.json` and `model.bpk` (each written whole, then renamed).
