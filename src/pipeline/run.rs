@@ -209,6 +209,75 @@ struct Writers {
 }
 
 impl Writers {
+    /// Opens the writers of `out` for `frames` frames of `p` on `scene`: new files, or with
+    /// `resume_at` (a time in frames) the published ones continued after that frame.
+    fn open(
+        p: &Pipeline<'_>,
+        scene: &Scene,
+        frames: usize,
+        out: &Outputs,
+        resume_at: Option<f64>,
+    ) -> Result<Writers> {
+        let start = scene.frame_start as f64;
+        let fine_edge = p.fine_edge_m;
+        let stage = |meshes: Vec<MeshOut>, what: &str| {
+            let mut meshes = meshes;
+            for c in &scene.colliders {
+                meshes.push(MeshOut::collider(c, scene.fps));
+            }
+            StageOut {
+                fps: scene.fps,
+                start,
+                end: start + frames as f64,
+                doc: Some(format!("{} ({what})", out.doc)),
+                ascii: out.ascii,
+                garments: Vec::new(),
+                meshes,
+                solver: Some(SolverSettings {
+                    gravity_m_s2: scene.gravity_m_s2,
+                    dt_s: p.coarse.sim.params.dt_s,
+                }),
+            }
+        };
+        let open = |path: &Path, st: &StageOut<'_>| -> Result<AnimationWriter> {
+            match resume_at {
+                Some(t) => AnimationWriter::resume(path, st, t),
+                None => AnimationWriter::create(path, st),
+            }
+        };
+        let fine_stage = stage(
+            part_meshes(&p.fine_part_meshes, fine_edge),
+            "fine garments M_f",
+        );
+        let mut writers = Writers {
+            fine: (out.fine.clone(), open(&out.fine, &fine_stage)?),
+            coarse: None,
+            upsampled: None,
+        };
+        if let Some(path) = &out.coarse {
+            let model = &p.coarse.sim.model;
+            let coarse_part_meshes: Vec<_> = (0..model.parts.len())
+                .map(|i| {
+                    let q = &model.parts[i];
+                    (q.name.clone(), model.part_mesh(i), q.fabric.clone())
+                })
+                .collect();
+            let st = stage(
+                part_meshes(&coarse_part_meshes, p.coarse.edge_m),
+                "coarse M_int",
+            );
+            writers.coarse = Some((path.clone(), open(path, &st)?));
+        }
+        if let Some(path) = &out.upsampled {
+            let st = stage(
+                part_meshes(&p.fine_part_meshes, fine_edge),
+                "coarse upsampled to the fine mesh",
+            );
+            writers.upsampled = Some((path.clone(), open(path, &st)?));
+        }
+        Ok(writers)
+    }
+
     fn all(&mut self) -> impl Iterator<Item = &mut (PathBuf, AnimationWriter)> {
         std::iter::once(&mut self.fine)
             .chain(self.coarse.as_mut())
@@ -221,105 +290,60 @@ impl Writers {
         }
         Ok(())
     }
-}
 
-fn part_meshes(parts: &[(String, ClothMesh, crate::garment::Fabric)], edge_m: f64) -> Vec<MeshOut> {
-    parts
-        .iter()
-        .map(|(name, m, fabric)| {
-            let mut out = MeshOut::cloth(name, m, fabric, edge_m);
-            out.animated = true;
-            out
-        })
-        .collect()
-}
-
-fn split<'x>(x: &'x [Vector3<f64>], parts: &[std::ops::Range<usize>]) -> Vec<&'x [Vector3<f64>]> {
-    parts.iter().map(|r| &x[r.clone()]).collect()
-}
-
-/// Runs `frames` frames of `p` (set up on `scene`) into `out`, shown in `preview` when given.
-/// `progress` is called after every frame; returning `Break` stops the run after publishing
-/// everything and a resume point. On failure every file keeps the frames published before it
-/// and the resume point stays for the next call.
-pub fn run_to_files(
-    p: &mut Pipeline<'_>,
-    scene: &Scene,
-    frames: usize,
-    out: &Outputs,
-    preview: Option<&Preview<'_>>,
-    mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
-) -> Result<Report> {
-    let start = scene.frame_start as f64;
-    let resume_file = resume_path(&out.fine);
-    let resumed = if out.resume {
-        read_resume(&resume_file, &out.fingerprint)?.filter(|r| r.frame <= frames)
-    } else {
-        None
-    };
-    let coarse_mesh = p.coarse.sim.model.mesh.clone();
-    let fine_edge = p.fine_edge_m;
-    let stage = |meshes: Vec<MeshOut>, what: &str| {
-        let mut meshes = meshes;
-        for c in &scene.colliders {
-            meshes.push(MeshOut::collider(c, scene.fps));
+    /// Writes `p`'s current state as frame `f` of a run starting at frame `start`, to every
+    /// file.
+    fn write_frame(&mut self, p: &mut Pipeline<'_>, start: f64, f: usize) -> Result<()> {
+        let t = start + f as f64;
+        self.fine.1.write_frame(t, &p.fine_part_positions())?;
+        if let Some((_, cw)) = &mut self.coarse {
+            cw.write_frame(t, &p.coarse.part_positions())?;
         }
-        StageOut {
-            fps: scene.fps,
-            start,
-            end: start + frames as f64,
-            doc: Some(format!("{} ({what})", out.doc)),
-            ascii: out.ascii,
-            garments: Vec::new(),
-            meshes,
-            solver: Some(SolverSettings {
-                gravity_m_s2: scene.gravity_m_s2,
-                dt_s: p.coarse.sim.params.dt_s,
-            }),
+        if self.upsampled.is_some() {
+            let up = p.upsampled()?;
+            if let Some((_, uw)) = &mut self.upsampled {
+                uw.write_frame(t, &split(&up, &p.fine_parts))?;
+            }
         }
-    };
-    let open = |path: &Path, st: &StageOut<'_>| -> Result<AnimationWriter> {
-        match &resumed {
-            Some(r) => AnimationWriter::resume(path, st, start + r.frame as f64),
-            None => AnimationWriter::create(path, st),
-        }
-    };
-    let fine_stage = stage(
-        part_meshes(&p.fine_part_meshes, fine_edge),
-        "fine garments M_f",
-    );
-    let mut writers = Writers {
-        fine: (out.fine.clone(), open(&out.fine, &fine_stage)?),
-        coarse: None,
-        upsampled: None,
-    };
-    if let Some(path) = &out.coarse {
-        let model = &p.coarse.sim.model;
-        let coarse_part_meshes: Vec<_> = (0..model.parts.len())
-            .map(|i| {
-                let q = &model.parts[i];
-                (q.name.clone(), model.part_mesh(i), q.fabric.clone())
-            })
-            .collect();
-        let st = stage(
-            part_meshes(&coarse_part_meshes, p.coarse.edge_m),
-            "coarse M_int",
-        );
-        writers.coarse = Some((path.clone(), open(path, &st)?));
-    }
-    if let Some(path) = &out.upsampled {
-        let st = stage(
-            part_meshes(&p.fine_part_meshes, fine_edge),
-            "coarse upsampled to the fine mesh",
-        );
-        writers.upsampled = Some((path.clone(), open(path, &st)?));
+        Ok(())
     }
 
-    let rec = preview.map(|v| v.recorder);
-    if let Some(r) = rec {
+    /// Finishes every file, logging what the writers warn about.
+    fn finish(self) -> Result<()> {
+        let Writers {
+            fine,
+            coarse,
+            upsampled,
+        } = self;
+        for (path, w) in std::iter::once(fine).chain(coarse).chain(upsampled) {
+            for warning in w.finish()? {
+                tracing::warn!("{}: {warning}", path.display());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a run shows in Rerun, frame by frame.
+struct FrameLog<'a> {
+    preview: Option<&'a Preview<'a>>,
+    scene: &'a Scene,
+    /// The scene's first frame.
+    start: f64,
+    /// The coarse mesh (its triangles).
+    coarse_mesh: ClothMesh,
+}
+
+impl FrameLog<'_> {
+    /// Logs the meshes' topologies and the still colliders.
+    fn topology(&self, p: &Pipeline<'_>) -> Result<()> {
+        let Some(r) = self.preview.map(|v| v.recorder) else {
+            return Ok(());
+        };
+        let (scene, coarse_mesh) = (self.scene, &self.coarse_mesh);
         r.mesh_topology(paths::FINE, &p.fine.triangles, colours::FINE)?;
         r.mesh_topology(paths::M_INT, &coarse_mesh.triangles, colours::M_INT)?;
-        if let Some(g) = preview.and_then(|v| v.ground_truth) {
+        if let Some(g) = self.preview.and_then(|v| v.ground_truth) {
             r.mesh_topology(paths::GROUND_TRUTH, &g.triangles, colours::GROUND_TRUTH)?;
         }
         if p.has_corrector() {
@@ -334,9 +358,17 @@ pub fn run_to_files(
             let entity = format!("{}/{}", paths::COLLIDERS, c.name);
             r.mesh_topology(&entity, &c.triangles, colours::COLLIDER)?;
         }
+        Ok(())
     }
-    let log_frame = |p: &mut Pipeline<'_>, f: usize| -> Result<()> {
-        let Some(r) = rec else { return Ok(()) };
+
+    /// Logs frame `f` of `p`: positions (the fine mesh coloured by its distance to the ground
+    /// truth when there is one), moving colliders and stage times.
+    fn frame(&self, p: &mut Pipeline<'_>, f: usize) -> Result<()> {
+        let Some(r) = self.preview.map(|v| v.recorder) else {
+            return Ok(());
+        };
+        let (scene, coarse_mesh, start) = (self.scene, &self.coarse_mesh, self.start);
+        let preview = self.preview;
         r.set_frame(start as i64 + f as i64);
         let t = start + f as f64;
         let gt = preview.and_then(|v| v.ground_truth.map(|g| (g, v.heat_max_m)));
@@ -370,21 +402,63 @@ pub fn run_to_files(
             }
         }
         Ok(())
+    }
+}
+
+fn part_meshes(parts: &[(String, ClothMesh, crate::garment::Fabric)], edge_m: f64) -> Vec<MeshOut> {
+    parts
+        .iter()
+        .map(|(name, m, fabric)| {
+            let mut out = MeshOut::cloth(name, m, fabric, edge_m);
+            out.animated = true;
+            out
+        })
+        .collect()
+}
+
+fn split<'x>(x: &'x [Vector3<f64>], parts: &[std::ops::Range<usize>]) -> Vec<&'x [Vector3<f64>]> {
+    parts.iter().map(|r| &x[r.clone()]).collect()
+}
+
+/// Adds the last frame of `p` to the run's totals.
+fn add_frame(totals: &mut FrameTimes, pushed: &mut PushOut, p: &Pipeline<'_>) {
+    totals.simulator_s += p.times.simulator_s;
+    totals.corrector_s += p.times.corrector_s;
+    totals.msr_s += p.times.msr_s;
+    pushed.inside += p.pushed.inside;
+    pushed.moved += p.pushed.moved;
+    pushed.max_depth_m = pushed.max_depth_m.max(p.pushed.max_depth_m);
+}
+
+/// Runs `frames` frames of `p` (set up on `scene`) into `out`, shown in `preview` when given.
+/// `progress` is called after every frame; returning `Break` stops the run after publishing
+/// everything and a resume point. On failure every file keeps the frames published before it
+/// and the resume point stays for the next call.
+pub fn run_to_files(
+    p: &mut Pipeline<'_>,
+    scene: &Scene,
+    frames: usize,
+    out: &Outputs,
+    preview: Option<&Preview<'_>>,
+    mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<Report> {
+    let start = scene.frame_start as f64;
+    let resume_file = resume_path(&out.fine);
+    let resumed = if out.resume {
+        read_resume(&resume_file, &out.fingerprint)?.filter(|r| r.frame <= frames)
+    } else {
+        None
     };
-    let write_frame = |p: &mut Pipeline<'_>, w: &mut Writers, f: usize| -> Result<()> {
-        let t = start + f as f64;
-        w.fine.1.write_frame(t, &p.fine_part_positions())?;
-        if let Some((_, cw)) = &mut w.coarse {
-            cw.write_frame(t, &p.coarse.part_positions())?;
-        }
-        if w.upsampled.is_some() {
-            let up = p.upsampled()?;
-            if let Some((_, uw)) = &mut w.upsampled {
-                uw.write_frame(t, &split(&up, &p.fine_parts))?;
-            }
-        }
-        Ok(())
+    let coarse_mesh = p.coarse.sim.model.mesh.clone();
+    let resume_at = resumed.as_ref().map(|r| start + r.frame as f64);
+    let mut writers = Writers::open(p, scene, frames, out, resume_at)?;
+    let log = FrameLog {
+        preview,
+        scene,
+        start,
+        coarse_mesh,
     };
+    log.topology(p)?;
 
     let first = match resumed {
         Some(r) => {
@@ -395,13 +469,13 @@ pub fn run_to_files(
             );
             let f = r.frame;
             p.restore(r.state)?;
-            log_frame(p, f)?;
+            log.frame(p, f)?;
             f
         }
         None => {
             p.super_resolve()?;
-            write_frame(p, &mut writers, 0)?;
-            log_frame(p, 0)?;
+            writers.write_frame(p, start, 0)?;
+            log.frame(p, 0)?;
             0
         }
     };
@@ -432,14 +506,9 @@ pub fn run_to_files(
             writers.checkpoint()?;
             return Err(e);
         }
-        write_frame(p, &mut writers, f)?;
-        log_frame(p, f)?;
-        totals.simulator_s += p.times.simulator_s;
-        totals.corrector_s += p.times.corrector_s;
-        totals.msr_s += p.times.msr_s;
-        pushed.inside += p.pushed.inside;
-        pushed.moved += p.pushed.moved;
-        pushed.max_depth_m = pushed.max_depth_m.max(p.pushed.max_depth_m);
+        writers.write_frame(p, start, f)?;
+        log.frame(p, f)?;
+        add_frame(&mut totals, &mut pushed, p);
         let flow = progress(&Progress {
             frame: f,
             frames,
@@ -463,16 +532,7 @@ pub fn run_to_files(
             last_publish = Instant::now();
         }
     }
-    let Writers {
-        fine,
-        coarse,
-        upsampled,
-    } = writers;
-    for (path, w) in std::iter::once(fine).chain(coarse).chain(upsampled) {
-        for warning in w.finish()? {
-            tracing::warn!("{}: {warning}", path.display());
-        }
-    }
+    writers.finish()?;
     if resume_file.exists() {
         std::fs::remove_file(&resume_file).map_err(|e| Error::io(&resume_file, e))?;
     }
