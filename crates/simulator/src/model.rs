@@ -76,8 +76,8 @@ pub struct WrinkleBending {
 }
 
 impl WrinkleBending {
-    /// The shortening at which the extra stiffness is full, by default (0.3 %; the fine
-    /// three-balls sheet settles with its 20 mm edges shortened by 0.25 % on average).
+    /// The shortening at which the extra stiffness is full, by default (0.3 %; about what
+    /// a settled fine sheet's coarse edges are shortened by on average).
     pub const DEFAULT_STRAIN: f64 = 0.003;
     /// The mean speed below which the extra stiffness comes in, by default, m/s.
     pub const DEFAULT_SETTLE_SPEED_M_S: f64 = 0.06;

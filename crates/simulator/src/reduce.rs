@@ -34,7 +34,7 @@ pub fn sum_split(n: usize, min_chunks: usize, f: impl Fn(usize) -> f64 + Sync) -
 /// Σ `a[i]·b[i]`, the same on any number of threads; `min_len` as in [`sum_split`].
 pub fn dot(a: &[nalgebra::Vector3<f64>], b: &[nalgebra::Vector3<f64>], min_len: usize) -> f64 {
     assert_eq!(a.len(), b.len(), "dot of vectors of different lengths");
-    // Slices, not indices: an indexed closure here made CG's dots 3× slower.
+    // Slices, not indices: an indexed closure here made CG's dots much slower.
     let chunk_dot = |(x, y): (&[nalgebra::Vector3<f64>], &[nalgebra::Vector3<f64>])| {
         x.iter().zip(y).map(|(p, q)| p.dot(q)).sum::<f64>()
     };

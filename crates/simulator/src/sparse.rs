@@ -154,7 +154,7 @@ impl BlockCsr {
 /// Runs `f(i, &mut out[i])` for every entry, shared among rayon's threads in runs of at least
 /// `min_len`, or in a plain loop on the calling thread when `min_len` is `usize::MAX`: even
 /// an unsplit parallel pass costs rayon's bridge a few microseconds, and CG makes about ten
-/// passes an iteration (3K vertices: 0.1 ms an iteration in all).
+/// passes an iteration, each short on a small mesh.
 fn for_each_entry<T: Send>(out: &mut [T], min_len: usize, f: impl Fn(usize, &mut T) + Sync) {
     if min_len == usize::MAX {
         out.iter_mut().enumerate().for_each(|(i, o)| f(i, o));
@@ -290,7 +290,7 @@ fn apply_jacobi(inv: &[Matrix3<f64>], r: &[Vector3<f64>], z: &mut [Vector3<f64>]
 impl Pcg {
     /// Runs every pass of later solves on the calling thread (`true`) or shares them among
     /// rayon's threads (`false`, the default). On small meshes the hand-offs cost more than
-    /// the passes: 3K vertices, 0.27 vs 0.14 ms a CG iteration on two threads.
+    /// the passes.
     pub fn set_single_threaded(&mut self, single: bool) {
         self.bufs.min_len = if single { usize::MAX } else { 1 };
     }
@@ -854,8 +854,8 @@ impl TwoLevel {
             .collect();
         let factor = CholeskyPreconditioner::new(&coarse)?;
         // faer's triangular solves are called once per CG iteration on a few thousand
-        // unknowns, whose supernodes are too small to share between threads: sequential,
-        // the correction costs 0.37 ms an iteration at 40K vertices. faer serves only the
+        // unknowns, whose supernodes are too small to share between threads, so they run
+        // sequentially. faer serves only the
         // simulator's preconditioners in this program.
         faer::set_global_parallelism(faer::Par::Seq);
         Some(TwoLevel {

@@ -531,8 +531,8 @@ fn start_new(
         // Dressed at the coarse resolution (rolled, sewn, draped), then carried onto the
         // fine mesh (Phong-tessellated, so that it bulges with the body instead of cutting
         // chords into it) where it sews its last millimetres and drapes again: the fine
-        // mesh dressed from its flat pattern took ~18 s a step for a pencil skirt at
-        // 2.5 mm, its steps halved under the move limits while the seams were open.
+        // mesh dressed from its flat pattern was very slow, its steps halved under the move
+        // limits while the seams were open.
         let c = coarse.dress(2.0, 0.3, 1e-3)?;
         let x = transfer.upsample_phong(
             &coarse.state.x,

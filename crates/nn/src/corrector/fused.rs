@@ -14,8 +14,8 @@
 //! messages into its own `[N, L]` buffer, added in range order afterwards; the whole pass
 //! runs on rayon's threads.
 //!
-//! Measured (`clothsr lab bench pipeline`, release build, two cores, the shipped three-balls
-//! network, latent 64, 745 nodes): 2.5 ms a call against burn's 3.4 ms.
+//! It is faster than burn's pass on the shipped networks (`clothsr lab bench pipeline`
+//! compares the two).
 //!
 //! Shapes: node rows `[N, ·]`, edge rows `[E, ·]`, all row-major `f32`.
 

@@ -23,12 +23,12 @@
 //! Δq (also beyond the paper) is what the simulator's forces (elastic, damping, contact) did
 //! in the step. The coarse mesh cannot buckle inside its triangles, so from M_int (the fine
 //! cloth, shortened by its wrinkles) its membrane springs back in one step, and M_int's next
-//! step moves almost as if only gravity and contact acted: on the three-balls drops,
-//! p̄ ≈ −0.9·Δq explains 94 % of the target's variance during the impact and 72–88 % later.
+//! step moves almost as if only gravity and contact acted: the target p̄ is then close to a
+//! negative multiple of Δq, which explains most of its variance.
 //! Δq is zero in free fall, where no correction is needed. (The elastic impulse at M_c,
 //! −h·∇E(x_c)/m, is no substitute: the one-Newton-step solver's velocity change is not the
-//! force at its end state; in its place the phase-1 loss stayed 3× higher and the interleaved
-//! rollout diverged in frame 2.)
+//! force at its end state; in its place the phase-1 loss stayed much higher and the
+//! interleaved rollout diverged.)
 
 use std::collections::{HashMap, VecDeque};
 

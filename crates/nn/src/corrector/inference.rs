@@ -332,8 +332,7 @@ impl Corrector {
         sim: &Simulation,
     ) -> Result<()> {
         // On one of rayon's threads, so that the proximity search's and the network's parallel
-        // steps do not each hand their work over from the caller's thread and wait to be woken
-        // (0.5–1 ms a call on two cores).
+        // steps do not each hand their work over from the caller's thread and wait to be woken.
         rayon::scope(|_| self.correct_in_pool(start_v, state, sim))
     }
 

@@ -73,9 +73,8 @@ pub struct CorrectorConfig {
     /// mean strain of the vertex's edges after the step
     /// ([`super::graph::MeshGraph::tension_weight`]). The finer cloth's wrinkles take up
     /// compression, not tension: the fine and coarse membranes resist stretching alike, and
-    /// a corrector taking back their tension lets gravity stretch the interleaved cloth
-    /// (measured: +3 to +10 % mean strain against the data's −0.3 %, states never seen in
-    /// training). `None`: [`DEFAULT_TENSION_RAMP`] (also for models saved before it
+    /// a corrector taking back their tension lets gravity stretch the interleaved cloth into
+    /// states never seen in training (stretched where the data is slightly shortened). `None`: [`DEFAULT_TENSION_RAMP`] (also for models saved before it
     /// existed); 0: no limit. Training leaves it out: the data's one-step results are
     /// stretched by the simulator's spring-back at many vertices, and a corrector trained
     /// with the limit moved what it could not take back there into its free contact term
@@ -86,8 +85,8 @@ pub struct CorrectorConfig {
     /// for models saved before it existed). Taking back most of each step's velocity change
     /// also takes back most of the cloth's elastic restoring force, and the corrected cloth
     /// then drifts under small per-step biases where the simulation alone would be pulled
-    /// back (measured: the shipped three-balls corrector started on the settled ground truth
-    /// drifts to 7.9 mm at scale 1, 4.0 mm at 0.5, the simulation alone 3.1 mm).
+    /// back (a corrector started on a settled ground truth drifts further from it than the
+    /// simulation alone, and less with a smaller scale).
     pub take_back: Option<f64>,
     /// Low-pass filter on the correction at inference (beyond the paper, any decoder): this
     /// many rounds of mass-weighted averaging over each vertex and its graph neighbours

@@ -135,7 +135,7 @@ impl RolloutErrors {
     }
 
     /// Several rollouts (one per held-out data set) summed up: one drop's rollout cannot rank
-    /// two correctors whose means differ by less than ~20 % (the trajectories are chaotic), so
+    /// two correctors whose means differ only a little (the trajectories are chaotic), so
     /// figures are pooled over frames of several drops, with each drop's ratio beside them.
     pub fn pooled(runs: &[RolloutErrors]) -> PooledErrors {
         let frames: usize = runs.iter().map(|e| e.sim_alone_mm.len()).sum();

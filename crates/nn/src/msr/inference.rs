@@ -307,10 +307,8 @@ impl<'a> SuperResolver<'a> {
             layouts,
             prev: None,
             prev_coarse: None,
-            // Measured (`clothsr lab sr`, three-balls sheet, 49 patches of 32², 2 threads): 0.41 s
-            // a frame at 8 patches per call, 0.42 at 4, 0.45 at 16, 0.49 at 32, 0.52 at 1,
-            // 0.59 at 64; `bench pipeline`'s t_i over the three sample sheets 425 → 399 ms
-            // from 32 to 8 (smaller batches stay in cache).
+            // Patches per call: small batches stay in cache, and 8 was the fastest of the
+            // sizes tried (`clothsr lab sr`, `clothsr lab bench pipeline`).
             batch: 8,
             times: FrameTimes::default(),
         })

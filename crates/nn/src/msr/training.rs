@@ -14,8 +14,8 @@
 //!   differences per pixel spacing (h = two pixels), so α and β weigh comparable quantities.
 //! * **Unrolled initialisation** (beyond the paper): at inference the initialisation is the
 //!   network's own previous output, not a smoothed ground truth, and a network trained only on
-//!   the latter copies its own errors forward (measured: 0.55× the upsampled baseline's error
-//!   when fed the true previous frame, 1.10× when fed its own). So each step draws r in
+//!   the latter copies its own errors forward (fed its own previous output, its error grows
+//!   well beyond what it makes fed the true previous frame). So each step draws r in
 //!   0..=`unroll_max`, starts its patches r frames before the target from the data's
 //!   initialisation and runs the network (no gradients) through those frames, feeding each
 //!   output, moved by the coarse motion, forward as the next initialisation (the "pushforward"

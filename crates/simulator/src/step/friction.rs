@@ -34,8 +34,8 @@ impl FrictionPoint {
     /// f₁′ ≤ f₁/y (0 when sliding), so this one is the exact one plus a PSD term, a stiffer
     /// model along the slide. With one Newton iteration a step (fast mode) the exact one let
     /// the step overshoot and the friction chatter: the corrector's tiny training set (a silk
-    /// sheet on a ball) became noise that 300 training steps could not lower (loss 0.41 →
-    /// 0.42, against 0.38 → 0.20 with this one). Converged Newton reaches the same minimiser.
+    /// sheet on a ball) became noise that training could not lower, where with this one the
+    /// loss fell. Converged Newton reaches the same minimiser.
     pub fn energy_gradient_hessian(&self, x: &Vector3<f64>) -> (f64, Vector3<f64>, Matrix3<f64>) {
         let (e, f1_over_y, _, u) = self.eval(x);
         let p = Matrix3::identity() - self.n * self.n.transpose();

@@ -5,10 +5,8 @@ use nalgebra::Vector3;
 use super::{CholeskyPreconditioner, LinearSolver, Simulator, TwoLevel};
 use crate::sparse::CgStats;
 
-/// From this many vertices [`LinearSolver::Auto`] adds the two-level coarse correction
-/// (bench sim, fast mode, ms a step, block-Jacobi vs two-level with aggregates of 32 / 64:
-/// 1K vertices 3.96 vs 4.52 / 4.48; 2K 8.49 vs 8.55 / 8.66; 3K 13.6 vs 11.6 / 12.2; 6K 24.4 vs
-/// 23.9 / 21.1).
+/// From this many vertices [`LinearSolver::Auto`] adds the two-level coarse correction: about
+/// where it starts to pay off against block-Jacobi alone (`clothsr lab bench sim`, fast mode).
 pub(super) const TWO_LEVEL_FROM_VERTICES: usize = 2_500;
 
 /// Below this many vertices the Newton systems are solved on a single thread.

@@ -116,13 +116,13 @@ impl Simulator {
             pins: Vec::new(),
             matrix,
             // Small meshes solve their Newton systems on the step's own thread: rayon's
-            // hand-offs cost more than CG's short passes there (3K vertices: 0.27 vs 0.14 ms
-            // an iteration on two threads; a one-thread pool of its own took 9–11 ms a solve
-            // against 7 ms inline: the matrix then lives in the other core's cache).
+            // hand-offs cost more than CG's short passes there (a one-thread pool of its own
+            // is slower than solving inline: the matrix then lives in the other core's cache).
             // Detection, assembly and the line search use every thread at any size; their sums
             // are taken in fixed chunks ([`super::reduce`]), so a run gives the same bits on
-            // any number of threads (a step's sums used to follow rayon's splits: the pencil
-            // skirt's rounding-sensitive dressing ended 65 mm open on two threads, 36 on one).
+            // any number of threads (a step's sums used to follow rayon's splits, and the
+            // pencil skirt's rounding-sensitive dressing ended differently on two threads
+            // than on one).
             pcg: {
                 let mut pcg = Pcg::default();
                 pcg.set_single_threaded(n < SERIAL_BELOW_VERTICES);

@@ -62,11 +62,10 @@ pub struct SimParams {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LinearSolver {
     /// Block-Jacobi PCG below 2,500 vertices, two-level PCG from there (aggregates of 32
-    /// below 5K vertices, 64 above): measured on the sheet-on-sphere bench, the coarse
-    /// correction cuts the iterations by a third to a half (3K: 70 → 46; 40K: 117 → 63) and
-    /// pays off in time from about 2.5K vertices (3K: 13.6 → 11.6 ms a step; 40K: 276–287 →
-    /// 224–273 ms). Smaller aggregates (8) cut more iterations at 3K but their coarse solve
-    /// costs as much as a product.
+    /// below 5K vertices, 64 above): on the sheet-on-sphere bench (`clothsr lab bench sim`)
+    /// the coarse correction cuts the iterations substantially and pays off in time from
+    /// about that size. Smaller aggregates (8) cut more iterations on small meshes but their
+    /// coarse solve costs as much as a product.
     Auto,
     /// Conjugate gradients with a block-Jacobi preconditioner.
     JacobiPcg,
@@ -111,17 +110,16 @@ impl SimParams {
             newton_exact: true,
             // 1 cm/s of velocity error: far below what shows in an animation.
             newton_tol_m: 3e-2 * crate::scene::DEFAULT_DT_S,
-            // 1e-2 costs a third of the iterations (bench: 25 vs 75 at 3K) but, with one Newton
-            // iteration per step, leaves stiff sewing springs short of closing (tests/simulator.rs
-            // sewing_closes_a_two_panel_tube stalls at 10 mm).
+            // 1e-2 costs far fewer iterations but, with one Newton iteration per step, leaves
+            // stiff sewing springs short of closing (tests/simulator.rs
+            // sewing_closes_a_two_panel_tube stalls).
             cg_rel_tol: 1e-3,
             cg_max_iters: 200,
             max_halvings: 4,
             bending_hessian: BendingHessian::GaussNewton,
-            // Measured on the 2-core CI machine: a full sparse Cholesky preconditioner (faer's
-            // factorisation ≈ 32 ms at 9K unknowns, triangular solves ≈ 4 ms) costs more than
-            // the ~100 block-Jacobi iterations (≈ 0.2 ms each) it saves, at 3K and at 40K
-            // vertices alike; a coarse one on aggregates pays off on large meshes.
+            // A full sparse Cholesky preconditioner (faer's factorisation and triangular
+            // solves) costs more than the block-Jacobi iterations it saves, on small and large
+            // meshes alike; a coarse one on aggregates pays off on large meshes.
             linear_solver: LinearSolver::Auto,
         }
     }

@@ -103,7 +103,7 @@ pub struct TrainingConfig {
     /// over their frames; the network that was closest is the one saved (`None`: no
     /// validation, the last network is saved). Training losses are one step or one window
     /// long; a corrector is judged over hundreds of frames, where networks with the same
-    /// losses differ by 2× (the three-balls README). Optional so that older configs load.
+    /// losses can differ widely (`docs/experiments/`). Optional so that older configs load.
     pub validate_every: Option<usize>,
     /// Frames of each validation set rolled out (`None`: all loaded).
     pub validation_frames: Option<usize>,
@@ -116,8 +116,8 @@ pub struct TrainingConfig {
     pub init_from: Option<PathBuf>,
     /// Phase-2 window after which the saved network is the running mean of the weights after
     /// every later window (stochastic weight averaging, Izmailov et al. 2018) instead of the
-    /// last weights: networks a few windows apart differ by up to 2× in long-rollout error
-    /// (the three-balls README), and their mean is a smoother pick than any one of them. With
+    /// last weights: networks a few windows apart can differ widely in long-rollout error
+    /// (`docs/experiments/`), and their mean is a smoother pick than any one of them. With
     /// validation, the mean is what is validated. `None`: no averaging.
     pub average_from: Option<usize>,
     /// Phase 2 rolls the corrector out as it runs at inference: the gated decoder's take-back
