@@ -182,21 +182,19 @@ pub fn choose_path(models: &Path, choice: CorrectorChoice) -> Result<(ModelPath,
             ModelPath::CoarseAlone,
             format!("--corrector off{}", figures(ModelPath::CoarseAlone)),
         ),
-        (CorrectorChoice::On, false) | (CorrectorChoice::Auto, false) => {
-            if choice == CorrectorChoice::On {
-                return Err(Error::bad_input(
-                    models,
-                    "--corrector on, but the folder has no corrector (corrector/config.json)",
-                ));
-            }
-            (
-                ModelPath::CoarseAlone,
-                format!(
-                    "the folder has no corrector{}",
-                    figures(ModelPath::CoarseAlone)
-                ),
-            )
+        (CorrectorChoice::On, false) => {
+            return Err(Error::bad_input(
+                models,
+                "--corrector on, but the folder has no corrector (corrector/config.json)",
+            ))
         }
+        (CorrectorChoice::Auto, false) => (
+            ModelPath::CoarseAlone,
+            format!(
+                "the folder has no corrector{}",
+                figures(ModelPath::CoarseAlone)
+            ),
+        ),
         (CorrectorChoice::On, true) => (
             ModelPath::Corrector,
             format!("--corrector on{}", figures(ModelPath::Corrector)),

@@ -155,6 +155,12 @@ impl CoarseCalibration {
         })
     }
 
+    /// The friction coefficient for reports: the number, or "the simulator's" when unset.
+    pub fn friction_label(&self) -> String {
+        self.friction
+            .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string())
+    }
+
     /// `base` with each setting given here in place of its own, normalised (a setting given as
     /// the simulator's own, such as a compression factor of 1, unsets it); `None` where a given
     /// setting is unusable.
@@ -208,9 +214,7 @@ impl CoarseCalibration {
         if self.friction.is_some() && trained.friction != self.friction {
             return Some(format!(
                 "beside a coarse friction coefficient of {}, not {:?}",
-                trained
-                    .friction
-                    .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string()),
+                trained.friction_label(),
                 self.friction
             ));
         }

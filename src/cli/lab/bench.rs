@@ -341,13 +341,11 @@ fn pipeline_row(
     isr: &clothsr::msr::Isr,
     scene_path: &Path,
 ) -> anyhow::Result<TableRow> {
+    use clothsr::pipeline::models::has_corrector;
     use clothsr::pipeline::{options_for_run, Options, Pipeline};
     let scene = Scene::load(scene_path, &Fabric::default())?;
     let corrector_dir = models.join("corrector");
-    let corrector = corrector_dir
-        .join("config.json")
-        .exists()
-        .then_some(corrector_dir.as_path());
+    let corrector = has_corrector(models).then_some(corrector_dir.as_path());
     // The coarse model `clothsr run` would use with these models.
     let (opts, _) = options_for_run(models, corrector, Options::default())?;
     let mut p = Pipeline::new(&scene, isr, corrector, opts)?;

@@ -100,12 +100,7 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     args.coarse.check_flags().map_err(anyhow::Error::msg)?;
     let t = &mut corrector.training;
     if let Some(c) = args.coarse.replacing(&t.coarse_calibration()) {
-        t.coarse_compression = c.compression;
-        t.coarse_compression_knee = c.compression_knee;
-        t.coarse_friction = c.friction;
-        t.coarse_wrinkle_bending = c.wrinkle_bending;
-        t.coarse_bending = c.bending;
-        t.coarse_crease_contacts = c.crease_contacts;
+        t.set_coarse_calibration(&c);
     }
     Ok(corrector)
 }

@@ -324,7 +324,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .coarse
         .replacing(&trained_beside)
         .unwrap_or(trained_beside);
-    let cfg = TrainingConfig::new(model)
+    let mut cfg = TrainingConfig::new(model)
         .with_steps(a.steps)
         .with_batch(a.batch)
         .with_lr_start(a.lr_start)
@@ -338,12 +338,6 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
         .with_target_steps((a.target_steps != 1).then_some(a.target_steps))
         .with_seed(a.seed)
-        .with_coarse_compression(coarse.compression)
-        .with_coarse_compression_knee(coarse.compression_knee)
-        .with_coarse_friction(coarse.friction)
-        .with_coarse_wrinkle_bending(coarse.wrinkle_bending)
-        .with_coarse_bending(coarse.bending)
-        .with_coarse_crease_contacts(coarse.crease_contacts)
         .with_init_from(a.init.clone())
         .with_distil_from(a.distil.clone())
         .with_average_from(a.average_from)
@@ -353,6 +347,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_drift_tau_steps(a.drift_tau.filter(|&t| t != DEFAULT_DRIFT_TAU_STEPS))
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
+    cfg.set_coarse_calibration(&coarse);
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
     anyhow::ensure!(
         a.drift_share != 0.0 || (a.drift_refresh.is_none() && a.drift_tau.is_none()),

@@ -172,8 +172,7 @@ impl TrainingConfig {
     /// The coarse friction coefficient the corrector was trained beside, for reports: the
     /// number, or "the simulator's" when unset ([`Self::coarse_friction`]).
     pub fn friction_label(&self) -> String {
-        self.coarse_friction
-            .map_or_else(|| "the simulator's".to_string(), |mu| mu.to_string())
+        self.coarse_calibration().friction_label()
     }
 
     /// The coarse model the corrector was trained beside, as a calibration.
@@ -186,6 +185,16 @@ impl TrainingConfig {
             bending: self.coarse_bending,
             crease_contacts: self.coarse_crease_contacts,
         }
+    }
+
+    /// Records `cal` as the coarse model the corrector is trained beside.
+    pub fn set_coarse_calibration(&mut self, cal: &crate::sim::coarse::CoarseCalibration) {
+        self.coarse_compression = cal.compression;
+        self.coarse_compression_knee = cal.compression_knee;
+        self.coarse_friction = cal.friction;
+        self.coarse_wrinkle_bending = cal.wrinkle_bending;
+        self.coarse_bending = cal.bending;
+        self.coarse_crease_contacts = cal.crease_contacts;
     }
 
     /// Sets up `sim` (a coarse simulation) as the corrector was trained with
