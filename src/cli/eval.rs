@@ -3,11 +3,11 @@
 //! error-over-time plot and a Rerun heat map (see [`clothsr::eval`]); where the prediction's file
 //! holds the scene's colliders, how many vertices of each series lie inside them.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::eval::{
-    compare, floor_bound, plot, summarise, vertex_errors, write_csv, Animation, Bodies,
+    compare, floor_bound, plot, summarise, vertex_errors, write_csv, Animation, Bodies, FloorBound,
     FrameMetrics,
 };
 use clothsr::viz::{colours, Recorder};
@@ -51,6 +51,9 @@ pub struct Args {
     heat_max_mm: Option<f64>,
 }
 
+/// A series' label and its per-frame metrics.
+type Series = (String, Vec<FrameMetrics>);
+
 fn label_and_path(s: &str) -> (String, PathBuf) {
     match s.split_once('=') {
         Some((name, path)) if !name.is_empty() && !name.contains('/') => {
@@ -75,14 +78,48 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let pred_anim = Animation::read_usd(&args.pred)?;
     // A data set's frames 1.. follow the prediction's first time code.
     let start = pred_anim.time_codes.first().copied().unwrap_or(0.0);
-    let read = |path: &std::path::Path| {
-        if path.is_dir() {
-            Animation::read_dataset(path, start)
-        } else {
-            Animation::read_usd(path)
-        }
-    };
-    let gt = read(&args.gt)?;
+    let gt = read(&args.gt, start)?;
+    let inputs = inputs(&args)?;
+    let (series, anims) = measure(&gt, pred_anim, &inputs, start)?;
+    let pred_mean = print_errors(&series);
+    // Cloth inside the bodies: the prediction's file carries the scene's colliders.
+    let bodies = Bodies::read_usd(&args.pred)?;
+    if !bodies.is_empty() {
+        print_inside(&bodies, &gt, &inputs, &anims, &series[0].1);
+    }
+    if let Some(twin_path) = &args.floor {
+        let twin = anims.last().context("the twin was read")?;
+        let b = floor_bound(&gt, twin, twin_path, &anims[0], &args.pred)?;
+        print_floor(&b, &series);
+    }
+    if let Some(path) = &args.csv {
+        write_csv(path, &series)?;
+        tracing::info!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{} against {}", args.pred.display(), args.gt.display());
+        plot(path, &series, &title)?;
+        tracing::info!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.rrd {
+        let max_m = args.heat_max_mm.unwrap_or(2.0 * pred_mean).max(1e-3) * 1e-3;
+        write_rrd(path, &gt, &series, &anims, max_m)?;
+    }
+    Ok(())
+}
+
+/// A fine animation: a `clothsr lab dataset` directory's fine frames from time code `start`
+/// on, else a USD file.
+fn read(path: &Path, start: f64) -> clothsr::Result<Animation> {
+    if path.is_dir() {
+        Animation::read_dataset(path, start)
+    } else {
+        Animation::read_usd(path)
+    }
+}
+
+/// The series to measure, labelled: the prediction, the baselines, then the twin as `floor`.
+fn inputs(args: &Args) -> anyhow::Result<Vec<(String, PathBuf)>> {
     let mut inputs = vec![label_and_path(&format!(
         "prediction={}",
         args.pred.display()
@@ -95,15 +132,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         inputs.push(("floor".to_string(), twin.clone()));
     }
-    let mut series: Vec<(String, Vec<FrameMetrics>)> = Vec::new();
+    Ok(inputs)
+}
+
+/// Each input's per-frame errors against the ground truth, and its animation; the first input
+/// is the prediction, already read.
+fn measure(
+    gt: &Animation,
+    pred_anim: Animation,
+    inputs: &[(String, PathBuf)],
+    start: f64,
+) -> anyhow::Result<(Vec<Series>, Vec<Animation>)> {
+    let mut series: Vec<Series> = Vec::new();
     let mut anims: Vec<Animation> = Vec::new();
     let mut pred_anim = Some(pred_anim);
-    for (name, path) in &inputs {
+    for (name, path) in inputs {
         let a = match pred_anim.take() {
             Some(a) => a,
-            None => read(path)?,
+            None => read(path, start)?,
         };
-        let mut m = compare(&gt, &a, path)?;
+        let mut m = compare(gt, &a, path)?;
         // A baseline counts over the prediction's frames only, so that the ratios compare
         // like with like (a fork's frames before it was moved count as zero there too).
         if let Some((_, pred)) = series.first() {
@@ -115,12 +163,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         series.push((name.clone(), m));
         anims.push(a);
     }
+    Ok((series, anims))
+}
+
+/// Prints each series' summary and the prediction's ratio to each baseline; returns the
+/// prediction's mean error, mm.
+fn print_errors(series: &[Series]) -> f64 {
     println!(
         "{:<24} {:>6} {:>9} {:>9} {:>9} {:>10} {:>10} {:>10}",
         "series", "frames", "mean mm", "max mm", "std mm", "normal °", "jitter mm", "gt jitter"
     );
     let pred_mean = summarise(&series[0].1).mean_mm;
-    for (name, m) in &series {
+    for (name, m) in series {
         let s = summarise(m);
         println!(
             "{:<24} {:>6} {:>9.3} {:>9.3} {:>9.3} {:>10.3} {:>10.4} {:>10.4}",
@@ -140,110 +194,116 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             println!("prediction / {name}: {:.3}×", pred_mean / b);
         }
     }
-    // Cloth inside the bodies: the prediction's file carries the scene's colliders.
-    let bodies = Bodies::read_usd(&args.pred)?;
-    if !bodies.is_empty() {
+    pred_mean
+}
+
+/// Prints how many vertices of the ground truth and of each series lie inside the bodies, over
+/// the prediction's frames `times`.
+fn print_inside(
+    bodies: &Bodies,
+    gt: &Animation,
+    inputs: &[(String, PathBuf)],
+    anims: &[Animation],
+    times: &[FrameMetrics],
+) {
+    println!(
+        "{:<24} {:>6} {:>16} {:>14} {:>11}",
+        "inside the bodies", "frames", "vertices a frame", "frames with any", "deepest mm"
+    );
+    let all = std::iter::once(("ground truth", gt))
+        .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(anims));
+    for (name, a) in all {
+        let (mut sum, mut any, mut deepest, mut n) = (0usize, 0usize, 0.0f64, 0usize);
+        for f in times {
+            let Some(k) = a.frame_at(f.time_code) else {
+                continue;
+            };
+            let (inside, depth) = bodies.inside(&a.frames[k], f.time_code);
+            sum += inside;
+            any += usize::from(inside > 0);
+            deepest = deepest.max(depth);
+            n += 1;
+        }
         println!(
-            "{:<24} {:>6} {:>16} {:>14} {:>11}",
-            "inside the bodies", "frames", "vertices a frame", "frames with any", "deepest mm"
+            "{:<24} {:>6} {:>16.1} {:>14} {:>11.2}",
+            name,
+            n,
+            sum as f64 / n.max(1) as f64,
+            any,
+            deepest * 1e3
         );
-        let all = std::iter::once(("ground truth", &gt))
-            .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(&anims));
-        let times = &series[0].1;
-        for (name, a) in all {
-            let (mut sum, mut any, mut deepest, mut n) = (0usize, 0usize, 0.0f64, 0usize);
-            for f in times {
-                let Some(k) = a.frame_at(f.time_code) else {
-                    continue;
-                };
-                let (inside, depth) = bodies.inside(&a.frames[k], f.time_code);
-                sum += inside;
-                any += usize::from(inside > 0);
-                deepest = deepest.max(depth);
-                n += 1;
+    }
+}
+
+/// Prints the predictability floor `b` and the least error against each baseline.
+fn print_floor(b: &FloorBound, series: &[Series]) {
+    println!(
+        "the two ground truths apart: {:.3} mm over {} frames",
+        b.floor_mm, b.frames
+    );
+    println!(
+        "prediction against the twin: {:.3} mm; mean over both: {:.3} mm",
+        b.against_twin_mm,
+        b.two_truths_mm()
+    );
+    println!(
+        "least possible over both: {:.3} mm (half the floor: no prediction from the shared \
+         start averages less over the two ground truths)",
+        b.least_mm()
+    );
+    if b.least_mm() > 0.0 {
+        println!(
+            "prediction over both / least: {:.2}×",
+            b.two_truths_mm() / b.least_mm()
+        );
+    }
+    for (name, m) in series.iter().skip(1) {
+        let base = summarise(m).mean_mm;
+        if name != "floor" && base > 0.0 {
+            println!("least / {name}: {:.3}×", b.least_mm() / base);
+        }
+    }
+}
+
+/// Writes the Rerun recording: the ground truth, and each series as a heat map of its
+/// per-vertex error (red at `max_m`) with its mean error plotted.
+fn write_rrd(
+    path: &Path,
+    gt: &Animation,
+    series: &[Series],
+    anims: &[Animation],
+    max_m: f64,
+) -> anyhow::Result<()> {
+    let rec = Recorder::save("clothsr_eval", path)?;
+    rec.mesh_topology("world/ground_truth", &gt.triangles, colours::FINE)?;
+    for (name, _) in series {
+        rec.mesh_topology(&format!("world/{name}"), &gt.triangles, colours::FINE)?;
+    }
+    for (k, &t) in gt.time_codes.iter().enumerate() {
+        rec.set_frame(t.round() as i64);
+        rec.mesh_positions("world/ground_truth", &gt.triangles, &gt.frames[k])?;
+        for ((name, m), a) in series.iter().zip(anims) {
+            let Some(j) = a.frame_at(t) else { continue };
+            let e = vertex_errors(&gt.frames[k], &a.frames[j]);
+            rec.mesh_heat_map(
+                &format!("world/{name}"),
+                &gt.triangles,
+                &a.frames[j],
+                &e,
+                max_m,
+            )?;
+            if let Some(fm) = m.iter().find(|x| (x.time_code - t).abs() < 1e-6) {
+                rec.scalar(&format!("error_mm/{name}"), fm.mean_mm)?;
             }
-            println!(
-                "{:<24} {:>6} {:>16.1} {:>14} {:>11.2}",
-                name,
-                n,
-                sum as f64 / n.max(1) as f64,
-                any,
-                deepest * 1e3
-            );
         }
     }
-    if let Some(twin_path) = &args.floor {
-        let twin = anims.last().context("the twin was read")?;
-        let b = floor_bound(&gt, twin, twin_path, &anims[0], &args.pred)?;
-        println!(
-            "the two ground truths apart: {:.3} mm over {} frames",
-            b.floor_mm, b.frames
+    let written = rec.finish().context("finishing the recording")?;
+    if let Some(p) = written {
+        tracing::info!(
+            "wrote {} (heat map: blue 0 → red {:.1} mm)",
+            p.display(),
+            max_m * 1e3
         );
-        println!(
-            "prediction against the twin: {:.3} mm; mean over both: {:.3} mm",
-            b.against_twin_mm,
-            b.two_truths_mm()
-        );
-        println!(
-            "least possible over both: {:.3} mm (half the floor: no prediction from the shared \
-             start averages less over the two ground truths)",
-            b.least_mm()
-        );
-        if b.least_mm() > 0.0 {
-            println!(
-                "prediction over both / least: {:.2}×",
-                b.two_truths_mm() / b.least_mm()
-            );
-        }
-        for (name, m) in series.iter().skip(1) {
-            let base = summarise(m).mean_mm;
-            if name != "floor" && base > 0.0 {
-                println!("least / {name}: {:.3}×", b.least_mm() / base);
-            }
-        }
-    }
-    if let Some(path) = &args.csv {
-        write_csv(path, &series)?;
-        tracing::info!("wrote {}", path.display());
-    }
-    if let Some(path) = &args.plot {
-        let title = format!("{} against {}", args.pred.display(), args.gt.display());
-        plot(path, &series, &title)?;
-        tracing::info!("wrote {}", path.display());
-    }
-    if let Some(path) = &args.rrd {
-        let max_m = args.heat_max_mm.unwrap_or(2.0 * pred_mean).max(1e-3) * 1e-3;
-        let rec = Recorder::save("clothsr_eval", path)?;
-        rec.mesh_topology("world/ground_truth", &gt.triangles, colours::FINE)?;
-        for (name, _) in &series {
-            rec.mesh_topology(&format!("world/{name}"), &gt.triangles, colours::FINE)?;
-        }
-        for (k, &t) in gt.time_codes.iter().enumerate() {
-            rec.set_frame(t.round() as i64);
-            rec.mesh_positions("world/ground_truth", &gt.triangles, &gt.frames[k])?;
-            for ((name, m), a) in series.iter().zip(&anims) {
-                let Some(j) = a.frame_at(t) else { continue };
-                let e = vertex_errors(&gt.frames[k], &a.frames[j]);
-                rec.mesh_heat_map(
-                    &format!("world/{name}"),
-                    &gt.triangles,
-                    &a.frames[j],
-                    &e,
-                    max_m,
-                )?;
-                if let Some(fm) = m.iter().find(|x| (x.time_code - t).abs() < 1e-6) {
-                    rec.scalar(&format!("error_mm/{name}"), fm.mean_mm)?;
-                }
-            }
-        }
-        let written = rec.finish().context("finishing the recording")?;
-        if let Some(p) = written {
-            tracing::info!(
-                "wrote {} (heat map: blue 0 → red {:.1} mm)",
-                p.display(),
-                max_m * 1e3
-            );
-        }
     }
     Ok(())
 }

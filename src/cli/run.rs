@@ -13,7 +13,7 @@ use clothsr::eval::Animation;
 use clothsr::msr::Isr;
 use clothsr::pipeline::{
     choose_path, options_for_run, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath,
-    Options, Outputs, Pipeline, Preview, Progress,
+    Options, Outputs, Pipeline, Preview, Progress, Report,
 };
 use clothsr::viz::Recorder;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -330,53 +330,13 @@ fn run_one(
         (None, true) => Some(Recorder::spawn("clothsr")?),
         (None, false) => None,
     };
-    // Everything that shapes the output: a resume point made with other settings is ignored.
-    let gt = match &args.gt {
-        Some(g) if g.is_dir() => Some(Animation::read_dataset(g, scene.frame_start as f64)?),
-        Some(g) => Some(Animation::read_usd(g)?),
-        None => None,
-    };
-    if let Some(g) = &gt {
-        anyhow::ensure!(
-            g.num_vertices() == p.fine.num_vertices() && g.triangles == p.fine.triangles,
-            "{}: not the fine mesh of this run ({} vertices against {}): simulate it at the ISR \
-             model's pixel size ({} mm)",
-            args.gt.as_deref().unwrap_or(Path::new("")).display(),
-            g.num_vertices(),
-            p.fine.num_vertices(),
-            isr.cfg.pixel_m * 1e3
-        );
-    }
+    let gt = ground_truth(args, scene.frame_start as f64, &p, isr)?;
     let preview = rec.as_ref().map(|r| Preview {
         recorder: r,
         ground_truth: gt.as_ref(),
         heat_max_m: knobs.heat_max_mm * 1e-3,
     });
-    let fingerprint = format!(
-        "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
-         colliders={:?} avatar={:?} fabric={}",
-        super::absolute(&job.scene)?.display(),
-        super::absolute(&args.models)?.display(),
-        p.has_corrector(),
-        args.inputs.collider,
-        args.inputs.avatar,
-        args.inputs.fabric
-    );
-    let outputs = Outputs {
-        fine: job.output.clone(),
-        coarse: knobs.coarse_out.clone(),
-        upsampled: knobs.upsampled_out.clone(),
-        ascii: args.ascii,
-        doc: format!(
-            "clothsr run {} with models {} (corrector {})",
-            job.scene.display(),
-            args.models.display(),
-            if p.has_corrector() { "on" } else { "off" }
-        ),
-        resume: !args.restart,
-        fingerprint,
-        publish_every_s: 10.0,
-    };
+    let outputs = outputs(args, knobs, job, p.has_corrector(), frames, opts, variation)?;
     let bar = multi.add(ProgressBar::new(frames as u64));
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} frames {per_sec} eta {eta} {msg}")
@@ -388,31 +348,7 @@ fn run_one(
         frames,
         &outputs,
         preview.as_ref(),
-        |g: &Progress| {
-            if g.frame == 0 || Some(g.frame) == g.resumed_after {
-                bar.set_position(g.frame as u64);
-                bar.reset_eta();
-                return ControlFlow::Continue(());
-            }
-            let t = g.times;
-            let mut message = format!(
-                "frame {}/{}: simulator {:.2} s, corrector {:.2} s, MSR {:.2} s",
-                g.frame, g.frames, t.simulator_s, t.corrector_s, t.msr_s
-            );
-            if g.pushed.inside > 0 {
-                message += &format!(
-                    ", {} fine vertices pushed out of bodies (deepest {:.1} mm)",
-                    g.pushed.inside,
-                    g.pushed.max_depth_m * 1e3
-                );
-            }
-            if bar.is_hidden() {
-                tracing::info!("{message}");
-            }
-            bar.set_message(message);
-            bar.set_position(g.frame as u64);
-            ControlFlow::Continue(())
-        },
+        |g: &Progress| show_progress(&bar, g),
     );
     let report = match report {
         Ok(r) => r,
@@ -432,11 +368,110 @@ fn run_one(
             tracing::info!("wrote {}", path.display());
         }
     }
+    log_report(&job.output, &report);
+    Ok(())
+}
+
+/// The `--gt` fine simulation (a USD file, or a data set's fine frames from time code
+/// `start`), checked to be the fine mesh of this run.
+fn ground_truth(
+    args: &Args,
+    start: f64,
+    p: &Pipeline<'_>,
+    isr: &Isr,
+) -> anyhow::Result<Option<Animation>> {
+    let gt = match &args.gt {
+        Some(g) if g.is_dir() => Some(Animation::read_dataset(g, start)?),
+        Some(g) => Some(Animation::read_usd(g)?),
+        None => None,
+    };
+    if let Some(g) = &gt {
+        anyhow::ensure!(
+            g.num_vertices() == p.fine.num_vertices() && g.triangles == p.fine.triangles,
+            "{}: not the fine mesh of this run ({} vertices against {}): simulate it at the ISR \
+             model's pixel size ({} mm)",
+            args.gt.as_deref().unwrap_or(Path::new("")).display(),
+            g.num_vertices(),
+            p.fine.num_vertices(),
+            isr.cfg.pixel_m * 1e3
+        );
+    }
+    Ok(gt)
+}
+
+/// The files one scene's run writes, and the fingerprint of its settings.
+fn outputs(
+    args: &Args,
+    knobs: &Knobs,
+    job: &Job,
+    has_corrector: bool,
+    frames: usize,
+    opts: Options,
+    variation: Variation,
+) -> anyhow::Result<Outputs> {
+    // Everything that shapes the output: a resume point made with other settings is ignored.
+    let fingerprint = format!(
+        "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
+         colliders={:?} avatar={:?} fabric={}",
+        super::absolute(&job.scene)?.display(),
+        super::absolute(&args.models)?.display(),
+        has_corrector,
+        args.inputs.collider,
+        args.inputs.avatar,
+        args.inputs.fabric
+    );
+    Ok(Outputs {
+        fine: job.output.clone(),
+        coarse: knobs.coarse_out.clone(),
+        upsampled: knobs.upsampled_out.clone(),
+        ascii: args.ascii,
+        doc: format!(
+            "clothsr run {} with models {} (corrector {})",
+            job.scene.display(),
+            args.models.display(),
+            if has_corrector { "on" } else { "off" }
+        ),
+        resume: !args.restart,
+        fingerprint,
+        publish_every_s: 10.0,
+    })
+}
+
+/// Moves the progress bar to frame `g` with its stage times (logged instead without a
+/// terminal).
+fn show_progress(bar: &ProgressBar, g: &Progress) -> ControlFlow<()> {
+    if g.frame == 0 || Some(g.frame) == g.resumed_after {
+        bar.set_position(g.frame as u64);
+        bar.reset_eta();
+        return ControlFlow::Continue(());
+    }
+    let t = g.times;
+    let mut message = format!(
+        "frame {}/{}: simulator {:.2} s, corrector {:.2} s, MSR {:.2} s",
+        g.frame, g.frames, t.simulator_s, t.corrector_s, t.msr_s
+    );
+    if g.pushed.inside > 0 {
+        message += &format!(
+            ", {} fine vertices pushed out of bodies (deepest {:.1} mm)",
+            g.pushed.inside,
+            g.pushed.max_depth_m * 1e3
+        );
+    }
+    if bar.is_hidden() {
+        tracing::info!("{message}");
+    }
+    bar.set_message(message);
+    bar.set_position(g.frame as u64);
+    ControlFlow::Continue(())
+}
+
+/// Logs what a finished run wrote to `output`: frames, time per stage, vertices pushed out.
+fn log_report(output: &Path, report: &Report) {
     let n = report.frames_computed.max(1) as f64;
     let t = report.totals;
     tracing::info!(
         "wrote {}: {} frames in {:.1} s{}; per frame: simulator {:.3} s, corrector {:.3} s, MSR {:.3} s",
-        job.output.display(),
+        output.display(),
         report.frames_computed,
         report.wall_s,
         report
@@ -455,5 +490,4 @@ fn run_one(
             (report.pushed.moved - report.pushed.inside) as f64 / n
         );
     }
-    Ok(())
 }

@@ -1,14 +1,14 @@
 //! `clothsr simulate SCENE --edge-mm 20 --frames N -o OUT.usdc`: the cloth simulator alone,
 //! writing time-sampled points frame by frame.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
 use clothsr::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
 use clothsr::io::SceneFiles;
 use clothsr::scene::Scene;
-use clothsr::sim::driver::Simulation;
+use clothsr::sim::driver::{FrameStats, Simulation};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `simulate`.
@@ -78,6 +78,54 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.edge_mm.is_finite() && args.edge_mm > 0.0,
         "--edge-mm must be positive"
     );
+    let scene = load_scene(&args)?;
+    let frames = args
+        .frames
+        .unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
+    anyhow::ensure!(
+        frames > 0,
+        "nothing to simulate: give --frames N (the scene's frame range is empty)"
+    );
+    let mut sim = new_simulation(&scene, &args)?;
+    if !args.no_dress && !sim.sim.model.mesh.seam_pairs.is_empty() {
+        dress(&mut sim, args.dress_max_s, args.settle_s)?;
+    }
+    log_model(&sim);
+
+    let stage = stage(&args, &scene, &sim, frames);
+    let start = stage.start;
+    let mut writer = AnimationWriter::create(&output, &stage)?;
+    writer.write_frame(start, &sim.part_positions())?;
+
+    let bar = ProgressBar::new((frames * sim.steps_per_frame) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} eta {eta} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let t0 = Instant::now();
+    let tangled_frames = animate(&mut sim, &mut writer, &bar, &output, start, frames, t0)?;
+    bar.finish();
+    if tangled_frames > 0 {
+        tracing::warn!(
+            "{}: the cloth passed through itself in {tangled_frames} of {frames} frames",
+            output.display()
+        );
+    }
+    for w in writer.finish()? {
+        tracing::warn!("{}: {w}", output.display());
+    }
+    let secs = t0.elapsed().as_secs_f64();
+    tracing::info!(
+        "wrote {}: {frames} frames in {secs:.1} s ({:.2} ms per step, {:.1} s per simulated second)",
+        output.display(),
+        secs * 1e3 / (frames * sim.steps_per_frame) as f64,
+        secs / (frames as f64 / scene.fps)
+    );
+    Ok(())
+}
+
+/// The scene with the extra colliders, the avatar and the time step given.
+fn load_scene(args: &Args) -> anyhow::Result<Scene> {
     let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
     let offset = args
         .collider_offset
@@ -95,13 +143,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::ensure!(dt.is_finite() && dt > 0.0, "--dt must be positive");
         scene.dt_s = dt;
     }
-    let frames = args
-        .frames
-        .unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
-    anyhow::ensure!(
-        frames > 0,
-        "nothing to simulate: give --frames N (the scene's frame range is empty)"
-    );
+    Ok(scene)
+}
+
+/// The simulation of `scene` at `--edge-mm` under the solver flags given.
+fn new_simulation(scene: &Scene, args: &Args) -> anyhow::Result<Simulation> {
     let (no_self, fast) = (args.no_self_collision, args.fast);
     if let Some(mu) = args.friction {
         anyhow::ensure!(
@@ -115,7 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "--contact-stiffness must be a positive number of N/m, not {k}"
         );
     }
-    let mut sim = Simulation::new(&scene, args.edge_mm * 1e-3, |p| {
+    let sim = Simulation::new(scene, args.edge_mm * 1e-3, |p| {
         p.collision.self_collision = !no_self;
         p.newton_exact = !fast;
         if let Some(k) = args.contact_stiffness {
@@ -125,26 +171,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             p.friction = mu;
         }
     })?;
-    if !args.no_dress && !sim.sim.model.mesh.seam_pairs.is_empty() {
-        anyhow::ensure!(
-            args.dress_max_s >= 0.0 && args.settle_s >= 0.0,
-            "--dress-max-s and --settle-s must not be negative"
-        );
-        let t = Instant::now();
-        let d = sim
-            .dress(args.dress_max_s, args.settle_s, 1e-3)
-            .context("dressing the garments (sewing before the animation)")?;
-        tracing::info!(
-            "dressed: {} panels rolled around the body; {} sewing + {} settling steps in {:.1} s; widest seam gap {:.1} → {:.2} mm, penetration {:.2} mm",
-            d.wrapped_panels,
-            d.sew_steps,
-            d.settle_steps,
-            t.elapsed().as_secs_f64(),
-            d.initial_seam_gap_m * 1e3,
-            d.seam_gap_m * 1e3,
-            d.max_penetration_m * 1e3
-        );
-    }
+    Ok(sim)
+}
+
+/// Sews the garments with seams, then settles them, before the first frame.
+fn dress(sim: &mut Simulation, dress_max_s: f64, settle_s: f64) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        dress_max_s >= 0.0 && settle_s >= 0.0,
+        "--dress-max-s and --settle-s must not be negative"
+    );
+    let t = Instant::now();
+    let d = sim
+        .dress(dress_max_s, settle_s, 1e-3)
+        .context("dressing the garments (sewing before the animation)")?;
+    tracing::info!(
+        "dressed: {} panels rolled around the body; {} sewing + {} settling steps in {:.1} s; widest seam gap {:.1} → {:.2} mm, penetration {:.2} mm",
+        d.wrapped_panels,
+        d.sew_steps,
+        d.settle_steps,
+        t.elapsed().as_secs_f64(),
+        d.initial_seam_gap_m * 1e3,
+        d.seam_gap_m * 1e3,
+        d.max_penetration_m * 1e3
+    );
+    Ok(())
+}
+
+/// Logs the cloth model's size and the solver's time step and contact distance.
+fn log_model(sim: &Simulation) {
     let model = &sim.sim.model;
     tracing::info!(
         "{} vertices, {} triangles, {} hinges, {} seam pairs; dt {:.5} s, {} steps per frame, d̂ {:.1} mm",
@@ -156,7 +210,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         sim.steps_per_frame,
         sim.sim.params.collision.dhat_m * 1e3
     );
+}
 
+/// The output stage: the animated cloth parts and the colliders over `frames` frames.
+fn stage(args: &Args, scene: &Scene, sim: &Simulation, frames: usize) -> StageOut<'static> {
+    let model = &sim.sim.model;
     let start = scene.frame_start as f64;
     let mut meshes: Vec<MeshOut> = (0..model.parts.len())
         .map(|i| {
@@ -169,7 +227,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for c in &scene.colliders {
         meshes.push(MeshOut::collider(c, scene.fps));
     }
-    let stage = StageOut {
+    StageOut {
         fps: scene.fps,
         start,
         end: start + frames as f64,
@@ -185,16 +243,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             gravity_m_s2: scene.gravity_m_s2,
             dt_s: sim.sim.params.dt_s,
         }),
-    };
-    let mut writer = AnimationWriter::create(&output, &stage)?;
-    writer.write_frame(start, &sim.part_positions())?;
+    }
+}
 
-    let bar = ProgressBar::new((frames * sim.steps_per_frame) as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} steps {per_sec} eta {eta} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let t0 = Instant::now();
+/// Simulates frames 1..=`frames` and writes each one, checkpointing the file every ten
+/// seconds; returns how many frames the cloth passed through itself in. On a failure the
+/// frames simulated so far are saved.
+fn animate(
+    sim: &mut Simulation,
+    writer: &mut AnimationWriter,
+    bar: &ProgressBar,
+    output: &Path,
+    start: f64,
+    frames: usize,
+    t0: Instant,
+) -> anyhow::Result<usize> {
     let mut last_checkpoint = Instant::now();
     // Cloth passing through itself is what users see first and the solver must never do:
     // counted every frame (a BVH pass, a few ms at 4K vertices), reported when it happens.
@@ -231,19 +294,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 );
             }
         }
-        let message = format!(
-            "frame {f}/{frames}  newton {:.1}/step  cg {:.0}/step  substeps {}  contacts {}  max penetration {:.2} mm{}",
-            stats.steps.newton_iters as f64 / stats.step_count as f64,
-            stats.steps.cg_iters as f64 / stats.step_count as f64,
-            stats.steps.substeps,
-            stats.steps.contacts,
-            stats.max_penetration_m * 1e3,
-            if crossings > 0 {
-                format!("  crossings {crossings}")
-            } else {
-                String::new()
-            }
-        );
+        let message = frame_message(f, frames, &stats, crossings);
         if bar.is_hidden() {
             // No terminal (batch, CI, DCC pipelines): log instead of drawing a bar.
             tracing::info!("{message}  ({:.1} s elapsed)", t0.elapsed().as_secs_f64());
@@ -255,22 +306,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             last_checkpoint = Instant::now();
         }
     }
-    bar.finish();
-    if tangled_frames > 0 {
-        tracing::warn!(
-            "{}: the cloth passed through itself in {tangled_frames} of {frames} frames",
-            output.display()
-        );
-    }
-    for w in writer.finish()? {
-        tracing::warn!("{}: {w}", output.display());
-    }
-    let secs = t0.elapsed().as_secs_f64();
-    tracing::info!(
-        "wrote {}: {frames} frames in {secs:.1} s ({:.2} ms per step, {:.1} s per simulated second)",
-        output.display(),
-        secs * 1e3 / (frames * sim.steps_per_frame) as f64,
-        secs / (frames as f64 / scene.fps)
-    );
-    Ok(())
+    Ok(tangled_frames)
+}
+
+/// The progress line of frame `f`: solver iterations, contacts, penetration, crossings.
+fn frame_message(f: usize, frames: usize, stats: &FrameStats, crossings: usize) -> String {
+    format!(
+        "frame {f}/{frames}  newton {:.1}/step  cg {:.0}/step  substeps {}  contacts {}  max penetration {:.2} mm{}",
+        stats.steps.newton_iters as f64 / stats.step_count as f64,
+        stats.steps.cg_iters as f64 / stats.step_count as f64,
+        stats.steps.substeps,
+        stats.steps.contacts,
+        stats.max_penetration_m * 1e3,
+        if crossings > 0 {
+            format!("  crossings {crossings}")
+        } else {
+            String::new()
+        }
+    )
 }
