@@ -498,7 +498,7 @@ fn a_sheet_thrown_at_another_never_passes_through_it() {
 /// one Newton iteration a step, vertices sliding over the table's edge took the repulsion of
 /// the wrong side of it and the sheet left the table at metres per second (kinetic energy at
 /// frame 5 above what the whole sheet would have gained in free fall). Fast mode now iterates
-/// on while a touching vertex moves more than `FAST_CONTACT_MOVE_M` in a step.
+/// on while a touching vertex slides more than `FAST_CONTACT_MOVE_M` near a crease in a step.
 ///
 /// Nor does the landing push it over the edge. The table's top can only stop the sheet; its
 /// edge can turn the overhang's falling momentum into a pull along the cloth, twice that if

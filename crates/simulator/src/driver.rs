@@ -174,6 +174,7 @@ impl Simulation {
             frame.steps.contacts = stats.contacts;
             frame.steps.substeps += stats.substeps;
             frame.steps.energy_j = stats.energy_j;
+            frame.steps.times.add(&stats.times);
         }
         Ok(frame)
     }

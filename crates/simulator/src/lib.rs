@@ -7,6 +7,7 @@
 //! ([`SimState`]) between steps. [`coarse`] holds the coarse model's settings.
 
 pub mod arrange;
+pub mod bench;
 pub mod coarse;
 pub mod collide;
 pub mod driver;
@@ -21,5 +22,6 @@ pub(crate) use clothsr_geometry::{error, garment, mesh, scene};
 
 pub use model::{ClothModel, WrinkleBending};
 pub use step::{
-    ColliderFrame, LinearSolver, Pin, PinTarget, SimParams, SimState, Simulator, StepStats,
+    ColliderFrame, LinearSolver, PhaseTimes, Pin, PinTarget, SimParams, SimState, Simulator,
+    StepStats,
 };

@@ -98,17 +98,6 @@ impl BlockCsr {
         self.matvec_with(&self.blocks, x, y, free, 1);
     }
 
-    /// The pattern's blocks rounded to single precision: half the memory traffic of a
-    /// product, which is what bounds it once the matrix outgrows the caches (36 MB of f64
-    /// blocks at 40K vertices). Conjugate gradients to a relative residual of 1e-2–1e-3 do not
-    /// see the 1e-7 rounding.
-    pub fn blocks_f32(&self, out: &mut Vec<Matrix3<f32>>) {
-        out.resize(self.blocks.len(), Matrix3::zeros());
-        out.par_iter_mut()
-            .zip(self.blocks.par_iter())
-            .for_each(|(o, b)| *o = b.cast::<f32>());
-    }
-
     /// y = A·x with the pattern's blocks given as `blocks` (f64 or f32) and the extras in f64;
     /// rows are shared among threads in runs of at least `min_rows` (`usize::MAX`: all on the
     /// calling thread).
@@ -170,6 +159,115 @@ fn for_each_entry<T: Send>(out: &mut [T], min_len: usize, f: impl Fn(usize, &mut
 /// (≈ 10K vertices: 4.5 MB of f32 blocks, beyond a core's L2).
 pub const SINGLE_PRECISION_FROM_BLOCKS: usize = 130_000;
 
+/// Rows per range of [`UpperF32`]'s product: a fixed size, so that the order of every sum, and
+/// so the result, does not depend on the thread count.
+const UPPER_RANGE_ROWS: usize = 2048;
+
+/// The upper triangle (diagonal included) of a [`BlockCsr`]'s pattern in single precision:
+/// a quarter of the memory a product reads from the full f64 pattern. Rows are taken in ranges
+/// of [`UPPER_RANGE_ROWS`], one range per task: block (i, j) adds to row i and, transposed, to
+/// row j, straight when j lies in the range (rows are ordered along the mesh, so most do), else
+/// through the range's spill list, added after all ranges in order.
+#[derive(Debug, Clone, Default)]
+struct UpperF32 {
+    /// Per row, where its blocks start in `col` and `blocks` (n + 1 entries).
+    row_ptr: Vec<usize>,
+    col: Vec<u32>,
+    /// For each upper block, its index in the full matrix's blocks.
+    source: Vec<usize>,
+    blocks: Vec<Matrix3<f32>>,
+    /// The full pattern this was built for (row pointers and columns' count).
+    pattern: (usize, usize),
+    /// Per range, its spills of the last product.
+    spills: Vec<Vec<(u32, Vector3<f64>)>>,
+}
+
+impl UpperF32 {
+    /// Takes `a`'s current values (and its pattern, when it changed).
+    fn update(&mut self, a: &BlockCsr) {
+        if self.pattern != (a.n(), a.nnz_blocks()) || self.row_ptr.len() != a.n() + 1 {
+            self.row_ptr.clear();
+            self.col.clear();
+            self.source.clear();
+            self.row_ptr.push(0);
+            for i in 0..a.n() {
+                for k in a.row_ptr[i]..a.row_ptr[i + 1] {
+                    if a.col[k] as usize >= i {
+                        self.col.push(a.col[k]);
+                        self.source.push(k);
+                    }
+                }
+                self.row_ptr.push(self.col.len());
+            }
+            self.pattern = (a.n(), a.nnz_blocks());
+            self.spills = vec![Vec::new(); a.n().div_ceil(UPPER_RANGE_ROWS)];
+        }
+        self.blocks.resize(self.source.len(), Matrix3::zeros());
+        self.blocks
+            .par_iter_mut()
+            .zip(self.source.par_iter())
+            .for_each(|(b, &k)| *b = a.blocks[k].cast::<f32>());
+    }
+
+    /// y = A·x, skipping rows and columns where `free` is false; `a` gives the extra blocks.
+    fn matvec(&mut self, a: &BlockCsr, x: &[Vector3<f64>], y: &mut [Vector3<f64>], free: &[bool]) {
+        let all_free = free.iter().all(|f| *f);
+        let (row_ptr, col, blocks) = (&self.row_ptr, &self.col, &self.blocks);
+        y.par_chunks_mut(UPPER_RANGE_ROWS)
+            .zip(self.spills.par_iter_mut())
+            .enumerate()
+            .for_each(|(r, (ys, spill))| {
+                let first = r * UPPER_RANGE_ROWS;
+                let end = first + ys.len();
+                spill.clear();
+                ys.iter_mut().for_each(|v| *v = Vector3::zeros());
+                for i in first..end {
+                    if !all_free && !free[i] {
+                        continue;
+                    }
+                    let xi = x[i];
+                    let mut acc = Vector3::zeros();
+                    for k in row_ptr[i]..row_ptr[i + 1] {
+                        let j = col[k] as usize;
+                        if !all_free && !free[j] {
+                            continue;
+                        }
+                        let b: Matrix3<f64> = blocks[k].cast::<f64>();
+                        acc += b * x[j];
+                        if j == i {
+                            continue;
+                        }
+                        let t = b.tr_mul(&xi);
+                        if j < end {
+                            ys[j - first] += t;
+                        } else {
+                            spill.push((j as u32, t));
+                        }
+                    }
+                    ys[i - first] += acc;
+                }
+            });
+        for spill in &self.spills {
+            for (j, t) in spill {
+                y[*j as usize] += t;
+            }
+        }
+        for (i, j, m) in &a.extra {
+            let (i, j) = (*i as usize, *j as usize);
+            if free[i] && free[j] {
+                y[i] += m * x[j];
+            }
+        }
+        if !all_free {
+            for (yi, f) in y.iter_mut().zip(free) {
+                if !f {
+                    *yi = Vector3::zeros();
+                }
+            }
+        }
+    }
+}
+
 /// Outcome of a linear solve.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct CgStats {
@@ -191,8 +289,8 @@ struct CgBuffers {
     /// Shortest run of vectors' entries a thread takes in the solve's passes (`usize::MAX`:
     /// every pass on the calling thread; see [`Pcg::set_single_threaded`]).
     min_len: usize,
-    /// Single-precision copy of the matrix's pattern blocks for the products.
-    blocks32: Vec<Matrix3<f32>>,
+    /// Single-precision copy of the matrix's upper triangle for the products.
+    upper32: UpperF32,
     r: Vec<Vector3<f64>>,
     z: Vec<Vector3<f64>>,
     p: Vec<Vector3<f64>>,
@@ -236,7 +334,7 @@ impl CgBuffers {
         // the conversion costs more than the bandwidth it saves.
         let single = a.nnz_blocks() >= SINGLE_PRECISION_FROM_BLOCKS;
         if single {
-            a.blocks_f32(&mut self.blocks32);
+            self.upper32.update(a);
         }
         a.matvec_with(&a.blocks, x, &mut self.ap, free, ml);
         let ap = &self.ap;
@@ -254,7 +352,7 @@ impl CgBuffers {
         let mut it = 0;
         while it < max_iters && res > rel_tol {
             if single {
-                a.matvec_with(&self.blocks32, &self.p, &mut self.ap, free, ml);
+                self.upper32.matvec(a, &self.p, &mut self.ap, free);
             } else {
                 a.matvec_with(&a.blocks, &self.p, &mut self.ap, free, ml);
             }
@@ -442,15 +540,29 @@ mod tests {
             .sqrt();
         let bn: f64 = b.iter().map(|q| q.norm_squared()).sum::<f64>().sqrt();
         assert!(r / bn < 1e-5, "true relative residual {:.2e}", r / bn);
-        // And the f32 product itself is the f64 one to single precision.
-        let mut blocks32 = Vec::new();
-        a.blocks_f32(&mut blocks32);
-        let mut y32 = vec![Vector3::zeros(); n as usize];
-        a.matvec_with(&blocks32, &b, &mut y32, &free, 1);
+        // And the single-precision product of the upper triangle is the f64 one to single
+        // precision, with the same bits on one thread and on three (pinned vertices skipped).
+        let mut free = free;
+        free[7] = false;
+        free[n as usize / 2] = false;
+        let mut upper = UpperF32::default();
+        upper.update(&a);
+        let on = |threads: usize, upper: &mut UpperF32| {
+            let mut y = vec![Vector3::zeros(); n as usize];
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool")
+                .install(|| upper.matvec(&a, &b, &mut y, &free));
+            y
+        };
+        let (y1, y3) = (on(1, &mut upper), on(3, &mut upper));
+        assert_eq!(y1, y3);
         a.matvec(&b, &mut ax, &free);
-        for (p, q) in y32.iter().zip(&ax) {
+        for (p, q) in y1.iter().zip(&ax) {
             assert!((p - q).norm() <= 1e-6 * (1.0 + q.norm()), "{p:?} vs {q:?}");
         }
+        assert_eq!(y1[7], Vector3::zeros());
     }
 
     /// A k×k grid of vertices with anisotropic springs to the right and up neighbours (stiff

@@ -8,7 +8,7 @@ use super::bvh::{Aabb, Bvh};
 use super::contact::{Collider, CollisionParams, Contact, StepStart};
 use super::crease::{crease_planes, edge_boxes, edge_faces, sharp_edges_of, SHARP_EDGE_DEG};
 use super::crossings::triangle_boxes;
-use super::distance::segment_segment;
+use super::distance::{point_segment, segment_segment};
 use super::OBSTACLE_SEARCH_M;
 
 /// What [`CollisionDetector`] knows of a cloth vertex's distance to the colliders: when it
@@ -89,6 +89,17 @@ pub struct CollisionDetector {
     pub(super) cloth_tris: CachedBvh,
     pub(super) cloth_edges: CachedBvh,
     depth: Vec<f64>,
+    /// Per collider, its sharp edges at the last call ([`CollisionDetector::crease_within`]).
+    creases: Vec<Creases>,
+}
+
+/// A collider's sharp edges (creases) as found by one call, with a hierarchy over them.
+#[derive(Debug, Clone, Default)]
+struct Creases {
+    /// End points of each sharp edge, m.
+    segments: Vec<[Vector3<f64>; 2]>,
+    /// Over the segments' boxes; `None` when there are none.
+    bvh: Option<Bvh>,
 }
 
 impl Default for CollisionDetector {
@@ -114,7 +125,25 @@ impl CollisionDetector {
             cloth_tris: CachedBvh::default(),
             cloth_edges: CachedBvh::default(),
             depth: Vec::new(),
+            creases: Vec::new(),
         }
+    }
+
+    /// Whether a sharp edge of collider `collider` ([`SHARP_EDGE_DEG`], where the body's
+    /// surface turns), as the last call found them, passes within `r` of `p`.
+    pub fn crease_within(&self, collider: usize, p: &Vector3<f64>, r: f64) -> bool {
+        let Some(c) = self.creases.get(collider) else {
+            return false;
+        };
+        let Some(bvh) = &c.bvh else { return false };
+        let mut near = false;
+        bvh.query_ball(p, r, |i| {
+            if !near {
+                let [a, b] = &c.segments[i as usize];
+                near = point_segment(p, a, b).dist <= r;
+            }
+        });
+        near
     }
 
     /// The deepest collider penetration seen by the last [`CollisionDetector::find_contacts`]
@@ -306,24 +335,33 @@ impl CollisionDetector {
         }
         let mut contacts: Vec<Contact> = per_vertex.into_iter().flat_map(|p| p.1).collect();
 
-        // Sharp collider edges (creases) against cloth edges.
-        if self.crease_contacts
-            && dhat > 0.0
-            && !cloth_edges.is_empty()
-            && colliders.iter().any(|(_, t)| !t.is_empty())
-        {
-            let mut cloth_edge_bvh: Option<Bvh> = None;
-            for (k, (cache, (pts, tris))) in self.colliders.iter_mut().zip(colliders).enumerate() {
-                let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
-                let sharp = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
-                if sharp.is_empty() {
-                    continue;
-                }
+        // Sharp collider edges (creases): remembered for [`Self::crease_within`], and
+        // against cloth edges.
+        self.creases.resize_with(colliders.len(), Creases::default);
+        let mut cloth_edge_bvh: Option<Bvh> = None;
+        for (k, (cache, (pts, tris))) in self.colliders.iter_mut().zip(colliders).enumerate() {
+            let creases = &mut self.creases[k];
+            creases.segments.clear();
+            creases.bvh = None;
+            if tris.is_empty() {
+                continue;
+            }
+            let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
+            let sharp = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
+            if sharp.is_empty() {
+                continue;
+            }
+            let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * obstacle_dhat));
+            creases.segments.extend(
+                sharp
+                    .iter()
+                    .map(|e| [pts[e[0] as usize], pts[e[1] as usize]]),
+            );
+            if self.crease_contacts && dhat > 0.0 && !cloth_edges.is_empty() {
                 let planes = crease_planes(pts, tris, faces, &sharp);
                 let cloth_edge_bvh = cloth_edge_bvh.get_or_insert_with(|| {
                     Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * obstacle_dhat))
                 });
-                let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * obstacle_dhat));
                 contacts.extend(cloth_edge_bvh.pairs_with_filter_map(&body, |i, j| {
                     let a = cloth_edges[i as usize];
                     let e = sharp[j as usize];
@@ -343,6 +381,7 @@ impl CollisionDetector {
                     })
                 }));
             }
+            creases.bvh = Some(body);
         }
 
         self.find_self_contacts_into(cloth_x, cloth_tris, cloth_edges, params, &mut contacts);

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::newton::Potential;
 use super::Simulator;
 use crate::collide::distance::{point_triangle, segment_segment};
-use crate::collide::Contact;
+use crate::collide::{CollisionDetector, Contact};
 
 /// Most a found cloth–cloth pair may close in one Newton iteration, as a fraction of its gap.
 const PAIR_CLOSE_FRACTION: f64 = 0.8;
@@ -204,24 +204,35 @@ pub(super) fn limit_step(
     (step, clipped || paired)
 }
 
-/// In fast mode without self-collision, how far a vertex touching a body may move in the one
-/// Newton iteration that ends a step, m; a step whose iteration moved one further iterates on
-/// ([`SimParams::newton_exact`]).
+/// In fast mode without self-collision, how far a vertex touching a body may move near one of
+/// the body's creases in the one Newton iteration that ends a step, m; a step whose iteration
+/// moved one further iterates on ([`SimParams::newton_exact`]).
 pub const FAST_CONTACT_MOVE_M: f64 = 1e-3;
 
-/// The longest move `alpha · step` of a cloth vertex with a body contact, m.
-pub(super) fn body_contact_move(contacts: &[Contact], step: &[Vector3<f64>], alpha: f64) -> f64 {
-    contacts
-        .iter()
-        .filter(|c| {
-            matches!(
-                c,
-                Contact::VertexObstacle { .. } | Contact::EdgeObstacle { .. }
-            )
-        })
-        .flat_map(|c| c.cloth_dofs().into_iter().flatten())
-        .map(|v| step[v as usize].norm() * alpha)
-        .fold(0.0, f64::max)
+/// Whether a cloth vertex touching a body moved more than [`FAST_CONTACT_MOVE_M`] (by
+/// `alpha · step` from `x`) where the body's surface turns within its reach: a crease of that
+/// body within the move plus `reach` of where it started, or a crease contact of its own. One
+/// linearised step of cloth sliding over a sharp edge takes the repulsion of the wrong side of
+/// the edge, and the next step's repulsion launches the cloth; on a smooth body (or a flat face
+/// away from its edges) the linearisation holds over the whole move.
+pub(super) fn slid_over_crease(
+    detector: &CollisionDetector,
+    contacts: &[Contact],
+    x: &[Vector3<f64>],
+    step: &[Vector3<f64>],
+    alpha: f64,
+    reach: f64,
+) -> bool {
+    let moved = |v: u32| step[v as usize].norm() * alpha;
+    contacts.iter().any(|c| match c {
+        Contact::VertexObstacle { v, face, .. } => {
+            let m = moved(*v);
+            m > FAST_CONTACT_MOVE_M
+                && detector.crease_within(face[0] as usize, &x[*v as usize], m + reach)
+        }
+        Contact::EdgeObstacle { a, .. } => a.iter().any(|&v| moved(v) > FAST_CONTACT_MOVE_M),
+        _ => false,
+    })
 }
 
 /// `dx` with each vertex's move shortened to `limit`; and whether any was.

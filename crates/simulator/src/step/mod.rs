@@ -28,7 +28,7 @@ mod state;
 pub use friction::FrictionPoint;
 pub use line_search::FAST_CONTACT_MOVE_M;
 pub use params::{LinearSolver, SimParams};
-pub use state::{ColliderFrame, Pin, PinTarget, SimState, StepStats};
+pub use state::{ColliderFrame, PhaseTimes, Pin, PinTarget, SimState, StepStats};
 
 use nalgebra::Vector3;
 

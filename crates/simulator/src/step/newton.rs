@@ -4,9 +4,8 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::damping::DampingRows;
-use super::line_search::{body_contact_move, limit_pair_closing, Accepted, ClosingPair};
+use super::line_search::{limit_pair_closing, slid_over_crease, Accepted, ClosingPair};
 use super::state::BodyMotion;
-use super::FAST_CONTACT_MOVE_M;
 use super::{ColliderFrame, SimState, Simulator, StepStats, MAX_OBSTACLE_MARGIN_M};
 use crate::collide::{Contact, StepStart};
 use crate::error::{Error, Result};
@@ -113,6 +112,7 @@ impl Simulator {
         // motion on: a hanging sheet kept far more kinetic energy than it should.
         self.dx.iter_mut().for_each(|d| *d = Vector3::zeros());
         let prelude_ms = t_prelude.elapsed().as_secs_f64() * 1e3;
+        stats.times.prelude_s += prelude_ms * 1e-3;
         let t_newton = std::time::Instant::now();
         let inc = Increment {
             x_n,
@@ -126,8 +126,13 @@ impl Simulator {
             body_narrow,
             last_resort,
         };
+        let timed = |t: &super::PhaseTimes| t.detect_s + t.assemble_s + t.solve_s;
+        let before = timed(&stats.times);
         let (x, energy, contacts) = self.newton(&inc, x, damping, stats)?;
         let t_epilogue = std::time::Instant::now();
+        // The rest of the iterations' time: line searches, move limits, convergence tests.
+        stats.times.search_s +=
+            (t_epilogue - t_newton).as_secs_f64() - (timed(&stats.times) - before);
         let travelled = x
             .iter()
             .zip(&x_start)
@@ -157,6 +162,7 @@ impl Simulator {
             stats
                 .max_penetration_m
                 .max(penetration(&x, &contacts, self.detector.vertex_depths()));
+        stats.times.epilogue_s += t_epilogue.elapsed().as_secs_f64();
         tracing::trace!(
             prelude_ms,
             newton_ms = (t_epilogue - t_newton).as_secs_f64() * 1e3,
@@ -316,6 +322,9 @@ impl Simulator {
             stats.cg_iters += cg.iterations;
             stats.newton_iters += 1;
             let t_search = std::time::Instant::now();
+            stats.times.detect_s += (t_assemble - t_detect).as_secs_f64();
+            stats.times.assemble_s += (t_solve - t_assemble).as_secs_f64();
+            stats.times.solve_s += (t_search - t_solve).as_secs_f64();
             let slope: f64 = self.grad.iter().zip(&dx).map(|(g, d)| g.dot(d)).sum();
             let longest = dx.iter().map(|d| d.norm()).fold(0.0, f64::max);
             if !longest.is_finite() || !slope.is_finite() {
@@ -364,10 +373,27 @@ impl Simulator {
                 step_longest,
                 ..
             } = accepted;
+            // Fast mode stops after the first full, unclipped step. Without self-collision,
+            // where a vertex may move the whole obstacle margin (up to 10 mm) an iteration,
+            // not when a vertex touching a body slid further than FAST_CONTACT_MOVE_M within
+            // reach of one of the body's creases ([`slid_over_crease`]: a sheet dropped onto a
+            // table left its edge fast, with more energy than it had). With self-collision the
+            // moves are capped at half the cloth margin and the same drop keeps its energy.
+            let clipped = accepted.clipped || alpha < 1.0;
+            let fast_done = !self.params.newton_exact
+                && !clipped
+                && (self.params.collision.self_collision
+                    || !slid_over_crease(
+                        &self.detector,
+                        &contacts,
+                        &x,
+                        &step,
+                        alpha,
+                        self.params.collision.dhat_m + self.obstacle_margin_m,
+                    ));
             x = accepted.x;
             energy = accepted.energy;
             let moved = step_longest * alpha;
-            let clipped = accepted.clipped || alpha < 1.0;
             tracing::trace!(
                 it,
                 longest,
@@ -387,18 +413,6 @@ impl Simulator {
                 .zip(step.par_iter())
                 .for_each(|(d, s)| *d -= s * alpha);
             self.dx = dx;
-            // Fast mode stops after the first full, unclipped step. Without self-collision,
-            // where a vertex may move the whole obstacle margin (up to 10 mm) an iteration,
-            // not when a vertex touching a body moved further than FAST_CONTACT_MOVE_M in it:
-            // sliding over a body's sharp edge, one linearised step takes the repulsion of the
-            // wrong side of the edge, and the next step's repulsion launches the cloth (a
-            // sheet dropped onto a table left its edge fast, with more energy than it had).
-            // With self-collision the moves are capped at half the cloth margin and the same
-            // drop keeps its energy.
-            let fast_done = !self.params.newton_exact
-                && !clipped
-                && (self.params.collision.self_collision
-                    || body_contact_move(&contacts, &step, alpha) <= FAST_CONTACT_MOVE_M);
             if moved < self.params.newton_tol_m || fast_done {
                 break;
             }

@@ -64,6 +64,47 @@ pub struct StepStats {
     pub energy_j: f64,
     /// Deepest cloth vertex below a collider surface, m (0 when none).
     pub max_penetration_m: f64,
+    /// Where the step's time went.
+    pub times: PhaseTimes,
+}
+
+/// Wall time of a step's phases, s (all sub-steps and Newton iterations).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Before the Newton iterations: seam rest lengths, inertial start, damping rows.
+    pub prelude_s: f64,
+    /// Contact detection and friction points.
+    pub detect_s: f64,
+    /// Energy, gradient and Hessian assembly.
+    pub assemble_s: f64,
+    /// Linear solves, preconditioner set-up included.
+    pub solve_s: f64,
+    /// Line searches and move limits.
+    pub search_s: f64,
+    /// After the iterations: velocities, checks, penetration depth.
+    pub epilogue_s: f64,
+}
+
+impl PhaseTimes {
+    /// The sum of the phases, s.
+    pub fn total_s(&self) -> f64 {
+        self.prelude_s
+            + self.detect_s
+            + self.assemble_s
+            + self.solve_s
+            + self.search_s
+            + self.epilogue_s
+    }
+
+    /// Adds `other`'s times to these.
+    pub fn add(&mut self, other: &PhaseTimes) {
+        self.prelude_s += other.prelude_s;
+        self.detect_s += other.detect_s;
+        self.assemble_s += other.assemble_s;
+        self.solve_s += other.solve_s;
+        self.search_s += other.search_s;
+        self.epilogue_s += other.epilogue_s;
+    }
 }
 
 /// Where the colliders are at the start and the end of a whole time step (they move linearly

@@ -1,0 +1,101 @@
+//! The simulator's benchmark scene: a 1 m² cotton sheet dropped 2 cm above a sphere of radius
+//! 0.3 m, dt 1/300 s, one step a frame (`clothsr lab bench sim`, and
+//! `cargo run --release -p clothsr-sim --example bench` for the simulator alone). Newton 1.8's
+//! side of the comparison (`benches/newton_peer.py`) builds the same scene.
+
+use std::time::Instant;
+
+use nalgebra::Vector3;
+
+use crate::driver::Simulation;
+use crate::error::Result;
+use crate::garment::Fabric;
+use crate::scene::samples::flat_sheet;
+use crate::scene::{Collider, Scene};
+use crate::step::{PhaseTimes, SimParams};
+
+/// Steps run before timing: they bring the sheet down onto the sphere.
+pub const WARM_UP_STEPS: usize = 20;
+
+/// The edge length that gives the bench's sheet about `verts` vertices, m (1 m² of pattern
+/// holds about 2,950 vertices at 20 mm edges, scaling with 1/h²).
+pub fn edge_for_vertices(verts: f64) -> f64 {
+    0.020 * (2950.0 / verts).sqrt()
+}
+
+/// The bench's scene with a sheet of about `verts` vertices, settings tuned by `tune`.
+pub fn sheet_on_sphere(verts: f64, tune: impl FnOnce(&mut SimParams)) -> Result<Simulation> {
+    let mut scene = Scene {
+        garments: vec![flat_sheet(
+            "sheet",
+            1.0,
+            1.0,
+            Vector3::new(0.0, 0.32, 0.0),
+            Fabric::preset("cotton").unwrap_or_default(),
+        )],
+        ..Scene::default()
+    };
+    scene
+        .colliders
+        .push(Collider::sphere("sphere", Vector3::zeros(), 0.3, 4));
+    let mut sim = Simulation::new(&scene, edge_for_vertices(verts), tune)?;
+    sim.steps_per_frame = 1;
+    Ok(sim)
+}
+
+/// What timing a simulation's steps measured.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Timing {
+    /// Cloth vertices.
+    pub vertices: usize,
+    /// Cloth triangles.
+    pub triangles: usize,
+    /// Wall time per step, ms.
+    pub ms_per_step: f64,
+    /// Newton iterations per step.
+    pub newton_per_step: f64,
+    /// Linear-solve iterations per Newton iteration.
+    pub cg_per_newton: f64,
+    /// Contacts at the last step.
+    pub contacts: usize,
+    /// Where the time went, per step, s.
+    pub phases: PhaseTimes,
+}
+
+/// Runs `warm_up` steps of `sim`, then times `steps` more.
+pub fn time_steps(sim: &mut Simulation, warm_up: usize, steps: usize) -> Result<Timing> {
+    for _ in 0..warm_up {
+        sim.advance_frame(|_| {})?;
+    }
+    let (mut newton, mut cg, mut contacts) = (0usize, 0usize, 0usize);
+    let mut phases = PhaseTimes::default();
+    let t = Instant::now();
+    for _ in 0..steps {
+        let f = sim.advance_frame(|_| {})?;
+        newton += f.steps.newton_iters;
+        cg += f.steps.cg_iters;
+        contacts = f.steps.contacts;
+        phases.add(&f.steps.times);
+    }
+    let per = 1.0 / steps.max(1) as f64;
+    let scale = |p: &mut f64| *p *= per;
+    for p in [
+        &mut phases.prelude_s,
+        &mut phases.detect_s,
+        &mut phases.assemble_s,
+        &mut phases.solve_s,
+        &mut phases.search_s,
+        &mut phases.epilogue_s,
+    ] {
+        scale(p);
+    }
+    Ok(Timing {
+        vertices: sim.sim.model.num_vertices(),
+        triangles: sim.sim.model.mesh.triangles.len(),
+        ms_per_step: t.elapsed().as_secs_f64() * 1e3 * per,
+        newton_per_step: newton as f64 * per,
+        cg_per_newton: cg as f64 / newton.max(1) as f64,
+        contacts,
+        phases,
+    })
+}
