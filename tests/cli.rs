@@ -300,8 +300,8 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "2".into(),
     ]);
     assert!(model.join("model.bpk").exists());
-    // Fine-tuned from it: one more phase-2 window, its mean kept; the network's sizes come
-    // from the model, and asking for others is refused.
+    // Fine-tuned from it: two more phase-2 windows; the network's sizes come from the model,
+    // and asking for others is refused.
     let tuned = dir.path().join("tuned");
     let tune = |extra: &[&str]| {
         let mut args: Vec<OsString> = vec![
@@ -320,8 +320,6 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
             "2".into(),
             "--window".into(),
             "2".into(),
-            "--average-from".into(),
-            "0".into(),
         ];
         args.extend(extra.iter().map(OsString::from));
         clothsr().args(&args).output().expect("run")
@@ -329,12 +327,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let refused = tune(&["--latent", "16"]);
     assert_eq!(refused.status.code(), Some(2));
     assert!(!tuned.exists());
-    // Drift-window settings without drift windows are refused, before anything is written.
-    let refused = tune(&["--drift-tau", "5"]);
-    assert_eq!(refused.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&refused.stderr).contains("need --drift-share"));
-    assert!(!tuned.exists());
-    // So is a negative wrinkle bending gain, naming the option.
+    // So is a negative wrinkle bending gain, naming the option, before anything is written.
     let refused = tune(&["--coarse-wrinkle-bending=-1"]);
     assert!(!refused.status.success());
     let err = String::from_utf8_lossy(&refused.stderr);
@@ -368,9 +361,8 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         err.contains("--coarse-bending must be a factor > 0"),
         "{err}"
     );
-    // Every window a drift window (DAgger).
     // A wrinkle bending gain of 0 is none, as the model was trained.
-    let out = tune(&["--drift-share", "1", "--coarse-wrinkle-bending", "0"]);
+    let out = tune(&["--coarse-wrinkle-bending", "0"]);
     assert!(
         out.status.success(),
         "{}",
@@ -378,17 +370,14 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     );
     let config = std::fs::read_to_string(tuned.join("config.json")).expect("config");
     assert!(
-        config.contains("\"latent\": 8")
+        config.contains("\"format_version\": 2")
+            && config.contains("\"latent\": 8")
             && config.contains("\"init_from\"")
-            && config.contains("\"coarse_wrinkle_bending\": null")
-            && config.contains("\"coarse_bending\": null")
-            && config.contains("\"coarse_crease_contacts\": null"),
+            && config.contains("\"coarse\": {}"),
         "{config}"
     );
     let log = String::from_utf8_lossy(&out.stderr);
-    assert!(log.contains("mean weights of the last 2"), "{log}");
     assert!(log.contains("no phase 1 (started from"), "{log}");
-    assert!(log.contains("drift windows: 1 interleaved runs"), "{log}");
     // `clothsr rollout` of the model on the data set, with these arguments after.
     let rollout = |args: Vec<OsString>| {
         let mut all: Vec<OsString> = vec![

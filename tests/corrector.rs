@@ -18,7 +18,7 @@ use clothsr::corrector::training::{
     fit_normalisation, save_model, train, TrainSet, ValidationSet, VALIDATION_LOG,
 };
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
-use clothsr::data::{coarse_simulation, flat32, generate, Options, Variation};
+use clothsr::data::{coarse_simulation, generate, Options, Variation};
 use clothsr::garment::Fabric;
 use clothsr::nn::common::default_device;
 use clothsr::pipeline::calibrate::{score, sim_alone_errors, CalibrationSet};
@@ -158,22 +158,13 @@ fn training_lowers_the_loss_and_the_saved_model_loads() {
     );
 }
 
-fn g_inv_mass(g: &MeshGraph) -> Vec<f32> {
-    clothsr::corrector::model::inverse_masses(&g.mass)
-}
-
 fn dist(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum()
 }
 
 /// Every decoder, each without and with attention.
 fn every_network_kind() -> impl Iterator<Item = (bool, Decoder)> {
-    let kinds = [
-        Decoder::Node,
-        Decoder::Momentum,
-        Decoder::Gated,
-        Decoder::GatedEdges,
-    ];
+    let kinds = [Decoder::Node, Decoder::Gated];
     [false, true]
         .into_iter()
         .flat_map(move |a| kinds.map(|d| (a, d)))
@@ -193,11 +184,14 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                 .with_latent(16)
                 .with_steps(3)
                 .with_attention(attention)
-                .with_decoder(Some(decoder))
-                .with_tension_ramp(Some(0.0)),
+                .with_decoder(decoder)
+                .with_tension_ramp(0.0),
         );
         assert_eq!(cfg.model.tension_ramp(), None);
-        let default = cfg.model.clone().with_tension_ramp(None);
+        let default = cfg
+            .model
+            .clone()
+            .with_tension_ramp(CorrectorConfig::new().tension_ramp);
         assert_eq!(
             default.tension_ramp(),
             decoder.is_gated().then_some(DEFAULT_TENSION_RAMP)
@@ -258,7 +252,6 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                 edges: &edges,
                 senders: &seq.graph.senders,
                 receivers: &seq.graph.receivers,
-                inv_mass: &g_inv_mass(&seq.graph),
                 step_change: &step_change,
                 tension: None,
             },
@@ -312,7 +305,6 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             [edges.clone(), edges].concat(),
             &senders,
             &receivers,
-            [g_inv_mass(&seq.graph), g_inv_mass(&seq.graph)].concat(),
             [step_change.clone(), step_change].concat(),
             &device,
         );
@@ -338,46 +330,9 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             .expect_err("too fast");
         assert!(e.to_string().contains("diverged"), "{e}");
         assert_eq!(fast, before);
-        // Away from colliders, the momentum-conserving decoder's corrections add no linear
-        // momentum (Σ mᵢ pᵢ = 0 to rounding); near them they may. The paper's decoder gives
-        // any correction.
-        let momentum_of = |body: &[f32]| {
-            let p = loaded.predict(&x, &v, &dv, body).expect("predict");
-            let (mut sum, mut scale) = (Vector3::zeros(), 0.0);
-            for (p, m) in p.iter().zip(&seq.graph.mass) {
-                sum += p * f64::from(*m);
-                scale += p.norm() * f64::from(*m);
-            }
-            sum.norm() / scale
-        };
-        let (free, near) = (
-            momentum_of(&vec![0.0; x.len()]),
-            momentum_of(&vec![1.0; x.len()]),
-        );
-        match decoder {
-            Decoder::Momentum => {
-                assert!(free < 1e-5, "relative momentum {free} away from colliders")
-            }
-            _ => assert!(free > 1e-3, "{decoder:?}: momentum {free}"),
-        }
-        assert!(near > 1e-3, "relative momentum {near} near colliders");
-        // The gated decoder with edge impulses corrects in free fall too (the impulses are
-        // internal forces of the corrector's own), but adds no momentum there.
-        if decoder == Decoder::GatedEdges {
-            let zero = vec![Vector3::zeros(); x.len()];
-            let p = loaded
-                .predict(&x, &v, &zero, &vec![0.0; x.len()])
-                .expect("predict");
-            let (mut sum, mut scale) = (Vector3::zeros(), 0.0);
-            for (p, m) in p.iter().zip(&seq.graph.mass) {
-                sum += p * f64::from(*m);
-                scale += p.norm() * f64::from(*m);
-            }
-            assert!(scale > 0.0 && sum.norm() < 1e-5 * scale, "{sum} of {scale}");
-        }
         // Smoothing at inference applies the mesh graph's low-pass filter to the correction.
         let mut smoothed_cfg = cfg.clone();
-        smoothed_cfg.model.smoothing = Some(3);
+        smoothed_cfg.model.smoothing = 3;
         let smooth_dir = tempfile::tempdir().expect("tmp");
         save_model(smooth_dir.path(), &smoothed_cfg, &norm, &net).expect("save");
         let smoothed = Corrector::load(smooth_dir.path(), &seq.mesh).expect("load");
@@ -428,10 +383,10 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
                 Corrector::load(dir.path(), &seq.mesh).expect("load")
             };
             let mut limited = cfg.clone();
-            limited.model.tension_ramp = Some(0.01);
+            limited.model.tension_ramp = 0.01;
             let lim = with_config(&limited);
             let mut scaled = limited.clone();
-            scaled.model.take_back = Some(0.5);
+            scaled.model.take_back = 0.5;
             let half = with_config(&scaled);
             let free = loaded.predict(&x, &v, &dv, &far).expect("predict");
             let w = seq.graph.tension_weight(&x, 0.01);
@@ -447,7 +402,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             }
             for bad in [0.0, 1.5, f64::NAN] {
                 let mut c = limited.clone();
-                c.model.take_back = Some(bad);
+                c.model.take_back = bad;
                 assert!(c.model.check().is_err(), "take-back {bad}");
             }
             let c = x.iter().sum::<Vector3<f64>>() / x.len() as f64;
@@ -458,7 +413,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             // correction is 2p + Δq (it may amplify the step's velocity change), nothing in
             // free fall still.
             let mut wide = cfg.clone();
-            wide.model.share_min = Some(-1.0);
+            wide.model.share_min = -1.0;
             let two_sided = with_config(&wide);
             let q = two_sided.predict(&x, &v, &dv, &far).expect("predict");
             for ((a, b), d) in free.iter().zip(&q).zip(&dv) {
@@ -477,7 +432,7 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             assert!(p.iter().all(|p| *p == Vector3::zeros()), "free fall");
             for bad in [1.0, f64::NAN] {
                 let mut c = wide.clone();
-                c.model.share_min = Some(bad);
+                c.model.share_min = bad;
                 assert!(c.model.check().is_err(), "share min {bad}");
             }
         }
@@ -528,14 +483,14 @@ fn recomputed_coarse_steps_are_the_stored_ones_unless_the_simulator_changes() {
     let mut same = stored.clone();
     let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
     let t0 = sim.state.t_s;
-    same.recompute_coarse(&mut sim, t0, 1).expect("recompute");
+    same.recompute_coarse(&mut sim, t0).expect("recompute");
     let mut soft = stored.clone();
     let mut sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
     sim.sim
         .model
         .set_membrane_compression(0.05, None)
         .expect("factor");
-    soft.recompute_coarse(&mut sim, t0, 1).expect("recompute");
+    soft.recompute_coarse(&mut sim, t0).expect("recompute");
     let (g_same, g_soft) = (mean_gap(&same), mean_gap(&soft));
     eprintln!("recomputed M_c vs stored: same simulator {g_same:e} m, soft membrane {g_soft:e} m");
     assert!(g_same < 1e-6, "{g_same}");
@@ -546,89 +501,6 @@ fn recomputed_coarse_steps_are_the_stored_ones_unless_the_simulator_changes() {
         .model
         .set_membrane_compression(0.1, Some(0.0))
         .is_err());
-}
-
-#[test]
-fn k_step_targets_vanish_on_the_coarse_simulations_own_path_and_scale_with_the_gap() {
-    const K: usize = 5;
-    let stored = load(None);
-    let n = stored.steps.len();
-    assert!(n > 2 * K, "{n} steps");
-    let sim = || coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
-    let t0 = sim().state.t_s;
-    let mean_norm = |p: &[f32]| {
-        p.chunks_exact(3).map(|c| vectors(c)[0].norm()).sum::<f64>() / (p.len() / 3) as f64
-    };
-    // Horizon 1 is the paper's target: no target positions, p̄ = v_int − v_c.
-    let mut one = stored.clone();
-    one.recompute_coarse(&mut sim(), t0, 1).expect("recompute");
-    assert!(one.steps.iter().all(|s| s.target_x.is_none()));
-    let st = &one.steps[3];
-    let want: Vec<f32> = st
-        .int_v
-        .iter()
-        .zip(&st.coarse_v)
-        .map(|(a, b)| a - b)
-        .collect();
-    assert_eq!(one.target(3), want);
-
-    // A ground truth that is the coarse simulation's own path needs no correction over any
-    // horizon.
-    let mut own = stored.clone();
-    let mut s = sim();
-    let mut state = own.int_state(0, t0);
-    for i in 1..n {
-        state = s.step_from(&state).expect("step").0;
-        own.steps[i].int_x = flat32(&state.x);
-        own.steps[i].int_v = flat32(&state.v);
-    }
-    own.recompute_coarse(&mut sim(), t0, K).expect("recompute");
-    let mut real = stored.clone();
-    real.recompute_coarse(&mut sim(), t0, K).expect("recompute");
-    let (mut p_own, mut p_real) = (0.0, 0.0);
-    for i in 1..n {
-        // The horizon shortens to the steps left: one step at the end has no target positions.
-        assert_eq!(real.steps[i].target_x.is_some(), n - i > 1, "step {i}");
-        p_own += mean_norm(&own.target(i)) / (n - 1) as f64;
-        p_real += mean_norm(&real.target(i)) / (n - 1) as f64;
-    }
-    eprintln!("mean |p̄| over {K} steps: own path {p_own:e} m/s, ground truth {p_real:e} m/s");
-    assert!(p_own < 1e-4, "{p_own}");
-    assert!(p_real > 1e-3 && p_real > 100.0 * p_own, "{p_real}");
-
-    // Moving the ground truth K steps on by δ moves the step's target by 2δ/(K(K + 1)) and
-    // its correction by that over h.
-    let (i, delta) = (2, Vector3::new(0.0, 1e-3, 0.0));
-    let mut moved = stored.clone();
-    let end = &mut moved.steps[i - 1 + K].int_x;
-    *end = flat32(&vectors(end).iter().map(|p| p + delta).collect::<Vec<_>>());
-    moved
-        .recompute_coarse(&mut sim(), t0, K)
-        .expect("recompute");
-    let (a, b) = (
-        vectors(moved.steps[i].target_x.as_deref().expect("target")),
-        vectors(real.steps[i].target_x.as_deref().expect("target")),
-    );
-    let want = delta * 2.0 / (K * (K + 1)) as f64;
-    let off = a
-        .iter()
-        .zip(&b)
-        .map(|(p, q)| (p - q - want).norm())
-        .fold(0.0, f64::max);
-    assert!(off < 1e-3 * want.norm(), "{off} against {}", want.norm());
-    let h = stored.manifest.dt_s;
-    let gap = mean_norm(
-        &moved
-            .target(i)
-            .iter()
-            .zip(real.target(i))
-            .map(|(p, q)| p - q)
-            .collect::<Vec<_>>(),
-    );
-    assert!(
-        (gap - want.norm() / h).abs() < 1e-3 * want.norm() / h,
-        "{gap}"
-    );
 }
 
 #[test]
@@ -715,8 +587,8 @@ fn rollout_training_and_evaluation_run_with_the_coarse_simulator() {
     trained.prepare_coarse(&mut beside).expect("default");
     assert_eq!(beside.sim.model.bending_scale(), 1.0);
     assert!(beside.sim.detector().crease_contacts);
-    trained.coarse_bending = Some(0.5);
-    trained.coarse_crease_contacts = Some(false);
+    trained.coarse.bending = Some(0.5);
+    trained.coarse.crease_contacts = Some(false);
     trained.prepare_coarse(&mut beside).expect("calibrated");
     assert_eq!(beside.sim.model.bending_scale(), 0.5);
     assert!(!beside.sim.detector().crease_contacts);
@@ -1082,7 +954,7 @@ fn max_difference(a: &[Vec<f32>], b: &[Vec<f32>]) -> f32 {
 }
 
 #[test]
-fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
+fn fine_tuning_starts_from_a_model_of_the_same_network_and_coarse_model() {
     let go = |cfg: &TrainingConfig, out: &std::path::Path| {
         train(cfg, &mut sets(), &[], out, |_| ControlFlow::Continue(())).expect("train")
     };
@@ -1090,8 +962,8 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
     let gated = CorrectorConfig::new()
         .with_latent(16)
         .with_steps(2)
-        .with_decoder(Some(Decoder::Gated))
-        .with_take_back(Some(0.5));
+        .with_decoder(Decoder::Gated)
+        .with_take_back(0.5);
     let base = tmp.path().join("base");
     go(
         &TrainingConfig::new(gated.clone())
@@ -1123,28 +995,30 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
     })
     .expect_err("other sizes");
     assert!(e.to_string().contains("config.json") && e.to_string().contains("latent 16"));
-    let soft = tune(2).with_coarse_compression(Some(0.1));
+    let beside = |c: CoarseCalibration| tune(2).with_coarse(c);
+    let soft = beside(CoarseCalibration {
+        compression: Some(0.1),
+        ..CoarseCalibration::default()
+    });
     let e = train(&soft, &mut sets(), &[], &tmp.path().join("y"), |_| {
         ControlFlow::Continue(())
     })
     .expect_err("other membrane");
     assert!(e.to_string().contains("compression"), "{e}");
-    let grip = tune(2).with_coarse_friction(Some(1.0));
+    let grip = beside(CoarseCalibration {
+        friction: Some(1.0),
+        ..CoarseCalibration::default()
+    });
     let e = train(&grip, &mut sets(), &[], &tmp.path().join("z"), |_| {
         ControlFlow::Continue(())
     })
     .expect_err("other friction");
     assert!(e.to_string().contains("friction"), "{e}");
 
-    // Two and three phase-2 windows from the base network: the same first two windows.
-    let (two, three, mean) = (
-        tmp.path().join("two"),
-        tmp.path().join("three"),
-        tmp.path().join("mean"),
-    );
-    let s2 = go(&tune(2), &two);
+    // Two and three phase-2 windows from the base network.
+    let (two, three) = (tmp.path().join("two"), tmp.path().join("three"));
+    go(&tune(2), &two);
     go(&tune(3), &three);
-    assert_eq!(s2.averaged, 0);
     // Training starts from the base network's statistics, not ones fitted anew.
     let norm = |d: &std::path::Path| std::fs::read(d.join("normalisation.json")).expect("norm");
     assert_eq!(norm(&two), norm(&base));
@@ -1155,255 +1029,6 @@ fn fine_tuning_starts_from_a_model_and_weight_averaging_saves_the_mean() {
     let fresh = tmp.path().join("fresh");
     go(&tune(2).with_init_from(None), &fresh);
     assert!(max_difference(&parameters(&fresh), &p2) > 1e-3);
-
-    // Averaging from window 1 saves the mean of the networks after windows 2 and 3.
-    let s = go(&tune(3).with_average_from(Some(1)), &mean);
-    assert_eq!(s.averaged, 2);
-    let expected: Vec<Vec<f32>> = p2
-        .iter()
-        .zip(&p3)
-        .map(|(a, b)| a.iter().zip(b).map(|(a, b)| 0.5 * (a + b)).collect())
-        .collect();
-    let pm = parameters(&mean);
-    assert!(max_difference(&pm, &expected) < 1e-6);
-    assert!(max_difference(&pm, &p3) > 1e-6);
-
-    // Interrupted after window 2 (one network averaged), resumed: the mean goes on from the
-    // checkpoint's.
-    let resumed = tmp.path().join("resumed");
-    let cfg = tune(3).with_average_from(Some(1));
-    let first = train(&cfg, &mut sets(), &[], &resumed, stop_in_phase_2_at(2)).expect("first part");
-    assert!(first.interrupted);
-    // The checkpoint's mean is the one network averaged so far, window 2's.
-    let ck = tmp.path().join("checkpoint_mean");
-    std::fs::create_dir_all(&ck).expect("dir");
-    for f in ["config.json", "normalisation.json"] {
-        std::fs::copy(resumed.join(f), ck.join(f)).expect("copy");
-    }
-    std::fs::copy(
-        resumed.join("checkpoint/average.bpk"),
-        ck.join(WEIGHTS_FILE),
-    )
-    .expect("copy");
-    assert!(max_difference(&parameters(&ck), &p2) < 1e-6);
-    let rest = go(&cfg, &resumed);
-    assert_eq!(rest.averaged, 2);
-
-    // Rolled out as at inference: without a take-back scale or tension limit the gating is
-    // the raw network's, bit for bit; with the base's scale 0.5 the windows differ.
-    let raw = gated
-        .clone()
-        .with_take_back(None)
-        .with_tension_ramp(Some(0.0));
-    let run = |model: &CorrectorConfig, as_inference: bool, name: &str| {
-        let mut c = tune(2).with_rollout_as_inference(Some(as_inference));
-        c.model = model.clone();
-        let out = tmp.path().join(name);
-        go(&c, &out);
-        parameters(&out)
-    };
-    assert_eq!(run(&raw, true, "raw_inf"), run(&raw, false, "raw"));
-    assert!(max_difference(&run(&gated, true, "gated_inf"), &p2) > 1e-6);
-}
-
-#[test]
-fn drift_windows_start_from_the_interleaved_runs_own_states() {
-    let base = tiny_config()
-        .with_steps(10)
-        .with_rollout_iters(5)
-        .with_window(3)
-        .with_rollout_lr(1e-3);
-    // Every window a drift window, the run redone every 2 windows: at windows 0, 2 and 4.
-    let cfg = base
-        .clone()
-        .with_drift_share(Some(1.0))
-        .with_drift_refresh(Some(2));
-    let out = tempfile::tempdir().expect("tmp");
-    let s = train(&cfg, &mut sets(), &[], out.path(), |_| {
-        ControlFlow::Continue(())
-    })
-    .expect("train");
-    assert_eq!(s.phase2_iters, 5);
-    let at: Vec<usize> = s.drift_runs.iter().map(|r| r.0).collect();
-    assert_eq!(at, vec![0, 2, 4]);
-    // The interleaved run leaves the ground truth (resolutions differ), by less than 100 mm
-    // over this 4-frame drop. How far depends on the initial weights, which burn draws lazily
-    // from one process-wide generator that the tests running beside this one draw from too:
-    // under 20 mm in earlier runs, 33 mm in one CI run.
-    for (_, mm) in &s.drift_runs {
-        assert!(mm.is_finite() && *mm > 0.0 && *mm < 100.0, "{mm}");
-    }
-    // Without drift windows (the same seed and data), no interleaved runs, and other windows:
-    // the first window's loss differs.
-    let plain = tempfile::tempdir().expect("tmp");
-    let p = train(&base, &mut sets(), &[], plain.path(), |_| {
-        ControlFlow::Continue(())
-    })
-    .expect("train");
-    assert!(p.drift_runs.is_empty());
-    assert!(
-        (p.phase2_first_last.0 - s.phase2_first_last.0).abs() > 1e-6,
-        "{:?} {:?}",
-        p.phase2_first_last,
-        s.phase2_first_last
-    );
-    // The same windows (same draws) from the same network with another drift pull-back time:
-    // other targets, so the drift windows' own states and τ reach the loss. Both start from
-    // the model just trained: fresh weights come from burn's process-wide generator, which
-    // the tests running beside this one draw from too.
-    let tuned = |tau: f64| {
-        let o = tempfile::tempdir().expect("tmp");
-        let c = cfg
-            .clone()
-            .with_steps(0)
-            .with_init_from(Some(out.path().to_path_buf()))
-            .with_drift_tau_steps(Some(tau));
-        train(
-            &c,
-            &mut sets(),
-            &[],
-            o.path(),
-            |_| ControlFlow::Continue(()),
-        )
-        .expect("train")
-    };
-    let (s, q) = (tuned(10.0), tuned(50.0));
-    assert_eq!(q.drift_runs[0], s.drift_runs[0]);
-    assert!(
-        (q.phase2_first_last.0 - s.phase2_first_last.0).abs() > 1e-6,
-        "{:?} {:?}",
-        q.phase2_first_last,
-        s.phase2_first_last
-    );
-    // A window as long as the data leaves no drift start: such windows start from the
-    // ground truth.
-    let steps = sets()[0].seq.steps.len();
-    let whole = tempfile::tempdir().expect("tmp");
-    let w = train(
-        &cfg.clone().with_window(steps - 1).with_rollout_iters(1),
-        &mut sets(),
-        &[],
-        whole.path(),
-        |_| ControlFlow::Continue(()),
-    )
-    .expect("train");
-    assert_eq!((w.phase2_iters, w.drift_runs.len()), (1, 1));
-    // Out-of-range settings are refused before anything is written.
-    for bad in [
-        base.clone().with_drift_share(Some(1.5)),
-        base.clone()
-            .with_drift_share(Some(0.5))
-            .with_drift_refresh(Some(0)),
-        base.clone()
-            .with_drift_share(Some(0.5))
-            .with_drift_tau_steps(Some(0.5)),
-    ] {
-        let o = tempfile::tempdir().expect("tmp");
-        let e = train(&bad, &mut sets(), &[], o.path(), |_| {
-            ControlFlow::Continue(())
-        });
-        assert!(e.is_err());
-        assert!(!o.path().join("config.json").exists());
-    }
-}
-
-#[test]
-fn a_distilled_network_learns_its_teachers_outputs_and_statistics() {
-    let tmp = tempfile::tempdir().expect("tmp");
-    let gated = CorrectorConfig::new()
-        .with_latent(32)
-        .with_steps(2)
-        .with_decoder(Some(Decoder::Gated));
-    let teacher = tmp.path().join("teacher");
-    // The teacher trains on the first two frames only, so that its statistics are not the
-    // ones the whole data set gives.
-    let mut first_frames = vec![TrainSet {
-        seq: load(Some(1..=2)),
-        sim: None,
-    }];
-    train(
-        &TrainingConfig::new(gated.clone())
-            .with_steps(40)
-            .with_batch(2)
-            .with_lr_start(3e-3)
-            .with_lr_end(1e-3),
-        &mut first_frames,
-        &[],
-        &teacher,
-        |_| ControlFlow::Continue(()),
-    )
-    .expect("teacher");
-    // A smaller student, and the same student shape trained on the data instead.
-    let student_cfg = |steps: usize| {
-        TrainingConfig::new(gated.clone().with_latent(16))
-            .with_steps(steps)
-            .with_batch(2)
-            .with_lr_start(3e-3)
-            .with_lr_end(1e-3)
-            .with_seed(3)
-    };
-    let run = |cfg: &TrainingConfig, name: &str| {
-        let out = tmp.path().join(name);
-        let mut losses = Vec::new();
-        train(cfg, &mut sets(), &[], &out, |p| {
-            losses.push(p.loss);
-            ControlFlow::Continue(())
-        })
-        .expect("train");
-        (out, losses)
-    };
-    let distil = |steps| student_cfg(steps).with_distil_from(Some(teacher.clone()));
-    let (student, losses) = run(&distil(150), "student");
-    let (untrained, _) = run(&distil(1), "untrained");
-    let (own, _) = run(&student_cfg(150), "own");
-    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
-    let last: f64 = losses[140..].iter().sum::<f64>() / 10.0;
-    assert!(last < 0.5 * first, "distillation loss {first} → {last}");
-    // The student has the teacher's statistics, not ones fitted to the data.
-    let norm = |d: &std::path::Path| std::fs::read(d.join("normalisation.json")).expect("norm");
-    assert_eq!(norm(&student), norm(&teacher));
-    assert_ne!(norm(&own), norm(&teacher));
-    // Its corrections are the teacher's, far closer than a network of its shape trained on
-    // the data's targets, and than where it started.
-    let seq = load(None);
-    let predict = |dir: &std::path::Path| {
-        let c = Corrector::load(dir, &seq.mesh).expect("load");
-        seq.steps
-            .iter()
-            .skip(1)
-            .flat_map(|st| {
-                let (x, v) = (vectors(&st.coarse_x), vectors(&st.coarse_v));
-                let dv = vectors(st.dv.as_deref().expect("Δq"));
-                c.predict(&x, &v, &dv, &st.body).expect("predict")
-            })
-            .collect::<Vec<_>>()
-    };
-    let t = predict(&teacher);
-    let gap = |dir: &std::path::Path| dist(&predict(dir), &t);
-    let (g_student, g_untrained, g_own) = (gap(&student), gap(&untrained), gap(&own));
-    assert!(
-        g_student < 0.3 * g_untrained && g_student < 0.5 * g_own,
-        "distance to the teacher's corrections: distilled {g_student}, at its start \
-         {g_untrained}, trained on the data {g_own}"
-    );
-
-    // A teacher trained beside another coarse model is refused, naming its configuration,
-    // and the refused run leaves no folder.
-    let out = tmp.path().join("refused");
-    let e = train(
-        &distil(10).with_coarse_friction(Some(1.0)),
-        &mut sets(),
-        &[],
-        &out,
-        |_| ControlFlow::Continue(()),
-    )
-    .expect_err("another coarse model");
-    let msg = e.to_string();
-    assert!(
-        msg.contains("teacher") && msg.contains("friction") && msg.contains("config.json"),
-        "{msg}"
-    );
-    assert!(!out.exists());
 }
 
 /// A triangulated k × k grid as a graph's directed edge pairs (edge 2m + 1 is edge 2m
@@ -1463,7 +1088,6 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
     }
     let edges = normal(e * EDGE_FEATURES);
     let step_change = normal(3 * n);
-    let inv_mass: Vec<f32> = (0..n).map(|i| 0.5 + (i % 5) as f32 * 0.3).collect();
     let tension: Vec<f32> = (0..n).map(|i| (i % 4) as f32 / 3.0).collect();
     let device = default_device().expect("device");
     for (attention, decoder) in every_network_kind() {
@@ -1473,8 +1097,8 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
                 .with_hidden_layers(layers)
                 .with_steps(2)
                 .with_attention(attention)
-                .with_decoder(Some(decoder))
-                .with_share_min(Some(-0.2));
+                .with_decoder(decoder)
+                .with_share_min(-0.2);
             let net = cfg.init(&device).map(&mut Jiggle);
             let fused = FusedNet::of(&net);
             // The burn network's and the fused pass's outputs on the nodes with the given edges.
@@ -1484,7 +1108,6 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
                     edges.to_vec(),
                     senders,
                     receivers,
-                    inv_mass.clone(),
                     step_change.clone(),
                     &device,
                 )
@@ -1500,7 +1123,6 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
                     edges,
                     senders,
                     receivers,
-                    inv_mass: &inv_mass,
                     step_change: &step_change,
                     tension: Some(&tension),
                 };
@@ -1524,7 +1146,7 @@ fn the_fused_cpu_forward_pass_is_the_burn_networks_function() {
                 same(&direct, &out, &format!("{parts} parts"));
             }
             // A graph without edges: its nodes get no messages (burn's sums are zero).
-            if !attention && !decoder.has_edge_impulses() {
+            if !attention {
                 same(
                     &on_burn(&[], &[], &[]),
                     &on_fused(&[], &[], &[], 2),

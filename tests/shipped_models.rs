@@ -153,3 +153,47 @@ fn skirt_models_give_their_reference_output() {
     check("skirt_corrector", with);
     check("skirt_coarse_alone", run("skirt", &scene, false));
 }
+
+/// Every shipped corrector's `config.json` is in this build's one form: it loads, and writing
+/// it again gives the same text. Without its `format_version` (as an older clothsr wrote it)
+/// it is refused, naming the file and how to make the model again.
+#[test]
+fn shipped_corrector_configs_are_in_the_current_form() {
+    use clothsr::corrector::training::{TrainingConfig, CORRECTOR_FORMAT_VERSION};
+    let models = root().join("samples/models");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&models).expect("samples/models") {
+        let path = entry.expect("entry").path().join("corrector/config.json");
+        if !path.exists() {
+            continue;
+        }
+        seen += 1;
+        let cfg = TrainingConfig::load(&path).expect("a current corrector configuration");
+        assert_eq!(cfg.format_version, CORRECTOR_FORMAT_VERSION);
+        let text = std::fs::read_to_string(&path).expect("read");
+        assert_eq!(
+            serde_json::to_string_pretty(&cfg).expect("json"),
+            text,
+            "{}",
+            path.display()
+        );
+        let dir = tempfile::tempdir().expect("tmp");
+        let old = dir.path().join("config.json");
+        let mut value: serde_json::Value = serde_json::from_str(&text).expect("json");
+        value
+            .as_object_mut()
+            .expect("an object")
+            .remove("format_version");
+        std::fs::write(&old, value.to_string()).expect("write");
+        let e = TrainingConfig::load(&old)
+            .expect_err("unversioned")
+            .to_string();
+        assert!(
+            e.contains(&old.display().to_string())
+                && e.contains("older clothsr")
+                && e.contains("make.sh"),
+            "{e}"
+        );
+    }
+    assert!(seen >= 2, "{seen} shipped correctors");
+}

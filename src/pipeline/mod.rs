@@ -206,7 +206,7 @@ impl<'a> Pipeline<'a> {
         // After dressing: sewing is done with the full membrane.
         match &corrector {
             Some(c) => {
-                if let Some(how) = opts.coarse.conflict_with(&c.training.coarse_calibration()) {
+                if let Some(how) = opts.coarse.conflict_with(&c.training.coarse) {
                     return Err(Error::Invalid(format!(
                         "the corrector in {} was trained {how}",
                         c.dir.display()

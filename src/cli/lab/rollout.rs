@@ -83,24 +83,24 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     let mut corrector = Corrector::load(&args.model, mesh)?;
     if let Some(k) = args.take_back {
         anyhow::ensure!(
-            corrector.config.decoder_kind().is_gated(),
+            corrector.config.decoder.is_gated(),
             "--take-back: {} has a {:?} decoder, which takes nothing back",
             args.model.display(),
-            corrector.config.decoder_kind()
+            corrector.config.decoder
         );
-        corrector.config.take_back = (k != 1.0).then_some(k);
+        corrector.config.take_back = k;
         corrector
             .config
             .check()
             .map_err(|e| anyhow::anyhow!("--take-back {k}: {e}"))?;
     }
     if let Some(n) = args.smoothing {
-        corrector.config.smoothing = (n > 0).then_some(n);
+        corrector.config.smoothing = n;
     }
     args.coarse.check_flags().map_err(anyhow::Error::msg)?;
     let t = &mut corrector.training;
-    if let Some(c) = args.coarse.replacing(&t.coarse_calibration()) {
-        t.set_coarse_calibration(&c);
+    if let Some(c) = args.coarse.replacing(&t.coarse) {
+        t.coarse = c;
     }
     Ok(corrector)
 }
@@ -411,20 +411,21 @@ fn short_horizons(
 /// its friction coefficient against bodies and, when not the simulator's, its wrinkle bending
 /// gain, bending factor and crease contacts.
 fn coarse_setup(t: &clothsr::corrector::training::TrainingConfig) -> String {
-    let wrinkles = t
-        .coarse_wrinkle_bending
+    let c = &t.coarse;
+    let wrinkles = c
+        .wrinkle_bending
         .map_or_else(String::new, |g| format!(", wrinkle bending {g}"));
-    let bending = t
-        .coarse_bending
+    let bending = c
+        .bending
         .map_or_else(String::new, |b| format!(", bending {b}"));
-    let creases = if t.coarse_crease_contacts == Some(false) {
+    let creases = if c.crease_contacts == Some(false) {
         ", no crease contacts"
     } else {
         ""
     };
     format!(
         "coarse membrane compression {}, friction {}{wrinkles}{bending}{creases}",
-        t.compression_factor(),
-        t.friction_label()
+        c.compression.unwrap_or(1.0),
+        c.friction_label()
     )
 }

@@ -4,11 +4,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use burn::config::Config;
 use clothsr::corrector::data::Sequence;
 use clothsr::corrector::training::{
-    train, Progress, TrainSet, TrainingConfig, ValidationSet, DEFAULT_DRIFT_REFRESH,
-    DEFAULT_DRIFT_TAU_STEPS, VALIDATION_LOG,
+    train, Progress, TrainSet, TrainingConfig, ValidationSet, VALIDATION_LOG,
 };
 use clothsr::corrector::CorrectorConfig;
 use clothsr::data::coarse_simulation;
@@ -156,12 +154,6 @@ pub struct CorrectorArgs {
     /// Stop phase 2 once the mean loss of the last 20 windows is below this (0: never).
     #[arg(long, default_value_t = 0.0)]
     rollout_stop_loss: f64,
-    /// Phase-1 target horizon, steps: the per-step correction that, kept up over this many
-    /// uncorrected coarse steps from the ground truth, closes the gap to it (1: the paper's
-    /// one-step target, which is mostly the coarse mesh's spring-back out of M_int's
-    /// wrinkles).
-    #[arg(long, default_value_t = 1)]
-    target_steps: usize,
     /// Latent width of every MLP.
     #[arg(long, default_value_t = 64)]
     latent: usize,
@@ -171,12 +163,9 @@ pub struct CorrectorArgs {
     /// GATv2-style attention on the edge aggregation.
     #[arg(long)]
     attention: bool,
-    /// The decoder: `node` (the paper's: a free correction per vertex), `momentum`
-    /// (antisymmetric edge impulses, per-vertex terms only near colliders) or `gated` (a
-    /// learned share of the simulator step's velocity change taken back, per-vertex terms
-    /// only near colliders) or `gated-edges` (the gated decoder plus antisymmetric edge
-    /// impulses everywhere: internal forces that can hold a drape the coarse forces would not
-    /// rest in).
+    /// The decoder: `node` (the paper's: a free correction per vertex) or `gated` (a learned
+    /// share of the simulator step's velocity change taken back, per-vertex terms only near
+    /// colliders).
     #[arg(long, value_enum, default_value = "gated")]
     decoder: clothsr::corrector::model::Decoder,
     /// The gated decoder's tension limit at inference, saved with the model: the share of
@@ -228,34 +217,6 @@ pub struct CorrectorArgs {
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
     #[arg(long, value_name = "MODEL", conflicts_with_all = ["latent", "mp_steps", "attention", "decoder"])]
     init: Option<PathBuf>,
-    /// Distil this trained corrector (a model directory, the teacher): phase 1's targets are
-    /// its outputs on the training states instead of the data's corrections, and the
-    /// network takes its normalisation; typically a smaller `--latent` than the teacher's,
-    /// for speed. Train beside the teacher's coarse model (its `--coarse-*` settings).
-    #[arg(long, value_name = "MODEL")]
-    distil: Option<PathBuf>,
-    /// Save the mean of the phase-2 weights after every window past this one (stochastic
-    /// weight averaging) instead of the last weights; with `--val-data`, the mean is what
-    /// is validated.
-    #[arg(long, value_name = "K")]
-    average_from: Option<usize>,
-    /// Phase 2 rolls the corrector out as it runs at inference (the gated decoder's
-    /// take-back scaled by the tension limit and `--take-back`, the correction smoothed by
-    /// `--smoothing`) instead of the raw network. Without it, phase-2 windows ignore both.
-    #[arg(long)]
-    rollout_as_inference: bool,
-    /// Share of phase-2 windows that start from the interleaved run's own states (DAgger): every
-    /// `--drift-refresh` windows the network is rolled out as at inference over each training
-    /// sequence, and such a window starts from that run at a random step, pulled back to the
-    /// ground truth over `--drift-tau` steps (0: every window starts from the ground truth).
-    #[arg(long, default_value_t = 0.0)]
-    drift_share: f64,
-    /// Drift windows between two interleaved runs (with `--drift-share`). [default: 50]
-    #[arg(long)]
-    drift_refresh: Option<usize>,
-    /// Pull-back time of drift windows' targets, steps (with `--drift-share`). [default: 10]
-    #[arg(long)]
-    drift_tau: Option<f64>,
 }
 
 /// Runs `train`.
@@ -277,54 +238,47 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     );
     // With --init, the network and the coarse membrane are the model's; inference settings
     // given here override its own.
-    let init = match &a.init {
-        Some(dir) => {
-            let path = dir.join(clothsr::corrector::inference::CONFIG_FILE);
-            Some(
-                TrainingConfig::load(&path)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
-                    .with_context(|| {
-                        format!("{} is not a corrector to start from", dir.display())
-                    })?,
-            )
-        }
-        None => None,
-    };
+    let init =
+        match &a.init {
+            Some(dir) => {
+                let path = dir.join(clothsr::corrector::inference::CONFIG_FILE);
+                Some(TrainingConfig::load(&path).with_context(|| {
+                    format!("{} is not a corrector to start from", dir.display())
+                })?)
+            }
+            None => None,
+        };
     let mut model = match &init {
         Some(old) => old.model.clone(),
         None => CorrectorConfig::new()
             .with_latent(a.latent)
             .with_steps(a.mp_steps)
             .with_attention(a.attention)
-            .with_decoder(Some(a.decoder))
-            .with_tension_ramp(Some(clothsr::corrector::model::DEFAULT_TENSION_RAMP)),
+            .with_decoder(a.decoder),
     };
     if let Some(r) = a.tension_ramp {
-        model = model.with_tension_ramp(Some(r));
+        model.tension_ramp = r;
     }
     if let Some(k) = a.take_back {
-        model = model.with_take_back((k != 1.0).then_some(k));
+        model.take_back = k;
     }
     if let Some(n) = a.smoothing {
-        model = model.with_smoothing((n > 0).then_some(n));
+        model.smoothing = n;
     }
     if let Some(m) = a.share_min {
         anyhow::ensure!(
             init.is_none(),
             "--share-min shapes a new network; it cannot change the --init model's"
         );
-        model = model.with_share_min((m != 0.0).then_some(m));
+        model.share_min = m;
     }
     a.coarse.check_flags().map_err(anyhow::Error::msg)?;
-    let trained_beside = init
-        .as_ref()
-        .map(TrainingConfig::coarse_calibration)
-        .unwrap_or_default();
+    let trained_beside = init.as_ref().map(|c| c.coarse).unwrap_or_default();
     let coarse = a
         .coarse
         .replacing(&trained_beside)
         .unwrap_or(trained_beside);
-    let mut cfg = TrainingConfig::new(model)
+    let cfg = TrainingConfig::new(model)
         .with_steps(a.steps)
         .with_batch(a.batch)
         .with_lr_start(a.lr_start)
@@ -335,24 +289,13 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_window(a.window)
         .with_rollout_lr(a.rollout_lr)
         .with_rollout_stop_loss(a.rollout_stop_loss)
-        .with_rollout_tau_steps((a.rollout_tau != 1.0).then_some(a.rollout_tau))
-        .with_target_steps((a.target_steps != 1).then_some(a.target_steps))
+        .with_rollout_tau_steps(a.rollout_tau)
         .with_seed(a.seed)
+        .with_coarse(coarse)
         .with_init_from(a.init.clone())
-        .with_distil_from(a.distil.clone())
-        .with_average_from(a.average_from)
-        .with_rollout_as_inference(a.rollout_as_inference.then_some(true))
-        .with_drift_share((a.drift_share != 0.0).then_some(a.drift_share))
-        .with_drift_refresh(a.drift_refresh.filter(|&r| r != DEFAULT_DRIFT_REFRESH))
-        .with_drift_tau_steps(a.drift_tau.filter(|&t| t != DEFAULT_DRIFT_TAU_STEPS))
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
-    cfg.set_coarse_calibration(&coarse);
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
-    anyhow::ensure!(
-        a.drift_share != 0.0 || (a.drift_refresh.is_none() && a.drift_tau.is_none()),
-        "--drift-refresh and --drift-tau set drift windows up: they need --drift-share"
-    );
     let mut validation = Vec::new();
     for dir in &a.val_data {
         let scene = data_scene(dir)?;
@@ -376,7 +319,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         // M_c from this simulator, in a fresh instance (a simulator carries warm starts).
         let mut fresh = coarse_simulation(&scene, dir, 1)?;
         cfg.prepare_coarse(&mut fresh)?;
-        seq.recompute_coarse(&mut fresh, t0, cfg.target_steps.unwrap_or(1))?;
+        seq.recompute_coarse(&mut fresh, t0)?;
         let sim = (a.rollout_iters > 0).then_some((sim, t0));
         tracing::info!(
             "{}: {} steps, {} coarse vertices, {} edges",
@@ -447,23 +390,6 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         tracing::info!(
             "kept {which}: {mm:.3} mm interleaved on the validation sets (all validations in {})",
             a.output.join(VALIDATION_LOG).display()
-        );
-    }
-    if let (Some(first), Some(last)) = (summary.drift_runs.first(), summary.drift_runs.last()) {
-        tracing::info!(
-            "drift windows: {} interleaved runs on the training sets, {:.2} mm from M_int at \
-             window {} → {:.2} mm at window {}",
-            summary.drift_runs.len(),
-            first.1,
-            first.0,
-            last.1,
-            last.0
-        );
-    }
-    if summary.averaged > 0 {
-        tracing::info!(
-            "saved the mean weights of the last {} phase-2 windows",
-            summary.averaged
         );
     }
     Ok(())

@@ -8,7 +8,6 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use rayon::prelude::*;
 
 use super::graph::{body_proximity, step_change, MeshGraph};
 use crate::data::{flat32, read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
@@ -34,10 +33,6 @@ pub struct Step {
     /// the previous step's M_int, m/s; `None` for a data set's very first step, whose start
     /// state is not stored.
     pub dv: Option<Vec<f32>>,
-    /// Where the training target lands the step: x_c + h·p̄. `None`: on M_int (p̄ = v_int −
-    /// v_c, the paper's one-step target); set by [`Sequence::recompute_coarse`] for a
-    /// horizon of more than one step.
-    pub target_x: Option<Vec<f32>>,
 }
 
 /// Δq = v_c − v_start − g·h of flattened arrays.
@@ -124,7 +119,6 @@ impl Sequence {
                     coarse_v,
                     int_x: f.int_x[r].to_vec(),
                     int_v: int_v.clone(),
-                    target_x: None,
                 });
                 start_v = Some(int_v);
             }
@@ -145,25 +139,7 @@ impl Sequence {
     /// corrector learns to correct the simulator it will run with rather than the one that
     /// made the data set. The first step's M_c (from the state before the sequence, which is
     /// not stored) stays as stored.
-    ///
-    /// With a `horizon` K > 1 the target of each such step is also set
-    /// ([`Step::target_x`]): the simulator runs on for K steps from the same M_int without
-    /// correction, and the target is the constant per-step velocity correction that, kept up
-    /// over those steps, closes the gap to M_int K steps later, p̄ = 2 (x_int,K − x_c,K) /
-    /// (h K (K + 1)) (the cloth's reaction to it ignored). With K = 1 this is the paper's
-    /// one-step target. M_int is a point sample of the fine cloth, wrinkles and all, and the
-    /// coarse mesh springs back out of it within a step or two: a one-step target is mostly
-    /// that spring-back (which an interleaved run, starting from its own states, never has),
-    /// while over K steps it is divided among K(K + 1)/2 and the gap the coarse dynamics open
-    /// (the impact's fold layout) remains. Near the end of the sequence the horizon shortens
-    /// to the steps left.
-    pub fn recompute_coarse(
-        &mut self,
-        sim: &mut Simulation,
-        t0_s: f64,
-        horizon: usize,
-    ) -> Result<()> {
-        let base = sim.clone();
+    pub fn recompute_coarse(&mut self, sim: &mut Simulation, t0_s: f64) -> Result<()> {
         let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
         for i in 1..self.steps.len() {
             let state = self.int_state(i - 1, t0_s);
@@ -174,87 +150,19 @@ impl Sequence {
             st.coarse_x = flat32(&c.x);
             st.coarse_v = flat32(&c.v);
             st.dv = Some(dv);
-            st.target_x = None;
-        }
-        if horizon <= 1 {
-            return Ok(());
-        }
-        // The K-step runs, in fixed blocks of steps (each on its own copy of the simulator as
-        // it was handed in, so that the result does not depend on the number of threads).
-        const BLOCK: usize = 32;
-        let n = self.steps.len();
-        let this = &*self;
-        let blocks: Vec<Result<Vec<Option<Vec<f32>>>>> = (1..n)
-            .step_by(BLOCK)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|first| {
-                let mut sim = base.clone();
-                (first..(first + BLOCK).min(n))
-                    .map(|i| this.k_step_target(&mut sim, t0_s, i, horizon))
-                    .collect()
-            })
-            .collect();
-        let mut i = 1;
-        for block in blocks {
-            for target_x in block? {
-                self.steps[i].target_x = target_x;
-                i += 1;
-            }
         }
         Ok(())
     }
 
-    /// [`Step::target_x`] of `steps[i]` over `horizon` steps (shortened to the steps left):
-    /// `None` for a horizon of one.
-    fn k_step_target(
-        &self,
-        sim: &mut Simulation,
-        t0_s: f64,
-        i: usize,
-        horizon: usize,
-    ) -> Result<Option<Vec<f32>>> {
-        let k = horizon.min(self.steps.len() - i);
-        if k <= 1 {
-            return Ok(None);
-        }
-        let mut end = self.int_state(i - 1, t0_s);
-        for _ in 0..k {
-            end = sim.step_from(&end)?.0;
-        }
-        let gt = vectors(&self.steps[i - 1 + k].int_x);
-        let scale = 2.0 / (k * (k + 1)) as f64;
-        let x: Vec<f32> = vectors(&self.steps[i].coarse_x)
-            .iter()
-            .zip(gt.iter().zip(&end.x))
-            .flat_map(|(xc, (g, e))| {
-                let p = xc + (g - e) * scale;
-                [p.x as f32, p.y as f32, p.z as f32]
-            })
-            .collect();
-        Ok(Some(x))
-    }
-
-    /// The per-step target velocity correction p̄ of `steps[i]`, flattened: (x_target −
-    /// x_c)/h towards [`Step::target_x`], or without one v_int − v_c (the same as towards
-    /// M_int).
+    /// The per-step target velocity correction p̄ = v_int − v_c of `steps[i]`, flattened (the
+    /// paper's one-step target, which also lands M_c on M_int: x_c + h·p̄ = x_int).
     pub fn target(&self, i: usize) -> Vec<f32> {
         let st = &self.steps[i];
-        match &st.target_x {
-            Some(to) => {
-                let h = self.manifest.dt_s as f32;
-                to.iter()
-                    .zip(&st.coarse_x)
-                    .map(|(a, b)| (a - b) / h)
-                    .collect()
-            }
-            None => st
-                .int_v
-                .iter()
-                .zip(&st.coarse_v)
-                .map(|(a, b)| a - b)
-                .collect(),
-        }
+        st.int_v
+            .iter()
+            .zip(&st.coarse_v)
+            .map(|(a, b)| a - b)
+            .collect()
     }
 
     /// The ground truth M_int at the end of `steps[i]` as a simulator state, with the coarse

@@ -475,9 +475,8 @@ pub struct FusedNet {
     encode_edges: FusedMlp,
     blocks: Vec<FusedBlock>,
     decode: FusedMlp,
-    decode_edges: Option<FusedMlp>,
     gate: Option<FusedMlp>,
-    share_min: Option<f64>,
+    share_min: f64,
 }
 
 /// The inputs of one forward pass: normalised features and the graph, as
@@ -492,8 +491,6 @@ pub struct FusedInputs<'a> {
     pub senders: &'a [u32],
     /// `[E]` receiver node of each edge.
     pub receivers: &'a [u32],
-    /// `[N]` inverse relative lumped masses.
-    pub inv_mass: &'a [f32],
     /// `[N, 3]` the step's velocity change beyond gravity, normalised as the targets.
     pub step_change: &'a [f32],
     /// `[N]` the gated decoder's take-back weights; `None`: 1.
@@ -508,7 +505,6 @@ impl FusedNet {
             encode_edges: FusedMlp::of(&net.encode_edges),
             blocks: net.blocks.iter().map(FusedBlock::of).collect(),
             decode: FusedMlp::of(&net.decode),
-            decode_edges: net.decode_edges.as_ref().map(FusedMlp::of),
             gate: net.gate.as_ref().map(FusedMlp::of),
             share_min: net.share_min,
         }
@@ -533,60 +529,25 @@ impl FusedNet {
         for block in &self.blocks {
             block.forward(&mut nodes, &mut edges, g.senders, g.receivers, parts);
         }
-        let body: Vec<f32> = g
-            .nodes
-            .chunks_exact(NODE_FEATURES)
-            .map(|f| f[BODY_COLUMN])
-            .collect(); // [N]
         let decoded = self.decode.run_rows(&nodes, n); // [N, 3]
-        let local = match &self.gate {
-            Some(gate) => {
-                let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
-                let share_min = self.share_min.filter(|&m| m != 0.0).map(|m| m as f32);
-                let gated = gate.run_rows(&nodes, n); // [N, 3]
-                let mut local = vec![0.0f32; 3 * n];
-                for i in 0..n {
-                    // c = max(0, 1 − d/CONTACT_RADIUS_M), d = (1 − b)·BODY_RADIUS_M.
-                    let contact = ((body[i] - 1.0) * ratio + 1.0).clamp(0.0, 1.0);
-                    let w = g.tension.map_or(1.0, |w| w[i]);
-                    for a in 3 * i..3 * i + 3 {
-                        let mut share = 1.0 / (1.0 + (-gated[a]).exp());
-                        if let Some(m) = share_min {
-                            share = share * (1.0 - m) + m;
-                        }
-                        let taken = share * g.step_change[a] * (1.0 - contact) * w;
-                        local[a] = decoded[a] * contact - taken;
-                    }
-                }
-                local
-            }
-            None if self.decode_edges.is_some() => decoded
-                .chunks_exact(3)
-                .zip(&body)
-                .flat_map(|(p, b)| p.iter().map(move |p| p * b))
-                .collect(),
-            None => return decoded,
+        let Some(gate) = &self.gate else {
+            return decoded;
         };
-        let Some(decode_edges) = &self.decode_edges else {
-            return local;
-        };
-        // Pair impulses f = g_ij − g_ji at each edge's receiver, −f at its twin's.
-        let impulses = decode_edges.run_rows(&edges, e); // [E, 3]
+        let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
+        let share_min = (self.share_min != 0.0).then_some(self.share_min as f32);
+        let gated = gate.run_rows(&nodes, n); // [N, 3]
         let mut out = vec![0.0f32; 3 * n];
-        for (g_e, r) in impulses.chunks_exact(6).zip(g.receivers.chunks_exact(2)) {
-            for a in 0..3 {
-                let f = g_e[a] - g_e[3 + a];
-                out[3 * r[0] as usize + a] += f;
-                out[3 * r[1] as usize + a] -= f;
-            }
-        }
-        for ((o, l), m) in out
-            .chunks_exact_mut(3)
-            .zip(local.chunks_exact(3))
-            .zip(g.inv_mass)
-        {
-            for (o, l) in o.iter_mut().zip(l) {
-                *o = *o * m + l;
+        for (i, f) in g.nodes.chunks_exact(NODE_FEATURES).enumerate() {
+            // c = max(0, 1 − d/CONTACT_RADIUS_M), d = (1 − b)·BODY_RADIUS_M.
+            let contact = ((f[BODY_COLUMN] - 1.0) * ratio + 1.0).clamp(0.0, 1.0);
+            let w = g.tension.map_or(1.0, |w| w[i]);
+            for a in 3 * i..3 * i + 3 {
+                let mut share = 1.0 / (1.0 + (-gated[a]).exp());
+                if let Some(m) = share_min {
+                    share = share * (1.0 - m) + m;
+                }
+                let taken = share * g.step_change[a] * (1.0 - contact) * w;
+                out[a] = decoded[a] * contact - taken;
             }
         }
         out

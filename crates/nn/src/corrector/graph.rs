@@ -168,7 +168,7 @@ pub struct MeshGraph {
     material: Vec<Vector2<f64>>,
     /// Lumped mass of each vertex relative to the mean (a third of the material-space area
     /// of its triangles, over the mean of that): the simulator's lumped masses up to the
-    /// fabric's density, for momentum-conserving corrections.
+    /// fabric's density, the weights of [`Self::smooth`].
     pub mass: Vec<f32>,
 }
 

@@ -9,13 +9,12 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use burn::config::Config;
 use burn::tensor::{Device, Int, Tensor};
 use nalgebra::Vector3;
 
 use super::fused::{FusedInputs, FusedNet};
 use super::graph::{step_change, MeshGraph, ProximityCache, EDGE_FEATURES, NODE_FEATURES};
-use super::model::{index_tensor, inverse_masses, CorrectorConfig, CorrectorNet, GraphTensors};
+use super::model::{index_tensor, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
 use crate::common::{default_device, load_weights};
@@ -103,8 +102,6 @@ pub struct Corrector {
     /// The graph's edge lists on the device, uploaded once.
     senders: Tensor<1, Int>,
     receivers: Tensor<1, Int>,
-    /// `[n]` inverse relative masses of the graph's nodes.
-    inv_mass: Vec<f32>,
     /// The network's sizes.
     pub config: CorrectorConfig,
     /// How it was trained (including the coarse simulator's set-up it needs,
@@ -135,8 +132,7 @@ pub fn load_net(
              'clothsr lab train corrector'",
         ));
     }
-    let config = TrainingConfig::load(&config_path)
-        .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+    let config = TrainingConfig::load(&config_path)?;
     config
         .model
         .check()
@@ -209,7 +205,6 @@ impl Corrector {
             norm,
             senders: index_tensor(&graph.senders, device),
             receivers: index_tensor(&graph.receivers, device),
-            inv_mass: inverse_masses(&graph.mass),
             graph,
             config: config.model.clone(),
             training: config,
@@ -264,7 +259,6 @@ impl Corrector {
                     edges: &edges,
                     senders: &self.graph.senders,
                     receivers: &self.graph.receivers,
-                    inv_mass: &self.inv_mass,
                     step_change: &step_change,
                     tension: tension.as_deref(),
                 },
@@ -277,7 +271,6 @@ impl Corrector {
                     edges,
                     self.senders.clone(),
                     self.receivers.clone(),
-                    self.inv_mass.clone(),
                     step_change.clone(),
                 )
                 .with_tension(tension);
@@ -354,8 +347,7 @@ impl Corrector {
         let dv = step_change(&state.v, start_v, sim.sim.params.gravity_m_s2 * dt_s);
         CorrectorTimes::add(&self.times.proximity_ns, t);
         let mut p = self.predict(&state.x, &state.v, &dv, &body)?;
-        self.graph
-            .smooth(&mut p, self.config.smoothing.unwrap_or(0));
+        self.graph.smooth(&mut p, self.config.smoothing);
         if let Some((i, q)) = state
             .v
             .iter()

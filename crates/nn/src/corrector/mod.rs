@@ -12,6 +12,23 @@
 //! * [`inference`]: the [`Corrector`] the simulation loop calls after every step;
 //! * [`rollout`]: rollout errors against the ground truth, with the paper's ablations.
 
+/// `with_<field>` setters for a configuration's fields, each returning the configuration with
+/// one field changed: `setters!(Type { with_x: x: T, … })`.
+macro_rules! setters {
+    ($ty:ty { $($with:ident: $field:ident: $t:ty),* $(,)? }) => {
+        impl $ty {
+            $(
+                #[doc = concat!("The same with `", stringify!($field), "` set to `value`.")]
+                #[must_use]
+                pub fn $with(mut self, value: $t) -> Self {
+                    self.$field = value;
+                    self
+                }
+            )*
+        }
+    };
+}
+
 pub mod data;
 pub mod fused;
 pub mod graph;

@@ -7,15 +7,8 @@
 //!   receiver). With `attention`, the sum is replaced by a GATv2-style weighted sum
 //!   (Brody et al. 2022): a score a·LeakyReLU(e′_ij) per edge, softmax over each receiver's
 //!   incoming edges.
-//! * Decoder: MLP `L → 3`, the velocity correction p_i (normalised units); or, with
-//!   the `Momentum` decoder, a momentum-conserving one (beyond the paper): an edge MLP `L → 3`
-//!   gives g_ij on each directed edge, the pair's impulse is f_ij = g_ij − g_ji = −f_ji, and
-//!   p_i = (Σ_j f_ji)/m_i + b_i·h(v_i), m_i the relative lumped mass, b_i the body proximity
-//!   and h the node MLP. Away from colliders (b = 0) the corrections then add no linear
-//!   momentum, Σ m_i p_i = 0 exactly, as differences of internal forces between resolutions
-//!   cannot: a learned bias can deform the cloth, which its elasticity undoes, but cannot
-//!   accelerate it as a whole, which nothing would undo (interleaved with the simulator, a
-//!   bias of 0.1 σ a step is a third of gravity).
+//! * Decoder: MLP `L → 3`, the velocity correction p_i (normalised units), the paper's
+//!   ([`Decoder::Node`]).
 //! * Or, with the `Gated` decoder (beyond the paper), p_i = −(1 − c_i)·γ_i ⊙ Δq_i +
 //!   c_i·h(v_i): γ_i ∈ (0, 1)³ a sigmoid of a node MLP, Δq_i the simulator step's velocity
 //!   change beyond gravity ([`super::graph::step_change`]), c_i = max(0, 1 − d_i/`CONTACT_RADIUS_M`)
@@ -29,18 +22,12 @@
 //!   further scaled per vertex by w = clamp(1 − ε̄/ramp, 0, 1), ε̄ the mean strain of its
 //!   edges after the step ([`CorrectorConfig::tension_ramp`]): the fine cloth's wrinkles take
 //!   up compression, not tension.
-//! * Or, with the `GatedEdges` decoder, the gated decoder's p_i plus the momentum decoder's
-//!   edge impulses (Σ_j f_ji)/m_i: internal forces of the corrector's own, which can hold a
-//!   shape the coarse forces would not rest in, where taking back a share of those forces
-//!   can only slow the cloth's way to the coarse equilibrium (or, taking back all, leave it
-//!   with none).
 //!
 //! Every MLP is ReLU with `hidden_layers` hidden layers of `latent` units; all but the decoder
 //! end in a LayerNorm. Inputs and outputs are normalised outside the network
 //! ([`super::normalise`]). Training runs this burn network; inference on the CPU runs its
 //! weights through [`super::fused`].
 
-use burn::config::Config;
 use burn::module::Module;
 use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::tensor::activation::{leaky_relu, relu, sigmoid};
@@ -50,113 +37,129 @@ use serde::{Deserialize, Serialize};
 
 use super::graph::{MeshGraph, BODY_COLUMN, BODY_RADIUS_M, EDGE_FEATURES, NODE_FEATURES};
 
-/// Sizes of the corrector network (saved as `config.json` beside the weights).
-#[derive(Config, Debug, PartialEq)]
+/// Sizes of the corrector network and its settings at inference (saved in `config.json`
+/// beside the weights, [`super::training::TrainingConfig::model`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CorrectorConfig {
     /// Width of every latent vector and hidden layer (the paper: 64).
-    #[config(default = 64)]
     pub latent: usize,
     /// Hidden layers per MLP (the paper: 2).
-    #[config(default = 2)]
     pub hidden_layers: usize,
     /// Message-passing blocks (L).
-    #[config(default = 8)]
     pub steps: usize,
     /// GATv2-style attention weights on the edge aggregation instead of a plain sum.
-    #[config(default = false)]
     pub attention: bool,
-    /// The decoder (`None`: [`Decoder::Node`], the paper's; optional so that models saved
-    /// before the choice existed load as they were trained).
-    pub decoder: Option<Decoder>,
+    /// The decoder ([`Decoder::Node`], the paper's, by default).
+    pub decoder: Decoder,
     /// The gated decoder's tension limit at inference (beyond the paper): the share of the
     /// step's velocity change taken back is scaled by w = clamp(1 − ε̄/ramp, 0, 1), ε̄ the
     /// mean strain of the vertex's edges after the step
     /// ([`super::graph::MeshGraph::tension_weight`]). The finer cloth's wrinkles take up
     /// compression, not tension: the fine and coarse membranes resist stretching alike, and
     /// a corrector taking back their tension lets gravity stretch the interleaved cloth into
-    /// states never seen in training (stretched where the data is slightly shortened). `None`: [`DEFAULT_TENSION_RAMP`] (also for models saved before it
-    /// existed); 0: no limit. Training leaves it out: the data's one-step results are
-    /// stretched by the simulator's spring-back at many vertices, and a corrector trained
-    /// with the limit moved what it could not take back there into its free contact term
-    /// and diverged (frame 18 of the held-out drop).
-    pub tension_ramp: Option<f64>,
+    /// states never seen in training (stretched where the data is slightly shortened).
+    /// [`DEFAULT_TENSION_RAMP`] by default; 0: no limit. Training leaves it out: the data's
+    /// one-step results are stretched by the simulator's spring-back at many vertices, and a
+    /// corrector trained with the limit moved what it could not take back there into its
+    /// free contact term and diverged.
+    pub tension_ramp: f64,
     /// The gated decoder's take-back scale at inference (beyond the paper): the share of the
-    /// step's velocity change taken back is multiplied by this, in (0, 1] (`None`: 1, also
-    /// for models saved before it existed). Taking back most of each step's velocity change
-    /// also takes back most of the cloth's elastic restoring force, and the corrected cloth
-    /// then drifts under small per-step biases where the simulation alone would be pulled
-    /// back (a corrector started on a settled ground truth drifts further from it than the
-    /// simulation alone, and less with a smaller scale).
-    pub take_back: Option<f64>,
+    /// step's velocity change taken back is multiplied by this, in (0, 1] (1 by default).
+    /// Taking back most of each step's velocity change also takes back most of the cloth's
+    /// elastic restoring force, and the corrected cloth then drifts under small per-step
+    /// biases where the simulation alone would be pulled back (a corrector started on a
+    /// settled ground truth drifts further from it than the simulation alone, and less with
+    /// a smaller scale).
+    pub take_back: f64,
     /// Low-pass filter on the correction at inference (beyond the paper, any decoder): this
     /// many rounds of mass-weighted averaging over each vertex and its graph neighbours
-    /// ([`super::graph::MeshGraph::smooth`]) before the correction is applied (`None` or 0:
-    /// none, also for models saved before it existed). It keeps a uniform correction, but
-    /// not exactly the momentum decoders' zero momentum, nor the gated decoder's zero where
-    /// the tension limit holds a vertex (neighbours' take-back spreads there). The one-step targets are dominated by
-    /// the coarse mesh springing back out of M_int's compressed edges, a local (edge-scale)
-    /// motion the interleaved run does not have; its learned cancellation is then a local
-    /// bias, while the fine cloth's drift from the coarse one is smooth over the garment.
-    pub smoothing: Option<usize>,
+    /// ([`super::graph::MeshGraph::smooth`]) before the correction is applied (0, the
+    /// default: none). It keeps a uniform correction, but not exactly the gated decoder's
+    /// zero where the tension limit holds a vertex (neighbours' take-back spreads there). The
+    /// one-step targets are dominated by the coarse mesh springing back out of M_int's
+    /// compressed edges, a local (edge-scale) motion the interleaved run does not have; its
+    /// learned cancellation is then a local bias, while the fine cloth's drift from the
+    /// coarse one is smooth over the garment.
+    pub smoothing: usize,
     /// The gated decoder's lowest share (beyond the paper): γ = m + (1 − m)·σ(·) ∈ (m, 1)³
-    /// instead of (0, 1)³ (`None`: 0, also for models saved before it existed). Below 0 the
-    /// decoder may also amplify the step's velocity change, where the fine cloth responds
-    /// faster than the coarse one (the hanging flaps swinging in under an impact).
-    pub share_min: Option<f64>,
+    /// instead of (0, 1)³ (0 by default). Below 0 the decoder may also amplify the step's
+    /// velocity change, where the fine cloth responds faster than the coarse one (the
+    /// hanging flaps swinging in under an impact).
+    pub share_min: f64,
+}
+
+setters!(CorrectorConfig {
+    with_latent: latent: usize,
+    with_hidden_layers: hidden_layers: usize,
+    with_steps: steps: usize,
+    with_attention: attention: bool,
+    with_decoder: decoder: Decoder,
+    with_tension_ramp: tension_ramp: f64,
+    with_take_back: take_back: f64,
+    with_smoothing: smoothing: usize,
+    with_share_min: share_min: f64,
+});
+
+impl Default for CorrectorConfig {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// How the network's node latents become velocity corrections.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Decoder {
     /// The paper's: a node MLP, any correction anywhere.
+    #[default]
     Node,
-    /// Antisymmetric edge impulses over lumped masses, node terms only near colliders: no
-    /// linear momentum added away from them.
-    Momentum,
     /// A per-vertex, per-axis share γ ∈ (0, 1)³ of the step's velocity change beyond gravity
     /// taken back, node terms only near colliders.
     Gated,
-    /// The gated decoder plus the momentum decoder's antisymmetric edge impulses everywhere:
-    /// the take-back scales down the simulator's forces, the impulses add internal forces of
-    /// their own, which can hold a shape the coarse membrane and bending would not rest in
-    /// (the fine cloth's drape) without accelerating the cloth as a whole.
-    GatedEdges,
 }
 
 impl Decoder {
     /// Whether the decoder takes back a share of the step's velocity change.
     pub fn is_gated(self) -> bool {
-        matches!(self, Decoder::Gated | Decoder::GatedEdges)
-    }
-
-    /// Whether the decoder adds antisymmetric edge impulses.
-    pub fn has_edge_impulses(self) -> bool {
-        matches!(self, Decoder::Momentum | Decoder::GatedEdges)
+        self == Decoder::Gated
     }
 }
 
-/// The gated decoder's tension ramp when the model names none: 1 % strain (the data's
-/// M_int is shortened by 0.3 % on average, the simulator's spring-back from it stretches
-/// by 0.1 %).
+/// The gated decoder's default tension ramp: 1 % strain (the data's M_int is shortened by
+/// 0.3 % on average, the simulator's spring-back from it stretches by 0.1 %).
 pub const DEFAULT_TENSION_RAMP: f64 = 0.01;
 
 impl CorrectorConfig {
+    /// The paper's network (latent 64, 2 hidden layers, node decoder) with 8 message-passing
+    /// blocks, no attention, and the inference settings' defaults (the tension ramp
+    /// [`DEFAULT_TENSION_RAMP`], no take-back scale, no smoothing, lowest share 0).
+    pub fn new() -> Self {
+        CorrectorConfig {
+            latent: 64,
+            hidden_layers: 2,
+            steps: 8,
+            attention: false,
+            decoder: Decoder::Node,
+            tension_ramp: DEFAULT_TENSION_RAMP,
+            take_back: 1.0,
+            smoothing: 0,
+            share_min: 0.0,
+        }
+    }
+
     /// Checks the settings a saved configuration may hold wrong; `Err` names the problem.
     pub fn check(&self) -> Result<(), String> {
-        if self
-            .tension_ramp
-            .is_some_and(|r| !(r.is_finite() && r >= 0.0))
-        {
+        let r = self.tension_ramp;
+        if !(r.is_finite() && r >= 0.0) {
             return Err("the tension ramp must not be negative (0: no limit)".into());
         }
-        if self
-            .take_back
-            .is_some_and(|k| !(k.is_finite() && k > 0.0 && k <= 1.0))
-        {
+        let k = self.take_back;
+        if !(k.is_finite() && k > 0.0 && k <= 1.0) {
             return Err("the take-back scale must be in (0, 1]".into());
         }
-        if self.share_min.is_some_and(|m| !(m.is_finite() && m < 1.0)) {
+        let m = self.share_min;
+        if !(m.is_finite() && m < 1.0) {
             return Err("the gated decoder's lowest share must be below 1".into());
         }
         Ok(())
@@ -165,20 +168,13 @@ impl CorrectorConfig {
     /// The gated decoder's take-back scale at inference ([`Self::take_back`]); `None`: 1 (or
     /// another decoder).
     pub fn take_back(&self) -> Option<f64> {
-        let k = self.take_back.unwrap_or(1.0);
-        (self.decoder_kind().is_gated() && k != 1.0).then_some(k)
+        (self.decoder.is_gated() && self.take_back != 1.0).then_some(self.take_back)
     }
 
     /// The gated decoder's tension ramp at inference ([`Self::tension_ramp`]); `None`: no
     /// limit (other decoders, or a ramp of 0).
     pub fn tension_ramp(&self) -> Option<f64> {
-        let r = self.tension_ramp.unwrap_or(DEFAULT_TENSION_RAMP);
-        (self.decoder_kind().is_gated() && r > 0.0).then_some(r)
-    }
-
-    /// The decoder.
-    pub fn decoder_kind(&self) -> Decoder {
-        self.decoder.unwrap_or(Decoder::Node)
+        (self.decoder.is_gated() && self.tension_ramp > 0.0).then_some(self.tension_ramp)
     }
 }
 
@@ -261,8 +257,6 @@ pub struct GraphTensors {
     pub senders: Tensor<1, Int>,
     /// `[E]` receiver node of each edge.
     pub receivers: Tensor<1, Int>,
-    /// `[N, 1]` inverse relative lumped mass of each node ([`MeshGraph::mass`]).
-    pub inv_mass: Tensor<2>,
     /// `[N, 3]` the step's velocity change beyond gravity in the targets' normalised units
     /// (for the gated decoder).
     pub step_change: Tensor<2>,
@@ -282,25 +276,15 @@ pub const ATTENTION_SLOPE: f32 = 0.2;
 /// per-receiver maximum, which keeps every weight representable.
 pub const SCORE_LIMIT: f32 = 30.0;
 
-/// Smallest relative mass used (a vertex of no triangle would otherwise divide by zero).
-const MIN_MASS: f32 = 0.05;
-
-/// `[n]` relative masses → `[n]` inverse masses.
-pub fn inverse_masses(mass: &[f32]) -> Vec<f32> {
-    mass.iter().map(|m| 1.0 / m.max(MIN_MASS)).collect()
-}
-
 impl GraphTensors {
     /// Uploads row-major features (`nodes`: `[n, NODE_FEATURES]`, `edges`: `[e, EDGE_FEATURES]`),
-    /// edge lists, inverse masses (`[n]`, [`inverse_masses`]) and step changes (`[n, 3]`,
-    /// normalised as the targets). Edges come in pairs: edge 2k + 1 is edge 2k reversed
-    /// ([`MeshGraph::new`]).
+    /// edge lists and step changes (`[n, 3]`, normalised as the targets). Edges come in pairs:
+    /// edge 2k + 1 is edge 2k reversed ([`MeshGraph::new`]).
     pub fn new(
         nodes: Vec<f32>,
         edges: Vec<f32>,
         senders: &[u32],
         receivers: &[u32],
-        inv_mass: Vec<f32>,
         step_change: Vec<f32>,
         device: &Device,
     ) -> GraphTensors {
@@ -309,7 +293,6 @@ impl GraphTensors {
             edges,
             index_tensor(senders, device),
             index_tensor(receivers, device),
-            inv_mass,
             step_change,
         )
     }
@@ -321,21 +304,18 @@ impl GraphTensors {
         edges: Vec<f32>,
         senders: Tensor<1, Int>,
         receivers: Tensor<1, Int>,
-        inv_mass: Vec<f32>,
         step_change: Vec<f32>,
     ) -> GraphTensors {
         let device = senders.device();
         let [e] = senders.dims();
         let n = nodes.len() / NODE_FEATURES;
         debug_assert_eq!(edges.len(), e * EDGE_FEATURES);
-        debug_assert_eq!(inv_mass.len(), n);
         debug_assert_eq!(step_change.len(), 3 * n);
         GraphTensors {
             nodes: Tensor::from_data(TensorData::new(nodes, [n, NODE_FEATURES]), &device),
             edges: Tensor::from_data(TensorData::new(edges, [e, EDGE_FEATURES]), &device),
             senders,
             receivers,
-            inv_mass: Tensor::from_data(TensorData::new(inv_mass, [n, 1]), &device),
             step_change: Tensor::from_data(TensorData::new(step_change, [n, 3]), &device),
             tension: None,
         }
@@ -364,7 +344,6 @@ impl GraphTensors {
             edges,
             &graph.senders,
             &graph.receivers,
-            inverse_masses(&graph.mass),
             step_change,
             device,
         )
@@ -471,9 +450,8 @@ pub struct CorrectorNet {
     pub(super) encode_edges: Mlp,
     pub(super) blocks: Vec<Block>,
     pub(super) decode: Mlp,
-    pub(super) decode_edges: Option<Mlp>,
     pub(super) gate: Option<Mlp>,
-    pub(super) share_min: Option<f64>,
+    pub(super) share_min: f64,
 }
 
 impl CorrectorConfig {
@@ -493,12 +471,8 @@ impl CorrectorConfig {
                 })
                 .collect(),
             decode: Mlp::new(l, l, h, 3, false, device),
-            decode_edges: self
-                .decoder_kind()
-                .has_edge_impulses()
-                .then(|| Mlp::new(l, l, h, 3, false, device)),
             gate: self
-                .decoder_kind()
+                .decoder
                 .is_gated()
                 .then(|| Mlp::new(l, l, h, 3, false, device)),
             share_min: self.share_min,
@@ -550,44 +524,25 @@ impl CorrectorNet {
         for block in &self.blocks {
             (nodes, edge_parts) = block.forward(nodes, edge_parts);
         }
+        let Some(gate) = &self.gate else {
+            return self.decode.forward(nodes); // [N, 3]
+        };
         let [n, _] = nodes.dims();
         let body = g.nodes.clone().slice([0..n, BODY_COLUMN..BODY_COLUMN + 1]); // [N, 1]
-        let local = match &self.gate {
-            Some(gate) => {
-                // d = (1 − b)·BODY_RADIUS_M, c = max(0, 1 − d/CONTACT_RADIUS_M).
-                let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
-                let contact = ((body - 1.0) * ratio + 1.0).clamp(0.0, 1.0); // [N, 1]
-                let share = sigmoid(gate.forward(nodes.clone())); // [N, 3]
-                let share = match self.share_min {
-                    Some(m) if m != 0.0 => share * (1.0 - m) as f32 + m as f32, // [N, 3]
-                    _ => share,
-                };
-                let mut taken = share * g.step_change.clone() * (contact.clone().neg() + 1.0); // [N, 3]
-                if let Some(w) = &g.tension {
-                    taken = taken * w.clone(); // [N, 3]
-                }
-                self.decode.forward(nodes) * contact - taken // [N, 3]
-            }
-            None if self.decode_edges.is_some() => self.decode.forward(nodes) * body, // [N, 3]
-            None => return self.decode.forward(nodes),                                // [N, 3]
+                                                                                // d = (1 − b)·BODY_RADIUS_M, c = max(0, 1 − d/CONTACT_RADIUS_M).
+        let ratio = (BODY_RADIUS_M / CONTACT_RADIUS_M) as f32;
+        let contact = ((body - 1.0) * ratio + 1.0).clamp(0.0, 1.0); // [N, 1]
+        let share = sigmoid(gate.forward(nodes.clone())); // [N, 3]
+        let m = self.share_min;
+        let share = if m != 0.0 {
+            share * (1.0 - m) as f32 + m as f32 // [N, 3]
+        } else {
+            share
         };
-        let Some(decode_edges) = &self.decode_edges else {
-            return local; // [N, 3]
-        };
-        let device = local.device();
-        let impulses = map_parts(&edge_parts, |p| {
-            let g_e = decode_edges.forward(p.edges.clone()); // [E_k, 3]
-            let [e, _] = g_e.dims();
-            let pairs = g_e.reshape([e / 2, 6]); // [E_k/2, 6]: g of edge 2k, then of 2k + 1
-            let f = pairs.clone().slice([0..e / 2, 0..3]) - pairs.slice([0..e / 2, 3..6]); // [E_k/2, 3]
-            let f = Tensor::cat(vec![f.clone(), f.neg()], 1).reshape([e, 3]); // [E_k, 3], f_ji = −f_ij
-            Tensor::<2>::zeros([n, 3], &device).select_assign(
-                0,
-                p.receivers.clone(),
-                f,
-                IndexingUpdateOp::Add,
-            ) // [N, 3]
-        });
-        sum_parts(impulses) * g.inv_mass.clone() + local // [N, 3], the impulses sum to zero
+        let mut taken = share * g.step_change.clone() * (contact.clone().neg() + 1.0); // [N, 3]
+        if let Some(w) = &g.tension {
+            taken = taken * w.clone(); // [N, 3]
+        }
+        self.decode.forward(nodes) * contact - taken // [N, 3]
     }
 }

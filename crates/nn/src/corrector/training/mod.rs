@@ -13,10 +13,10 @@
 //!   correction that brings the rollout back onto the ground truth. Gradients flow through the
 //!   network at every step (the simulator's output is data).
 //!
-//! * Beyond the paper: a warm start from a trained corrector ([`TrainingConfig::init_from`]),
-//!   an average of the phase-2 weights ([`TrainingConfig::average_from`]), phase-2 windows
-//!   rolled out as at inference ([`TrainingConfig::rollout_as_inference`]) and phase 1
-//!   distilling a trained corrector ([`TrainingConfig::distil_from`]).
+//! * Beyond the paper: phase 2's pull-back time ([`TrainingConfig::rollout_tau_steps`]), a
+//!   warm start from a trained corrector ([`TrainingConfig::init_from`]) and the choice of the
+//!   network by its interleaved rollout on held-out sequences
+//!   ([`TrainingConfig::validate_every`]).
 //!
 //! The output directory holds `config.json`, `normalisation.json`, `model.bpk`, `log.csv`
 //! (phase, step, learning rate, loss, elapsed seconds) and, while training, `checkpoint/`
@@ -30,7 +30,7 @@ mod start;
 mod validation;
 
 pub use checkpoint::{save_model, VALIDATION_LOG};
-pub use config::{TrainingConfig, DEFAULT_DRIFT_REFRESH, DEFAULT_DRIFT_TAU_STEPS};
+pub use config::{TrainingConfig, CORRECTOR_FORMAT_VERSION};
 pub use phase2::pull_back_target;
 pub use validation::ValidationSet;
 
@@ -39,7 +39,6 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::config::Config;
 use burn::optim::AdamConfig;
 use burn::tensor::Device;
 use rand::rngs::StdRng;
@@ -51,12 +50,9 @@ use super::model::CorrectorNet;
 use super::normalise::{Normalisation, NormalisationBuilder};
 use crate::common::{default_device, write_json};
 use crate::error::{Error, Result};
-use crate::sim::coarse::check_friction;
 use crate::sim::driver::Simulation;
-use crate::sim::SimState;
-use crate::sim::WrinkleBending;
-use checkpoint::{Position, WeightAverage, AVERAGE_FILE, BEST_FILE, CHECKPOINT_DIR};
-use start::{teacher, warm_start};
+use checkpoint::{Position, BEST_FILE, CHECKPOINT_DIR};
+use start::warm_start;
 
 /// A training sequence and, for phase 2, the coarse simulation it was made with
 /// ([`crate::data::coarse_simulation`]).
@@ -101,13 +97,6 @@ pub struct Summary {
     /// With validation: every validation's pooled error, (phase, step or window, mm; infinite
     /// where the rollout diverged).
     pub validations: Vec<(u8, usize, f64)>,
-    /// Phase-2 networks whose mean weights were saved ([`TrainingConfig::average_from`]; 0:
-    /// the last network's, or the best validated one's).
-    pub averaged: usize,
-    /// The interleaved runs made for drift windows ([`TrainingConfig::drift_share`]): the
-    /// phase-2 window each was made at and its mean distance to M_int over the training
-    /// sets' steps, mm.
-    pub drift_runs: Vec<(usize, f64)>,
 }
 
 struct Trainer<'a> {
@@ -127,21 +116,6 @@ struct Trainer<'a> {
     best: Option<CorrectorNet>,
     /// Every validation of this call, for the summary.
     validations: Vec<(u8, usize, f64)>,
-    /// The running mean of the phase-2 weights ([`TrainingConfig::average_from`]), once begun.
-    average: Option<WeightAverage>,
-    /// Per training set, the last interleaved run's corrected states by sequence step (index
-    /// 0: the first step's M_int; [`TrainingConfig::drift_share`]); empty until the first
-    /// drift window.
-    drift: Vec<Vec<SimState>>,
-    /// Drift windows run since [`Self::drift`] was made.
-    drift_used: usize,
-    /// Per training set, its coarse simulation as it was before phase 2's first window: each
-    /// interleaved run for drift windows starts from a copy, as a run at inference would.
-    pristine: Vec<Option<Simulation>>,
-    /// [`Summary::drift_runs`].
-    drift_runs: Vec<(usize, f64)>,
-    /// The network distilled ([`TrainingConfig::distil_from`]).
-    teacher: Option<CorrectorNet>,
 }
 
 fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) -> Result<()> {
@@ -187,32 +161,21 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
     if !(cfg.noise_ratio.is_finite() && cfg.noise_ratio >= 0.0) {
         return bad("noise_ratio must not be negative");
     }
+    if cfg.format_version != CORRECTOR_FORMAT_VERSION {
+        return bad(&format!(
+            "format_version {} (this clothsr writes {CORRECTOR_FORMAT_VERSION})",
+            cfg.format_version
+        ));
+    }
     if let Err(e) = cfg.model.check() {
         return bad(&e);
     }
-    if let Some(Err(e)) = cfg
-        .coarse_wrinkle_bending
-        .map(|g| WrinkleBending::with_gain(g).check())
-    {
-        return bad(&e);
-    }
-    if let Some(Err(e)) = cfg.coarse_friction.map(check_friction) {
+    if let Err(e) = cfg.coarse.check() {
         return bad(&format!("coarse: {e}"));
     }
-    if cfg
-        .coarse_bending
-        .is_some_and(|b| !(b > 0.0 && b.is_finite()))
-    {
-        return bad("coarse_bending must be a factor > 0");
-    }
-    if cfg
-        .rollout_tau_steps
-        .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
-    {
+    let tau = cfg.rollout_tau_steps;
+    if !(tau >= 1.0 && tau.is_finite()) {
         return bad("rollout_tau_steps must be at least 1");
-    }
-    if cfg.target_steps == Some(0) {
-        return bad("target_steps must be at least 1");
     }
     if cfg.rollout_iters > 0
         && !sets
@@ -220,24 +183,6 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
             .any(|s| s.sim.is_some() && s.seq.steps.len() > cfg.window)
     {
         return bad("phase 2 needs a coarse simulator and a sequence longer than the window");
-    }
-    if cfg
-        .drift_share
-        .is_some_and(|d| !(d.is_finite() && d > 0.0 && d <= 1.0))
-    {
-        return bad("drift_share must be in (0, 1]");
-    }
-    if cfg.drift_refresh == Some(0) {
-        return bad("drift_refresh must be at least 1");
-    }
-    if cfg
-        .drift_tau_steps
-        .is_some_and(|t| !(t >= 1.0 && t.is_finite()))
-    {
-        return bad("drift_tau_steps must be at least 1");
-    }
-    if cfg.average_from.is_some_and(|k| k >= cfg.rollout_iters) {
-        return bad("average_from must be below rollout_iters (weights are averaged in phase 2)");
     }
     Ok(())
 }
@@ -261,7 +206,7 @@ pub fn train(
     let norm_path = out.join(NORMALISATION_FILE);
     let device = default_device()?.autodiff();
     device.seed(cfg.seed);
-    let (start, teacher) = match starting_models(cfg, &device, resuming) {
+    let start = match starting_model(cfg, &device, resuming) {
         Ok(loaded) => loaded,
         Err(e) => {
             if made_out {
@@ -274,9 +219,9 @@ pub fn train(
     let norm = if resuming {
         read_json(&norm_path)?
     } else {
-        let norm = match (&start, &teacher) {
-            (Some((_, norm)), _) | (None, Some((_, norm))) => norm.clone(),
-            (None, None) => fit_normalisation(sets),
+        let norm = match &start {
+            Some((_, norm)) => norm.clone(),
+            None => fit_normalisation(sets),
         };
         write_json(&norm_path, &norm)?;
         write_json(&out.join(CONFIG_FILE), cfg)?;
@@ -287,10 +232,10 @@ pub fn train(
         Some((net, _)) => net,
         None => cfg.model.init(&device),
     };
-    let (net, optim, average) = if resuming {
-        resume_weights(cfg, out, &device, net, &position)?
+    let (net, optim) = if resuming {
+        resume_weights(out, net, &position)?
     } else {
-        (net, AdamConfig::new().init(), None)
+        (net, AdamConfig::new().init())
     };
     let log_path = out.join("log.csv");
     let log = crate::io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
@@ -318,12 +263,6 @@ pub fn train(
         stopped: false,
         best,
         validations: Vec::new(),
-        average,
-        drift: Vec::new(),
-        drift_used: 0,
-        pristine: Vec::new(),
-        drift_runs: Vec::new(),
-        teacher: teacher.map(|(net, _)| net),
     };
     t.run(sets, validation, &mut progress)
 }
@@ -337,8 +276,7 @@ fn open_run(cfg: &TrainingConfig, out: &Path) -> Result<(Position, bool)> {
     let mut position = Position::default();
     let resuming = state_path.exists();
     if resuming {
-        let old = TrainingConfig::load(&config_path)
-            .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
+        let old = TrainingConfig::load(&config_path)?;
         if &old != cfg {
             return Err(Error::bad_input(
                 &config_path,
@@ -355,64 +293,38 @@ fn open_run(cfg: &TrainingConfig, out: &Path) -> Result<(Position, bool)> {
     Ok((position, resuming))
 }
 
-/// A trained network and its normalisation.
-type Trained = (CorrectorNet, Normalisation);
-
-/// The models training starts from (none when `resuming`) and distils, each checked against
-/// `cfg`. A run refused here made nothing yet, so a folder it made goes again.
-fn starting_models(
+/// The model training starts from (none when `resuming`), checked against `cfg`, and its
+/// normalisation. A run refused here made nothing yet, so a folder it made goes again.
+fn starting_model(
     cfg: &TrainingConfig,
     device: &Device,
     resuming: bool,
-) -> Result<(Option<Trained>, Option<Trained>)> {
-    let start = if resuming {
-        None
+) -> Result<Option<(CorrectorNet, Normalisation)>> {
+    if resuming {
+        Ok(None)
     } else {
-        warm_start(cfg, device)?
-    };
-    let teacher = teacher(cfg, device)?;
-    // The teacher's statistics are the student's: a warm start must share them.
-    if let (Some((_, own)), Some((_, taught)), Some(dir)) = (&start, &teacher, &cfg.distil_from) {
-        if own != taught {
-            return Err(Error::bad_input(
-                dir.join(NORMALISATION_FILE),
-                "the teacher's normalisation is not the one of the network to start \
-                 from (a student starts fresh or from a student of this teacher)",
-            ));
-        }
+        warm_start(cfg, device)
     }
-    Ok((start, teacher))
 }
 
-/// The checkpointed network, optimiser state and weight average of a resumed run.
+/// The checkpointed network and optimiser state of a resumed run.
 fn resume_weights(
-    cfg: &TrainingConfig,
     out: &Path,
-    device: &Device,
     net: CorrectorNet,
     position: &Position,
-) -> Result<(
-    CorrectorNet,
-    burn::optim::ModuleOptimizer,
-    Option<WeightAverage>,
-)> {
-    let optim = AdamConfig::new().init();
-    let mut average = None;
+) -> Result<(CorrectorNet, burn::optim::ModuleOptimizer)> {
     let dir = out.join(CHECKPOINT_DIR);
     let net = crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))?;
-    let optim = optim
+    let optim = AdamConfig::new()
+        .init()
         .load(dir.join("optim.bpk"))
         .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
-    if position.averaged > 0 {
-        let avg = crate::common::load_weights(cfg.model.init(device), &dir.join(AVERAGE_FILE))?;
-        average = Some(WeightAverage::of(&avg, position.averaged));
-    }
     tracing::info!(
         "resuming: phase 1 at step {}, phase 2 at window {}",
         position.phase1_done,
         position.phase2_done
     );
-    Ok((net, optim, average))
+    Ok((net, optim))
 }
 
 impl Trainer<'_> {
@@ -443,16 +355,14 @@ impl Trainer<'_> {
         }
         summary.seconds = self.t0.elapsed().as_secs_f64();
         summary.validations = std::mem::take(&mut self.validations);
-        summary.drift_runs = std::mem::take(&mut self.drift_runs);
         if self.stopped {
             summary.interrupted = true;
             return Ok(summary);
         }
         summary.validation_best = self.position.best;
-        summary.averaged = self.average.as_ref().map_or(0, |a| a.count);
         let kept = match &self.best {
             Some(best) => best.clone(),
-            None => self.kept_net(),
+            None => self.net.clone(),
         };
         save_model(&out, cfg, &self.norm, &kept)?;
         std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(&out, e))?;

@@ -11,7 +11,7 @@ use rand_distr::{Distribution, Normal};
 use super::{first_last, mean, Progress, TrainSet, Trainer};
 use crate::corrector::data::vectors;
 use crate::corrector::graph::MeshGraph;
-use crate::corrector::model::{inverse_masses, GraphTensors};
+use crate::corrector::model::GraphTensors;
 use crate::corrector::normalise::Normalisation;
 use crate::data::flat32;
 use crate::error::{Error, Result};
@@ -34,11 +34,10 @@ pub(super) fn batch_tensors(
     device: &Device,
 ) -> (GraphTensors, Tensor<2>, Tensor<2>, f32) {
     let (mut nodes, mut edges, mut targets, mut mask) = (vec![], vec![], vec![], vec![]);
-    let (mut senders, mut receivers, mut inv_mass) = (vec![], vec![], vec![]);
+    let (mut senders, mut receivers) = (vec![], vec![]);
     let mut step_change = vec![];
     let mut offset = 0u32;
     for s in samples {
-        inv_mass.extend(inverse_masses(&s.graph.mass));
         step_change.extend_from_slice(&s.step_change);
         nodes.extend_from_slice(&s.nodes);
         edges.extend_from_slice(&s.edges);
@@ -55,15 +54,7 @@ pub(super) fn batch_tensors(
     let n = offset as usize;
     let weight: f32 = mask.iter().sum::<f32>().max(1.0) * 3.0;
     (
-        GraphTensors::new(
-            nodes,
-            edges,
-            &senders,
-            &receivers,
-            inv_mass,
-            step_change,
-            device,
-        ),
+        GraphTensors::new(nodes, edges, &senders, &receivers, step_change, device),
         Tensor::from_data(TensorData::new(targets, [n, 3]), device),
         Tensor::from_data(TensorData::new(mask, [n, 1]), device),
         weight,
@@ -104,7 +95,7 @@ impl Trainer<'_> {
             .dv
             .as_deref()
             .map_or_else(|| vec![Vector3::zeros(); x.len()], vectors);
-        let x_int = vectors(st.target_x.as_deref().unwrap_or(&st.int_x));
+        let x_int = vectors(&st.int_x);
         if self.noise_std_m > 0.0 {
             if let Ok(normal) = Normal::new(0.0, self.noise_std_m) {
                 for ((x, v), dv) in x.iter_mut().zip(v.iter_mut()).zip(dv.iter_mut()) {
@@ -115,8 +106,7 @@ impl Trainer<'_> {
                 }
             }
         }
-        // p̄ = (x_int − x̃_c)/h (or towards the K-step target, `target_steps`); without noise
-        // this is v_int − v_c.
+        // p̄ = (x_int − x̃_c)/h; without noise this is v_int − v_c.
         let targets: Vec<Vector3<f64>> = x_int.iter().zip(&x).map(|(a, b)| (a - b) / h).collect();
         let n = seq.graph.num_nodes;
         let (graph, nodes_idx, mask) = if self.cfg.patch_nodes > 0 && self.cfg.patch_nodes < n {
@@ -164,10 +154,6 @@ impl Trainer<'_> {
                 * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
             let samples: Vec<Sample> = (0..cfg.batch).map(|_| self.sample(sets)).collect();
             let (g, target, mask, weight) = batch_tensors(&samples, &self.norm, &self.device);
-            let target = match &self.teacher {
-                Some(teacher) => teacher.forward(&g).detach(), // [N, 3]
-                None => target,
-            };
             let pred = self.net.forward(&g);
             let loss = l1(pred, target, mask, weight);
             let value = f64::from(loss.clone().into_scalar::<f32>());

@@ -1,8 +1,7 @@
-//! The models training starts from and distils, checked against the configuration.
+//! The model a warm start begins from, checked against the configuration.
 
 use std::path::Path;
 
-use burn::module::Module;
 use burn::tensor::Device;
 
 use super::config::TrainingConfig;
@@ -10,9 +9,9 @@ use crate::corrector::inference::{load_net, CONFIG_FILE};
 use crate::corrector::model::CorrectorNet;
 use crate::corrector::normalise::Normalisation;
 use crate::error::{Error, Result};
-use crate::sim::coarse::crease_label;
+use crate::sim::coarse::{crease_label, CoarseCalibration};
 
-/// The network, statistics and configuration of the trained corrector `cfg` starts from
+/// The network and statistics of the trained corrector `cfg` starts from
 /// ([`TrainingConfig::init_from`]), checked against `cfg`; `None` without one.
 pub(super) fn warm_start(
     cfg: &TrainingConfig,
@@ -24,19 +23,9 @@ pub(super) fn warm_start(
     let (net, norm, old) = load_net(dir, device)?;
     let config_path = dir.join(CONFIG_FILE);
     let (a, b) = (&old.model, &cfg.model);
-    if (
-        a.latent,
-        a.hidden_layers,
-        a.steps,
-        a.attention,
-        a.decoder_kind(),
-    ) != (
-        b.latent,
-        b.hidden_layers,
-        b.steps,
-        b.attention,
-        b.decoder_kind(),
-    ) {
+    if (a.latent, a.hidden_layers, a.steps, a.attention, a.decoder)
+        != (b.latent, b.hidden_layers, b.steps, b.attention, b.decoder)
+    {
         return Err(Error::bad_input(
             &config_path,
             format!(
@@ -46,101 +35,71 @@ pub(super) fn warm_start(
                 a.hidden_layers,
                 a.steps,
                 a.attention,
-                a.decoder_kind(),
+                a.decoder,
                 b.latent,
                 b.hidden_layers,
                 b.steps,
                 b.attention,
-                b.decoder_kind()
+                b.decoder
             ),
         ));
     }
-    check_same_coarse(&old, cfg, &config_path, "the network to start from")?;
+    check_same_coarse(&old.coarse, &cfg.coarse, &config_path)?;
     Ok(Some((net, norm)))
 }
 
-/// Refuses (naming `config_path`) a trained corrector (`what`, configured as `old`) trained
-/// beside another coarse model than `cfg` asks for.
-pub(super) fn check_same_coarse(
-    old: &TrainingConfig,
-    cfg: &TrainingConfig,
+/// Refuses (naming `config_path`) a network to start from that was trained beside another
+/// coarse model (`old`) than the training asks for (`new`).
+fn check_same_coarse(
+    old: &CoarseCalibration,
+    new: &CoarseCalibration,
     config_path: &Path,
-    what: &str,
 ) -> Result<()> {
-    if old.coarse_friction != cfg.coarse_friction {
-        return Err(Error::bad_input(
+    let refuse = |how: String| {
+        Err(Error::bad_input(
             config_path,
-            format!(
-                "{what} was trained beside a coarse friction coefficient \
-                 of {:?}, the training asks for {:?} (None: the simulator's)",
-                old.coarse_friction, cfg.coarse_friction
-            ),
+            format!("the network to start from was trained {how}"),
+        ))
+    };
+    if old.friction != new.friction {
+        return refuse(format!(
+            "beside a coarse friction coefficient of {:?}, the training asks for {:?} \
+             (None: the simulator's)",
+            old.friction, new.friction
         ));
     }
-    let (old_b, new_b) = (
-        old.coarse_bending.unwrap_or(1.0),
-        cfg.coarse_bending.unwrap_or(1.0),
-    );
+    let (old_b, new_b) = (old.bending.unwrap_or(1.0), new.bending.unwrap_or(1.0));
     if old_b != new_b {
-        return Err(Error::bad_input(
-            config_path,
-            format!(
-                "{what} was trained beside {old_b} times the fabric's \
-                 bending stiffness, the training asks for {new_b}"
-            ),
+        return refuse(format!(
+            "beside {old_b} times the fabric's bending stiffness, the training asks for {new_b}"
         ));
     }
     let (old_e, new_e) = (
-        crease_label(old.coarse_crease_contacts),
-        crease_label(cfg.coarse_crease_contacts),
+        crease_label(old.crease_contacts),
+        crease_label(new.crease_contacts),
     );
     if old_e != new_e {
-        return Err(Error::bad_input(
-            config_path,
-            format!(
-                "{what} was trained with crease contacts {old_e}, the \
-                 training asks for {new_e}"
-            ),
+        return refuse(format!(
+            "with crease contacts {old_e}, the training asks for {new_e}"
         ));
     }
-    if old.coarse_wrinkle_bending != cfg.coarse_wrinkle_bending {
-        return Err(Error::bad_input(
-            config_path,
-            format!(
-                "{what} was trained beside a coarse wrinkle bending gain \
-                 of {:?}, the training asks for {:?} (None: off)",
-                old.coarse_wrinkle_bending, cfg.coarse_wrinkle_bending
-            ),
+    if old.wrinkle_bending != new.wrinkle_bending {
+        return refuse(format!(
+            "beside a coarse wrinkle bending gain of {:?}, the training asks for {:?} \
+             (None: off)",
+            old.wrinkle_bending, new.wrinkle_bending
         ));
     }
-    if old.compression_factor() != cfg.compression_factor()
-        || old.coarse_compression_knee != cfg.coarse_compression_knee
-    {
-        return Err(Error::bad_input(
-            config_path,
-            format!(
-                "{what} was trained beside a coarse membrane with \
-                 compression factor {} (knee {:?}), the training asks for {} (knee {:?})",
-                old.compression_factor(),
-                old.coarse_compression_knee,
-                cfg.compression_factor(),
-                cfg.coarse_compression_knee
-            ),
+    let (old_c, new_c) = (
+        old.compression.unwrap_or(1.0),
+        new.compression.unwrap_or(1.0),
+    );
+    if old_c != new_c || old.compression_knee != new.compression_knee {
+        return refuse(format!(
+            "beside a coarse membrane with compression factor {old_c} (knee {:?}), the \
+             training asks for {new_c} (knee {:?})",
+            old.compression_knee, new.compression_knee
         ));
     }
     Ok(())
-}
-
-/// The teacher network `cfg` distils ([`TrainingConfig::distil_from`]), without gradients,
-/// and its statistics; `None` without one.
-pub(super) fn teacher(
-    cfg: &TrainingConfig,
-    device: &Device,
-) -> Result<Option<(CorrectorNet, Normalisation)>> {
-    let Some(dir) = cfg.distil_from.as_deref() else {
-        return Ok(None);
-    };
-    let (net, norm, old) = load_net(dir, device)?;
-    check_same_coarse(&old, cfg, &dir.join(CONFIG_FILE), "the teacher")?;
-    Ok(Some((net.no_grad(), norm)))
 }

@@ -58,7 +58,7 @@ impl Trainer<'_> {
         }
         let t = Instant::now();
         let device = default_device()?;
-        let kept = self.kept_net();
+        let kept = self.net.clone();
         let net = kept.valid();
         let (mut sum, mut frames, mut diverged) = (0.0, 0usize, false);
         let mut rows = Vec::new();
