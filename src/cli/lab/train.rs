@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clothsr::corrector::data::Sequence;
 use clothsr::corrector::training::{
-    train, Progress, TrainSet, TrainingConfig, ValidationSet, VALIDATION_LOG,
+    train, Progress, Summary, TrainSet, TrainingConfig, ValidationSet, VALIDATION_LOG,
 };
 use clothsr::corrector::CorrectorConfig;
 use clothsr::data::coarse_simulation;
@@ -228,6 +228,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
+    let cfg = training_config(&a)?;
+    let validation = validation_sets(&a, &cfg)?;
+    let mut sets = train_sets(&a, &cfg)?;
+    let summary = train_with_progress(&cfg, &mut sets, &validation, &a.output)?;
+    log_summary(&cfg, &summary, &a.output);
+    Ok(())
+}
+
+/// The training settings the arguments give, checked.
+fn training_config(a: &CorrectorArgs) -> anyhow::Result<TrainingConfig> {
     anyhow::ensure!(
         a.steps > 0 || a.rollout_iters > 0,
         "nothing to train: --steps and --rollout-iters are 0"
@@ -238,40 +248,8 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     );
     // With --init, the network and the coarse membrane are the model's; inference settings
     // given here override its own.
-    let init =
-        match &a.init {
-            Some(dir) => {
-                let path = dir.join(clothsr::corrector::inference::CONFIG_FILE);
-                Some(TrainingConfig::load(&path).with_context(|| {
-                    format!("{} is not a corrector to start from", dir.display())
-                })?)
-            }
-            None => None,
-        };
-    let mut model = match &init {
-        Some(old) => old.model.clone(),
-        None => CorrectorConfig::new()
-            .with_latent(a.latent)
-            .with_steps(a.mp_steps)
-            .with_attention(a.attention)
-            .with_decoder(a.decoder),
-    };
-    if let Some(r) = a.tension_ramp {
-        model.tension_ramp = r;
-    }
-    if let Some(k) = a.take_back {
-        model.take_back = k;
-    }
-    if let Some(n) = a.smoothing {
-        model.smoothing = n;
-    }
-    if let Some(m) = a.share_min {
-        anyhow::ensure!(
-            init.is_none(),
-            "--share-min shapes a new network; it cannot change the --init model's"
-        );
-        model.share_min = m;
-    }
+    let init = init_config(a)?;
+    let model = model_config(a, init.as_ref())?;
     a.coarse.check_flags().map_err(anyhow::Error::msg)?;
     let trained_beside = init.as_ref().map(|c| c.coarse).unwrap_or_default();
     let coarse = a
@@ -296,29 +274,90 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         .with_validate_every((!a.val_data.is_empty()).then_some(a.validate_every))
         .with_validation_frames(a.val_frames.filter(|_| !a.val_data.is_empty()));
     anyhow::ensure!(a.validate_every > 0, "--validate-every must be at least 1");
+    Ok(cfg)
+}
+
+/// The training settings of the `--init` model, if any.
+fn init_config(a: &CorrectorArgs) -> anyhow::Result<Option<TrainingConfig>> {
+    let Some(dir) = &a.init else {
+        return Ok(None);
+    };
+    let path = dir.join(clothsr::corrector::inference::CONFIG_FILE);
+    let cfg = TrainingConfig::load(&path)
+        .with_context(|| format!("{} is not a corrector to start from", dir.display()))?;
+    Ok(Some(cfg))
+}
+
+/// The network: the `--init` model's or a new one, with the inference settings given.
+fn model_config(
+    a: &CorrectorArgs,
+    init: Option<&TrainingConfig>,
+) -> anyhow::Result<CorrectorConfig> {
+    let mut model = match init {
+        Some(old) => old.model.clone(),
+        None => CorrectorConfig::new()
+            .with_latent(a.latent)
+            .with_steps(a.mp_steps)
+            .with_attention(a.attention)
+            .with_decoder(a.decoder),
+    };
+    if let Some(r) = a.tension_ramp {
+        model.tension_ramp = r;
+    }
+    if let Some(k) = a.take_back {
+        model.take_back = k;
+    }
+    if let Some(n) = a.smoothing {
+        model.smoothing = n;
+    }
+    if let Some(m) = a.share_min {
+        anyhow::ensure!(
+            init.is_none(),
+            "--share-min shapes a new network; it cannot change the --init model's"
+        );
+        model.share_min = m;
+    }
+    Ok(model)
+}
+
+/// The coarse simulation a data set was made with, with the coarse model trained beside.
+fn prepared_simulation(
+    cfg: &TrainingConfig,
+    scene: &clothsr::scene::Scene,
+    dir: &std::path::Path,
+) -> anyhow::Result<clothsr::sim::driver::Simulation> {
+    let mut sim = coarse_simulation(scene, dir, 1)?;
+    cfg.prepare_coarse(&mut sim)?;
+    Ok(sim)
+}
+
+/// The `--val-data` sets.
+fn validation_sets(a: &CorrectorArgs, cfg: &TrainingConfig) -> anyhow::Result<Vec<ValidationSet>> {
     let mut validation = Vec::new();
     for dir in &a.val_data {
         let scene = data_scene(dir)?;
         let m = clothsr::data::read_manifest(dir)?;
         // One frame more than rolled out: the rollout starts at the first loaded frame.
         let frames = a.val_frames.map(|n| 1..=(n + 1).min(m.frames_done));
-        let mut sim = coarse_simulation(&scene, dir, 1)?;
-        cfg.prepare_coarse(&mut sim)?;
+        let sim = prepared_simulation(cfg, &scene, dir)?;
         let seq = Sequence::load(dir, frames, &sim)?;
         validation.push(ValidationSet { seq, scene });
     }
+    Ok(validation)
+}
+
+/// The `--data` sets, each with its simulator for phase 2.
+fn train_sets(a: &CorrectorArgs, cfg: &TrainingConfig) -> anyhow::Result<Vec<TrainSet>> {
     let mut sets = Vec::new();
     for dir in &a.data {
         let m = clothsr::data::read_manifest(dir)?;
         let frames = a.frames.map(|n| 1..=n.min(m.frames_done));
         let scene = data_scene(dir)?;
-        let mut sim = coarse_simulation(&scene, dir, 1)?;
-        cfg.prepare_coarse(&mut sim)?;
+        let sim = prepared_simulation(cfg, &scene, dir)?;
         let t0 = sim.state.t_s;
         let mut seq = Sequence::load(dir, frames, &sim)?;
         // M_c from this simulator, in a fresh instance (a simulator carries warm starts).
-        let mut fresh = coarse_simulation(&scene, dir, 1)?;
-        cfg.prepare_coarse(&mut fresh)?;
+        let mut fresh = prepared_simulation(cfg, &scene, dir)?;
         seq.recompute_coarse(&mut fresh, t0)?;
         let sim = (a.rollout_iters > 0).then_some((sim, t0));
         tracing::info!(
@@ -330,14 +369,25 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         );
         sets.push(TrainSet { seq, sim });
     }
-    let bar = ProgressBar::new(a.steps as u64);
+    Ok(sets)
+}
+
+/// Trains, showing each phase's progress and mean recent loss (logged when there is no
+/// terminal to draw a bar on).
+fn train_with_progress(
+    cfg: &TrainingConfig,
+    sets: &mut [TrainSet],
+    validation: &[ValidationSet],
+    output: &std::path::Path,
+) -> anyhow::Result<Summary> {
+    let bar = ProgressBar::new(cfg.steps as u64);
     bar.set_style(
         ProgressStyle::with_template("phase {msg} {bar:30} {pos}/{len} {per_sec} eta {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let mut phase = 1;
     let mut recent = Vec::new();
-    let summary = train(&cfg, &mut sets, &validation, &a.output, |p: &Progress| {
+    let summary = train(cfg, sets, validation, output, |p: &Progress| {
         if p.phase != phase {
             phase = p.phase;
             bar.set_length(p.total as u64);
@@ -362,6 +412,11 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         std::ops::ControlFlow::Continue(())
     })?;
     bar.finish_and_clear();
+    Ok(summary)
+}
+
+/// Logs what training did and, with validation, which network was kept.
+fn log_summary(cfg: &TrainingConfig, summary: &Summary, output: &std::path::Path) {
     let phase1 = match (&cfg.init_from, cfg.steps) {
         (Some(init), 0) => format!("no phase 1 (started from {})", init.display()),
         _ => format!(
@@ -373,7 +428,7 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
     };
     tracing::info!(
         "wrote {}: {phase1}; phase 2 ({} windows) {:.4} → {:.4}; {:.0} s",
-        a.output.display(),
+        output.display(),
         summary.phase2_iters,
         summary.phase2_first_last.0,
         summary.phase2_first_last.1,
@@ -389,10 +444,9 @@ fn corrector(a: CorrectorArgs) -> anyhow::Result<()> {
         };
         tracing::info!(
             "kept {which}: {mm:.3} mm interleaved on the validation sets (all validations in {})",
-            a.output.join(VALIDATION_LOG).display()
+            output.join(VALIDATION_LOG).display()
         );
     }
-    Ok(())
 }
 
 /// The scene a data set was made from (the corrector needs its colliders).
