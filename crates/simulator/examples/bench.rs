@@ -1,11 +1,12 @@
 //! The simulator's benchmark alone, without the rest of clothsr:
 //!
 //! ```text
-//! cargo run --release -p clothsr-sim --example bench -- [SIZES] [STEPS] [fast|converged] [self|noself] [SOLVER]
+//! cargo run --release -p clothsr-sim --example bench -- [SIZES] [STEPS] [fast|converged] [self|noself] [SOLVER] [WARM_UP]
 //! ```
 //!
 //! with SOLVER `auto` (the default), `jacobi`, `two-level:AGGREGATE:REFACTOR_ABOVE` or
-//! `cholesky:REFACTOR_ABOVE`; e.g. `-- 3k,40k 15 fast`; prints each size's time per step and where it went.
+//! `cholesky:REFACTOR_ABOVE`, and WARM_UP the untimed steps first (default: those that bring the
+//! sheet onto the sphere; 0 times its free fall); e.g. `-- 3k,40k 15 fast`; prints each size's time per step and where it went.
 //! `RUST_LOG=clothsr_sim=trace` shows each Newton iteration.
 
 use clothsr_sim::bench::{sheet_on_sphere, time_steps, WARM_UP_STEPS};
@@ -59,7 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             p.collision.self_collision = self_collision;
             p.linear_solver = solver;
         })?;
-        let t = time_steps(&mut sim, WARM_UP_STEPS, steps)?;
+        let warm_up: usize = args.get(5).map_or(Ok(WARM_UP_STEPS), |s| s.parse())?;
+        let t = time_steps(&mut sim, warm_up, steps)?;
         let ms = |s: f64| s * 1e3;
         println!(
             "{:>7} {:>9.2} {:>8.2} {:>8.1} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",

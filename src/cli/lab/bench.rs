@@ -1,6 +1,6 @@
-//! `clothsr lab bench sim`: the simulator's benchmark (a 1 m² sheet dropped 2 cm above a sphere of
-//! radius 0.3 m, dt 1/300 s, at ~3K and ~40K vertices), side by side with Newton 1.8 on the same
-//! scene when `benches/setup-newton.sh` has been run.
+//! `clothsr lab bench sim`: the simulator's benchmark ([`clothsr::sim::bench`]: a 1 m² sheet
+//! dropped 2 cm above a sphere of radius 0.3 m, dt 1/300 s, at ~3K and ~40K vertices), side by
+//! side with Newton 1.8 on the same scene when `benches/setup-newton.sh` has been run.
 
 use std::path::Path;
 use std::process::Command;
@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use clothsr::garment::Fabric;
 use clothsr::io::SceneFiles;
-use clothsr::scene::samples::flat_sheet;
-use clothsr::scene::{Collider, Scene};
+use clothsr::scene::Scene;
+use clothsr::sim::bench::{sheet_on_sphere, time_steps, Timing, WARM_UP_STEPS};
 use clothsr::sim::driver::Simulation;
 use clothsr::sim::step::LinearSolver;
 use nalgebra::Vector3;
@@ -41,6 +41,10 @@ pub struct Args {
     /// Timed steps per size (after 20 warm-up steps that bring the sheet onto the sphere).
     #[arg(long, default_value_t = 30)]
     steps: usize,
+    /// Runs of each case, interleaved; the table gives the median run's time per step (and
+    /// Newton 1.8's median over as many runs).
+    #[arg(long, default_value_t = 1)]
+    runs: usize,
     /// Skip the Newton 1.8 side-by-side run.
     #[arg(long)]
     no_peer: bool,
@@ -111,70 +115,80 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "unknown mode '{m}' (known: converged, fast)"
         );
     }
-    println!(
-        "{:>10} {:>8} {:>8} {:>10} {:>10} {:>10} {:>9}",
-        "mode", "verts", "tris", "ms/step", "newton/st", "cg/newton", "contacts"
-    );
-    let mut ours = Vec::new();
-    for (mode, s) in args
+    let cases: Vec<(&str, f64)> = args
         .modes
         .iter()
         .flat_map(|m| args.sizes.iter().map(move |s| (m.as_str(), s)))
-    {
-        let verts = parse_size(s)?;
-        // 1 m² of pattern holds ≈ 2950 vertices at 20 mm edges, scaling with 1/h².
-        let edge_m = 0.020 * (2950.0 / verts).sqrt();
-        let mut scene = Scene {
-            garments: vec![flat_sheet(
-                "sheet",
-                1.0,
-                1.0,
-                Vector3::new(0.0, 0.32, 0.0),
-                Fabric::preset("cotton").unwrap_or_default(),
-            )],
-            ..Scene::default()
-        };
-        scene
-            .colliders
-            .push(Collider::sphere("sphere", Vector3::zeros(), 0.3, 4));
-        let mut sim = Simulation::new(&scene, edge_m, |p| {
-            p.collision.self_collision = args.self_collision;
-            p.newton_exact = mode == "converged";
-            if let Some(t) = args.cg_tol {
-                p.cg_rel_tol = t;
-            }
-            if let Some(m) = args.cg_max {
-                p.cg_max_iters = m;
-            }
-            if let Some(s) = solver {
-                p.linear_solver = s;
-            }
-        })?;
-        sim.steps_per_frame = 1;
-        for _ in 0..20 {
-            sim.advance_frame(|_| {})?;
+        .map(|(m, s)| Ok((m, parse_size(s)?)))
+        .collect::<anyhow::Result<_>>()?;
+    anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
+    let mut timings: Vec<Vec<Timing>> = vec![Vec::new(); cases.len()];
+    for _ in 0..args.runs {
+        for (k, &(mode, verts)) in cases.iter().enumerate() {
+            let mut sim = sheet_on_sphere(verts, |p| {
+                p.collision.self_collision = args.self_collision;
+                p.newton_exact = mode == "converged";
+                if let Some(t) = args.cg_tol {
+                    p.cg_rel_tol = t;
+                }
+                if let Some(m) = args.cg_max {
+                    p.cg_max_iters = m;
+                }
+                if let Some(s) = solver {
+                    p.linear_solver = s;
+                }
+            })?;
+            timings[k].push(time_steps(&mut sim, WARM_UP_STEPS, args.steps)?);
         }
-        let (mut newton, mut cg, mut contacts) = (0usize, 0usize, 0usize);
-        let t = Instant::now();
-        for _ in 0..args.steps {
-            let f = sim.advance_frame(|_| {})?;
-            newton += f.steps.newton_iters;
-            cg += f.steps.cg_iters;
-            contacts = f.steps.contacts;
-        }
-        let ms = t.elapsed().as_secs_f64() * 1e3 / args.steps as f64;
-        let n = sim.sim.model.num_vertices();
+    }
+    println!(
+        "{:>10} {:>8} {:>8} {:>9} {:>7} {:>7} {:>8} | ms/step: {:>7} {:>7} {:>7} {:>7} {:>7} {:>7}",
+        "mode",
+        "verts",
+        "tris",
+        "ms/step",
+        "newton",
+        "cg/nt",
+        "contacts",
+        "prelude",
+        "detect",
+        "assemble",
+        "solve",
+        "search",
+        "epilog"
+    );
+    let mut ours = Vec::new();
+    for (&(mode, _), runs) in cases.iter().zip(&mut timings) {
+        runs.sort_by(|a, b| a.ms_per_step.total_cmp(&b.ms_per_step));
+        let t = runs[runs.len() / 2];
+        let ms = |s: f64| s * 1e3;
+        let p = &t.phases;
         println!(
-            "{mode:>10} {n:>8} {:>8} {ms:>10.2} {:>10.2} {:>10.1} {contacts:>9}",
-            sim.sim.model.mesh.triangles.len(),
-            newton as f64 / args.steps as f64,
-            cg as f64 / newton.max(1) as f64
+            "{mode:>10} {:>8} {:>8} {:>9.2} {:>7.2} {:>7.1} {:>8} |          {:>7.2} {:>7.2} {:>8.2} {:>7.2} {:>7.2} {:>7.2}",
+            t.vertices,
+            t.triangles,
+            t.ms_per_step,
+            t.newton_per_step,
+            t.cg_per_newton,
+            t.contacts,
+            ms(p.prelude_s),
+            ms(p.detect_s),
+            ms(p.assemble_s),
+            ms(p.solve_s),
+            ms(p.search_s),
+            ms(p.epilogue_s),
         );
-        ours.push((mode, n, ms));
+        ours.push((mode, t.vertices, t.ms_per_step));
     }
     if args.no_peer {
         return Ok(());
     }
+    newton_peer(&args, &ours)
+}
+
+/// Runs Newton 1.8 on the same scene `args.runs` times and prints its median time per step
+/// beside `ours` ((mode, vertices, ms per step) of each case).
+fn newton_peer(args: &Args, ours: &[(&str, usize, f64)]) -> anyhow::Result<()> {
     let root = clothsr::io::python::repo_root();
     let python = root.join("benches/.venv-newton/bin/python");
     let script = root.join("benches/newton_peer.py");
@@ -186,33 +200,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "Newton 1.8 on the same scene (Warp CPU), self-collision {}:",
         if args.self_collision { "on" } else { "off" }
     );
-    let mut peer = Command::new(&python);
-    peer.arg(&script)
-        .arg("--res")
-        .arg(args.sizes.join(","))
-        .arg("--steps")
-        .arg(args.steps.min(10).to_string())
-        .current_dir(Path::new(&root));
-    if args.self_collision {
-        peer.arg("--self-collision");
+    // (solver, vertices) → each run's median ms per step.
+    let mut peer_ms: Vec<(String, f64, Vec<f64>)> = Vec::new();
+    for _ in 0..args.runs {
+        let mut peer = Command::new(&python);
+        peer.arg(&script)
+            .arg("--res")
+            .arg(args.sizes.join(","))
+            .arg("--steps")
+            .arg(args.steps.min(10).to_string())
+            .current_dir(Path::new(&root));
+        if args.self_collision {
+            peer.arg("--self-collision");
+        }
+        let out = peer.output()?;
+        anyhow::ensure!(
+            out.status.success(),
+            "Newton peer failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        for line in String::from_utf8_lossy(&out.stdout).lines() {
+            let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+                continue;
+            };
+            let (Some(solver), Some(verts), Some(ms)) = (
+                v["solver"].as_str(),
+                v["verts"].as_f64(),
+                v["ms_per_step"].as_f64(),
+            ) else {
+                continue;
+            };
+            match peer_ms.iter_mut().find(|p| p.0 == solver && p.1 == verts) {
+                Some(p) => p.2.push(ms),
+                None => peer_ms.push((solver.to_string(), verts, vec![ms])),
+            }
+        }
     }
-    let out = peer.output()?;
-    anyhow::ensure!(
-        out.status.success(),
-        "Newton peer failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
-        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
-            continue;
-        };
-        let (Some(solver), Some(verts), Some(ms)) = (
-            v["solver"].as_str(),
-            v["verts"].as_f64(),
-            v["ms_per_step"].as_f64(),
-        ) else {
-            continue;
-        };
+    for (solver, verts, mut runs) in peer_ms {
+        runs.sort_by(f64::total_cmp);
+        let ms = runs[runs.len() / 2];
         for mode in &args.modes {
             let mine = ours
                 .iter()
