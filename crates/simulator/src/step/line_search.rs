@@ -180,103 +180,23 @@ pub(super) fn limit_pair_closing(step: &mut [Vector3<f64>], pairs: &[ClosingPair
     any
 }
 
-/// How far vertices may move in one Newton iteration: each at most `absolute` (cloth–body
-/// pairs not found stay apart while no vertex moves further than the obstacle margin), and each
-/// at most `relative` away from one shift common to all (cloth–cloth pairs not found stay apart
-/// while their two sides move apart by at most twice that: cloth moving as a whole, as a
-/// falling sheet, closes no gap in itself however far it goes).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct MoveLimit {
-    /// Longest move of any vertex, m.
-    pub(super) absolute: f64,
-    /// Longest move of any vertex relative to the common shift, m (infinite: none).
-    pub(super) relative: f64,
-}
-
-impl MoveLimit {
-    /// The common shift of `dx`: the centre of the box around its vectors (which makes the
-    /// largest deviation from it least, within a factor √3), shortened to leave every vertex
-    /// `relative` of room within `absolute`.
-    fn shift(&self, dx: &[Vector3<f64>]) -> Vector3<f64> {
-        if !self.relative.is_finite() || dx.is_empty() {
-            return Vector3::zeros();
-        }
-        let (lo, hi) = dx
-            .par_iter()
-            .fold(
-                || {
-                    (
-                        Vector3::repeat(f64::INFINITY),
-                        Vector3::repeat(f64::NEG_INFINITY),
-                    )
-                },
-                |(lo, hi), d| (lo.inf(d), hi.sup(d)),
-            )
-            .reduce(
-                || {
-                    (
-                        Vector3::repeat(f64::INFINITY),
-                        Vector3::repeat(f64::NEG_INFINITY),
-                    )
-                },
-                |(a, b), (c, d)| (a.inf(&c), b.sup(&d)),
-            );
-        let centre = (lo + hi) * 0.5;
-        let room = (self.absolute - self.relative).max(0.0);
-        let l = centre.norm();
-        if l > room {
-            centre * (room / l)
-        } else {
-            centre
-        }
-    }
-
-    /// `d` within both limits about `shift` ([`Self::shift`]); and whether it was shortened.
-    fn clip(&self, d: &Vector3<f64>, shift: &Vector3<f64>) -> (Vector3<f64>, bool) {
-        let mut out = *d;
-        let mut clipped = false;
-        if self.relative.is_finite() {
-            let dev = d - shift;
-            let l = dev.norm();
-            if l > self.relative {
-                out = shift + dev * (self.relative / l);
-                clipped = true;
-            }
-        }
-        let l = out.norm();
-        if l > self.absolute {
-            out *= self.absolute / l;
-            clipped = true;
-        }
-        (out, clipped)
-    }
-}
-
-/// The largest uniform scale of `dx` within the move limits and the pairs' closing limits (at
+/// The largest uniform scale of `dx` within the move limit and the pairs' closing limits (at
 /// most 1).
-pub(super) fn uniform_limit(dx: &[Vector3<f64>], limit: &MoveLimit, pairs: &[ClosingPair]) -> f64 {
-    let shift = limit.shift(dx);
-    let relative = if limit.relative.is_finite() {
-        dx.iter()
-            .map(|d| limit.relative / (d - shift).norm().max(f64::MIN_POSITIVE))
-            .fold(1.0, f64::min)
-    } else {
-        1.0
-    };
+pub(super) fn uniform_limit(dx: &[Vector3<f64>], limit: f64, pairs: &[ClosingPair]) -> f64 {
     let per_vertex = dx
         .iter()
-        .map(|d| limit.absolute / d.norm().max(f64::MIN_POSITIVE))
-        .fold(relative, f64::min);
+        .map(|d| limit / d.norm().max(f64::MIN_POSITIVE))
+        .fold(1.0, f64::min);
     pairs
         .iter()
         .map(|p| p.allowed / p.closing(dx, true).max(f64::MIN_POSITIVE))
         .fold(per_vertex, f64::min)
 }
 
-/// `dx` within the move limits and the pairs' closing limits; and whether it was shortened.
+/// `dx` within the move limit and the pairs' closing limits; and whether it was shortened.
 pub(super) fn limit_step(
     dx: &[Vector3<f64>],
-    limit: &MoveLimit,
+    limit: f64,
     pairs: &[ClosingPair],
 ) -> (Vec<Vector3<f64>>, bool) {
     let (mut step, clipped) = clip_to_limit(dx, limit);
@@ -316,11 +236,20 @@ pub(super) fn slid_over_crease(
 }
 
 /// `dx` with each vertex's move shortened to `limit`; and whether any was.
-fn clip_to_limit(dx: &[Vector3<f64>], limit: &MoveLimit) -> (Vec<Vector3<f64>>, bool) {
-    let shift = limit.shift(dx);
-    let clipped: Vec<(Vector3<f64>, bool)> = dx.par_iter().map(|d| limit.clip(d, &shift)).collect();
-    let any = clipped.iter().any(|c| c.1);
-    (clipped.into_iter().map(|c| c.0).collect(), any)
+fn clip_to_limit(dx: &[Vector3<f64>], limit: f64) -> (Vec<Vector3<f64>>, bool) {
+    let step: Vec<Vector3<f64>> = dx
+        .par_iter()
+        .map(|d| {
+            let l = d.norm();
+            if l > limit {
+                d * (limit / l)
+            } else {
+                *d
+            }
+        })
+        .collect();
+    let clipped = dx.iter().any(|d| d.norm() > limit);
+    (step, clipped)
 }
 
 /// A step the line search accepted.
@@ -350,7 +279,7 @@ impl Simulator {
         dx: &[Vector3<f64>],
         energy: f64,
     ) -> Option<(Vec<Vector3<f64>>, f64)> {
-        let (step, _) = limit_step(dx, &potential.inc.max_move, pairs);
+        let (step, _) = limit_step(dx, potential.inc.max_move, pairs);
         let step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
         let trial: Vec<Vector3<f64>> = x.iter().zip(&step).map(|(a, d)| a + d).collect();
         let e = potential.at(self, &trial);
@@ -374,12 +303,12 @@ impl Simulator {
         // (a fold pushed out of a body) no longer shrink everybody else's step, which
         // stalled whole garments at α ≈ 0.1 for every iteration. The clipped direction is
         // still a descent direction when its slope is negative; otherwise scale uniformly.
-        let (mut step, clipped) = limit_step(dx, &max_move, pairs);
+        let (mut step, clipped) = limit_step(dx, max_move, pairs);
         let mut step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
         if clipped && step_slope >= 0.0 {
             // Uniform scaling by the tightest ratio keeps every vertex and pair within its
             // limit.
-            let s = uniform_limit(dx, &max_move, pairs);
+            let s = uniform_limit(dx, max_move, pairs);
             step.iter_mut().zip(dx).for_each(|(o, d)| *o = d * s);
             step_slope = slope * s;
         }

@@ -4,7 +4,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use super::damping::DampingRows;
-use super::line_search::{limit_pair_closing, slid_over_crease, Accepted, ClosingPair, MoveLimit};
+use super::line_search::{limit_pair_closing, slid_over_crease, Accepted, ClosingPair};
 use super::state::BodyMotion;
 use super::{ColliderFrame, SimState, Simulator, StepStats, MAX_OBSTACLE_MARGIN_M};
 use crate::collide::{Contact, StepStart};
@@ -66,8 +66,8 @@ pub(super) struct Increment<'a> {
     colliders: &'a [ColliderFrame<'a>],
     /// Where the colliders are during the whole step.
     motion: &'a BodyMotion<'a, 'a>,
-    /// How far vertices move in one Newton iteration at most.
-    pub(super) max_move: MoveLimit,
+    /// Most any vertex moves in one Newton iteration, m.
+    pub(super) max_move: f64,
     /// How far cloth may approach a body in one iteration ([`ClosingPair::all`]).
     body_narrow: Option<f64>,
     /// Whether the step may no longer be halved.
@@ -255,39 +255,35 @@ impl Simulator {
         }
     }
 
-    /// How far vertices move in one Newton iteration at most, and how far cloth may approach a
+    /// The most any vertex moves in one Newton iteration, and how far cloth may approach a
     /// body in one ([`ClosingPair::all`]).
-    fn move_limits(&self) -> Result<(MoveLimit, Option<f64>)> {
+    fn move_limits(&self) -> Result<(f64, Option<f64>)> {
         // Per Newton iteration no vertex moves further than keeps its contact set valid.
         // Contacts are found within d̂ plus a margin, so pairs that were not found are at least
         // that far apart: cloth–body pairs stay beyond d̂ while each vertex moves less than the
-        // obstacle margin (the body holds still within an iteration), cloth–cloth pairs while
-        // their two sides move apart by at most the cloth margin: each vertex at most half of
-        // it away from a shift common to all ([`MoveLimit`]). Pairs that were found close by
-        // at most 0.8 of their gap, and cloth approaches a body by at most max(d/2, ½ d̂) but
-        // slides freely ([`ClosingPair`]).
+        // margin (the body holds still within an iteration), cloth–cloth pairs while each of
+        // their two sides moves at most half of it. Pairs that were found close by at most 0.8
+        // of their gap, and cloth approaches a body by at most max(d/2, ½ d̂) but slides
+        // freely ([`ClosingPair`]).
+        let max_move = if self.params.collision.self_collision {
+            0.5 * self.self_margin_m()
+        } else {
+            self.obstacle_margin_m.max(self.params.detection_margin_m)
+        };
         let cap = self.params.move_cap_m;
         if cap.is_nan() || cap <= 0.0 {
             return Err(Error::Invalid(format!(
                 "move_cap_m must be positive (f64::INFINITY for no cap), not {cap}"
             )));
         }
-        let absolute = self
-            .obstacle_margin_m
-            .max(self.params.detection_margin_m)
-            .min(cap);
-        let relative = if self.params.collision.self_collision {
-            (0.5 * self.self_margin_m()).min(absolute)
-        } else {
-            f64::INFINITY
-        };
+        let max_move = max_move.min(cap);
         // With self-collision off every vertex moves up to the whole obstacle margin, as ever.
         let body_narrow = self
             .params
             .collision
             .self_collision
             .then_some((0.5 * self.params.detection_margin_m).min(cap));
-        Ok((MoveLimit { absolute, relative }, body_narrow))
+        Ok((max_move, body_narrow))
     }
 
     /// Newton's iterations from `x`: the positions they end at, their energy and the contact
