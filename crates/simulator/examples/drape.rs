@@ -2,7 +2,7 @@
 //! scaled to a 25 cm rabbit), timed per simulated second, its last positions written out:
 //!
 //! ```text
-//! cargo run --release -p clothsr-sim --example drape -- EDGE_MM SECONDS fast|converged OUT.bin [CG_TOL]
+//! cargo run --release -p clothsr-sim --example drape -- EDGE_MM SECONDS fast|converged OUT.bin [CG_TOL|-] [self|noself] [SHIFT_MM]
 //! cargo run --release -p clothsr-sim --example drape -- compare A.bin B.bin
 //! ```
 //!
@@ -17,7 +17,8 @@ use nalgebra::Vector3;
 
 type Error = Box<dyn std::error::Error>;
 
-fn bunny_scene() -> Result<clothsr_geometry::scene::Scene, Error> {
+/// The scene, the sheet shifted by `shift_m` along x (another start of the same drape).
+fn bunny_scene(shift_m: f64) -> Result<clothsr_geometry::scene::Scene, Error> {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../tests/data/colliders/bunny.obj"
@@ -41,7 +42,7 @@ fn bunny_scene() -> Result<clothsr_geometry::scene::Scene, Error> {
         "sheet",
         0.5,
         0.5,
-        Vector3::new(centre.x, top + 0.02, centre.z),
+        Vector3::new(centre.x + shift_m, top + 0.02, centre.z),
         fabric,
     );
     let mut scene = clothsr_geometry::scene::Scene {
@@ -81,9 +82,15 @@ fn main() -> Result<(), Error> {
     let seconds: f64 = args.get(1).map_or(Ok(1.0), |s| s.parse())?;
     let converged = args.get(2).is_some_and(|m| m == "converged");
     let out = args.get(3).cloned().unwrap_or_else(|| "drape.bin".into());
-    let cg_tol: Option<f64> = args.get(4).map(|s| s.parse()).transpose()?;
-    let mut sim = Simulation::new(&bunny_scene()?, edge_mm * 1e-3, |p| {
+    let cg_tol: Option<f64> = match args.get(4).map(String::as_str) {
+        None | Some("-") => None,
+        Some(s) => Some(s.parse()?),
+    };
+    let self_collision = !args.get(5).is_some_and(|s| s == "noself");
+    let shift_m: f64 = args.get(6).map_or(Ok(0.0), |s| s.parse::<f64>())? * 1e-3;
+    let mut sim = Simulation::new(&bunny_scene(shift_m)?, edge_mm * 1e-3, |p| {
         p.newton_exact = converged;
+        p.collision.self_collision = self_collision;
         if let Some(t) = cg_tol {
             p.cg_rel_tol = t;
         }
