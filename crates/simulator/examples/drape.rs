@@ -86,7 +86,7 @@ fn main() -> Result<(), Error> {
         None | Some("-") => None,
         Some(s) => Some(s.parse()?),
     };
-    let self_collision = !args.get(5).is_some_and(|s| s == "noself");
+    let self_collision = args.get(5).is_none_or(|s| s != "noself");
     let shift_m: f64 = args.get(6).map_or(Ok(0.0), |s| s.parse::<f64>())? * 1e-3;
     let mut sim = Simulation::new(&bunny_scene(shift_m)?, edge_mm * 1e-3, |p| {
         p.newton_exact = converged;

@@ -89,14 +89,21 @@ pub struct CollisionDetector {
     pub(super) cloth_tris: CachedBvh,
     pub(super) cloth_edges: CachedBvh,
     depth: Vec<f64>,
-    /// Per collider, its sharp edges at the last call ([`CollisionDetector::crease_within`]).
+    /// Per collider, its edges where the surface turns at the last call
+    /// ([`CollisionDetector::crease_within`]).
     creases: Vec<Creases>,
 }
 
-/// A collider's sharp edges (creases) as found by one call, with a hierarchy over them.
+/// Angle between the faces of a collider edge beyond which the surface counts as turning there
+/// ([`CollisionDetector::crease_within`]): a fine tessellation of a smooth body (the bench's
+/// sphere turns by about 4° an edge) stays below it.
+pub const SURFACE_TURN_DEG: f64 = 10.0;
+
+/// A collider's edges where its surface turns, as found by one call, with a hierarchy over
+/// them.
 #[derive(Debug, Clone, Default)]
 struct Creases {
-    /// End points of each sharp edge, m.
+    /// End points of each such edge, m.
     segments: Vec<[Vector3<f64>; 2]>,
     /// Over the segments' boxes; `None` when there are none.
     bvh: Option<Bvh>,
@@ -129,8 +136,8 @@ impl CollisionDetector {
         }
     }
 
-    /// Whether a sharp edge of collider `collider` ([`SHARP_EDGE_DEG`], where the body's
-    /// surface turns), as the last call found them, passes within `r` of `p`.
+    /// Whether an edge of collider `collider` where its surface turns by more than
+    /// [`SURFACE_TURN_DEG`], as the last call found them, passes within `r` of `p`.
     pub fn crease_within(&self, collider: usize, p: &Vector3<f64>, r: f64) -> bool {
         let Some(c) = self.creases.get(collider) else {
             return false;
@@ -335,8 +342,8 @@ impl CollisionDetector {
         }
         let mut contacts: Vec<Contact> = per_vertex.into_iter().flat_map(|p| p.1).collect();
 
-        // Sharp collider edges (creases): remembered for [`Self::crease_within`], and
-        // against cloth edges.
+        // Collider edges where the surface turns: remembered for [`Self::crease_within`];
+        // the sharp ones (creases) against cloth edges.
         self.creases.resize_with(colliders.len(), Creases::default);
         let mut cloth_edge_bvh: Option<Bvh> = None;
         for (k, (cache, (pts, tris))) in self.colliders.iter_mut().zip(colliders).enumerate() {
@@ -347,41 +354,44 @@ impl CollisionDetector {
                 continue;
             }
             let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
+            let turns = sharp_edges_of(pts, tris, faces, SURFACE_TURN_DEG);
+            if !turns.is_empty() {
+                creases.segments.extend(
+                    turns
+                        .iter()
+                        .map(|e| [pts[e[0] as usize], pts[e[1] as usize]]),
+                );
+                creases.bvh = Some(Bvh::build(&edge_boxes(pts, &turns, 0.0)));
+            }
+            if !(self.crease_contacts && dhat > 0.0 && !cloth_edges.is_empty()) {
+                continue;
+            }
             let sharp = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
             if sharp.is_empty() {
                 continue;
             }
             let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * obstacle_dhat));
-            creases.segments.extend(
-                sharp
-                    .iter()
-                    .map(|e| [pts[e[0] as usize], pts[e[1] as usize]]),
-            );
-            if self.crease_contacts && dhat > 0.0 && !cloth_edges.is_empty() {
-                let planes = crease_planes(pts, tris, faces, &sharp);
-                let cloth_edge_bvh = cloth_edge_bvh.get_or_insert_with(|| {
-                    Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * obstacle_dhat))
-                });
-                contacts.extend(cloth_edge_bvh.pairs_with_filter_map(&body, |i, j| {
-                    let a = cloth_edges[i as usize];
-                    let e = sharp[j as usize];
-                    let (p0, p1) = (&pts[e[0] as usize], &pts[e[1] as usize]);
-                    let (c0, c1) = (&cloth_x[a[0] as usize], &cloth_x[a[1] as usize]);
-                    let q = segment_segment(c0, c1, p0, p1);
-                    // One-sided: an edge whose closest point lies inside the body has crossed
-                    // the crease (a 20 mm edge passes a table's edge within a step) and is left
-                    // to its vertices' contacts; the unsigned repulsion would hold it there
-                    // from inside, dragging the cloth towards the crease.
-                    let crossed =
-                        planes[j as usize].is_some_and(|p| p.behind(&(c0 + (c1 - c0) * q.s)));
-                    (q.dist < obstacle_dhat && !crossed).then_some(Contact::EdgeObstacle {
-                        a,
-                        edge: [*p0, *p1],
-                        ends: [k as u32, e[0], e[1]],
-                    })
-                }));
-            }
-            creases.bvh = Some(body);
+            let planes = crease_planes(pts, tris, faces, &sharp);
+            let cloth_edge_bvh = cloth_edge_bvh.get_or_insert_with(|| {
+                Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * obstacle_dhat))
+            });
+            contacts.extend(cloth_edge_bvh.pairs_with_filter_map(&body, |i, j| {
+                let a = cloth_edges[i as usize];
+                let e = sharp[j as usize];
+                let (p0, p1) = (&pts[e[0] as usize], &pts[e[1] as usize]);
+                let (c0, c1) = (&cloth_x[a[0] as usize], &cloth_x[a[1] as usize]);
+                let q = segment_segment(c0, c1, p0, p1);
+                // One-sided: an edge whose closest point lies inside the body has crossed
+                // the crease (a 20 mm edge passes a table's edge within a step) and is left
+                // to its vertices' contacts; the unsigned repulsion would hold it there
+                // from inside, dragging the cloth towards the crease.
+                let crossed = planes[j as usize].is_some_and(|p| p.behind(&(c0 + (c1 - c0) * q.s)));
+                (q.dist < obstacle_dhat && !crossed).then_some(Contact::EdgeObstacle {
+                    a,
+                    edge: [*p0, *p1],
+                    ends: [k as u32, e[0], e[1]],
+                })
+            }));
         }
 
         self.find_self_contacts_into(cloth_x, cloth_tris, cloth_edges, params, &mut contacts);

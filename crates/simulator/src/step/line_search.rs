@@ -204,17 +204,18 @@ pub(super) fn limit_step(
     (step, clipped || paired)
 }
 
-/// In fast mode without self-collision, how far a vertex touching a body may move near one of
-/// the body's creases in the one Newton iteration that ends a step, m; a step whose iteration
+/// In fast mode without self-collision, how far a vertex touching a body may move near an edge
+/// where the body's surface turns in the one Newton iteration that ends a step, m; a step whose iteration
 /// moved one further iterates on ([`SimParams::newton_exact`]).
 pub const FAST_CONTACT_MOVE_M: f64 = 1e-3;
 
 /// Whether a cloth vertex touching a body moved more than [`FAST_CONTACT_MOVE_M`] (by
-/// `alpha · step` from `x`) where the body's surface turns within its reach: a crease of that
-/// body within the move plus `reach` of where it started, or a crease contact of its own. One
-/// linearised step of cloth sliding over a sharp edge takes the repulsion of the wrong side of
-/// the edge, and the next step's repulsion launches the cloth; on a smooth body (or a flat face
-/// away from its edges) the linearisation holds over the whole move.
+/// `alpha · step` from `x`) where the body's surface turns within its reach: an edge of that
+/// body turning by more than [`SURFACE_TURN_DEG`](crate::collide::SURFACE_TURN_DEG) within
+/// the move plus `reach` of where it started, or a crease contact of its own. One linearised
+/// step of cloth sliding over a sharp edge takes the repulsion of the wrong side of the edge,
+/// and the next step's repulsion launches the cloth; where the body is flat across the move
+/// (a finely tessellated smooth body, a face away from its edges) the linearisation holds.
 pub(super) fn slid_over_crease(
     detector: &CollisionDetector,
     contacts: &[Contact],

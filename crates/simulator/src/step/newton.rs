@@ -376,7 +376,7 @@ impl Simulator {
             // Fast mode stops after the first full, unclipped step. Without self-collision,
             // where a vertex may move the whole obstacle margin (up to 10 mm) an iteration,
             // not when a vertex touching a body slid further than FAST_CONTACT_MOVE_M within
-            // reach of one of the body's creases ([`slid_over_crease`]: a sheet dropped onto a
+            // reach of an edge where the body turns ([`slid_over_crease`]: a sheet dropped onto a
             // table left its edge fast, with more energy than it had). With self-collision the
             // moves are capped at half the cloth margin and the same drop keeps its energy.
             let clipped = accepted.clipped || alpha < 1.0;
