@@ -108,6 +108,9 @@ def parse_res(token: str) -> int:
     token = token.strip().lower()
     if token in RES_ALIASES:
         return RES_ALIASES[token]
+    if token.endswith("k"):
+        # An approximate vertex count, as clothsr's bench takes it: the nearest square grid.
+        return max(2, round((float(token[:-1]) * 1000) ** 0.5))
     n = int(token)
     if n < 2:
         raise ValueError(f"resolution must be at least 2 vertices per side, got {n}")
@@ -295,7 +298,7 @@ def sanity(rec: dict) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--res", default="3k,40k", help="comma list: 3k (55x55), 40k (201x201) or N (NxN verts)")
+    ap.add_argument("--res", default="3k,40k", help="comma list: 3k (55x55), 40k (201x201), another Nk (the nearest square grid) or N (NxN verts)")
     ap.add_argument("--steps", type=int, default=30, help="timed steps per case (default 30)")
     ap.add_argument("--warmup", type=int, default=5, help="untimed warm-up steps incl. JIT (default 5)")
     ap.add_argument("--solvers", default="style3d,xpbd", help="comma list of style3d, xpbd, vbd")
