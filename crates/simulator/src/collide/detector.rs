@@ -78,6 +78,9 @@ pub struct CollisionDetector {
     /// top and one down its side passes through the table's corner in M_int, where the crease
     /// contact holds the coarse sheet out from the side.
     pub crease_contacts: bool,
+    /// Keep each collider's edges where its surface turns, for
+    /// [`CollisionDetector::crease_within`] (default false: only fast mode asks).
+    pub surface_turns: bool,
     colliders: Vec<CachedBvh>,
     clearance: Vec<Clearance>,
     clearance_x: Vec<Vector3<f64>>,
@@ -123,6 +126,7 @@ impl CollisionDetector {
             obstacle_extra_m: 0.0,
             skip_clear_vertices: true,
             crease_contacts: true,
+            surface_turns: false,
             colliders: Vec::new(),
             clearance: Vec::new(),
             clearance_x: Vec::new(),
@@ -137,7 +141,8 @@ impl CollisionDetector {
     }
 
     /// Whether an edge of collider `collider` where its surface turns by more than
-    /// [`SURFACE_TURN_DEG`], as the last call found them, passes within `r` of `p`.
+    /// [`SURFACE_TURN_DEG`], as the last call found them, passes within `r` of `p` (false
+    /// unless [`Self::surface_turns`] is set).
     pub fn crease_within(&self, collider: usize, p: &Vector3<f64>, r: f64) -> bool {
         let Some(c) = self.creases.get(collider) else {
             return false;
@@ -354,7 +359,11 @@ impl CollisionDetector {
                 continue;
             }
             let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
-            let turns = sharp_edges_of(pts, tris, faces, SURFACE_TURN_DEG);
+            let turns = if self.surface_turns {
+                sharp_edges_of(pts, tris, faces, SURFACE_TURN_DEG)
+            } else {
+                Vec::new()
+            };
             if !turns.is_empty() {
                 creases.segments.extend(
                     turns

@@ -96,6 +96,9 @@ impl Simulator {
         let self_margin = self.self_margin_m();
         params.dhat_m += self_margin;
         self.detector.obstacle_extra_m = (self.obstacle_margin_m - self_margin).max(0.0);
+        // Only fast mode without self-collision asks where bodies turn ([`slid_over_crease`]).
+        self.detector.surface_turns =
+            !self.params.newton_exact && !self.params.collision.self_collision;
         let mut contacts = self.detector.find_contacts_since(
             x,
             since,
