@@ -9,7 +9,9 @@
 //! sheet onto the sphere; 0 times its free fall); e.g. `-- 3k,40k 15 fast`; prints each size's time per step and where it went.
 //! `RUST_LOG=clothsr_sim=trace` shows each Newton iteration.
 
-use clothsr_sim::bench::{sheet_on_sphere, time_steps, WARM_UP_STEPS};
+use clothsr_sim::bench::{
+    parse_vertices, phase_columns, phase_header, sheet_on_sphere, time_steps, WARM_UP_STEPS,
+};
 use clothsr_sim::LinearSolver;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -38,23 +40,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
     };
     println!(
-        "{:>7} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8}",
+        "{:>7} {:>9} {:>8} {:>8}{}",
         "verts",
         "ms/step",
         "newton",
         "cg/nt",
-        "prelude",
-        "detect",
-        "assemble",
-        "solve",
-        "search",
-        "epilog"
+        phase_header()
     );
     for s in sizes.split(',') {
-        let verts: f64 = match s.strip_suffix('k') {
-            Some(k) => k.parse::<f64>()? * 1e3,
-            None => s.parse()?,
-        };
+        let verts = parse_vertices(s).ok_or_else(|| format!("bad size '{s}' (e.g. 3k, 40000)"))?;
         let mut sim = sheet_on_sphere(verts, |p| {
             p.newton_exact = converged;
             p.collision.self_collision = self_collision;
@@ -62,19 +56,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })?;
         let warm_up: usize = args.get(5).map_or(Ok(WARM_UP_STEPS), |s| s.parse())?;
         let t = time_steps(&mut sim, warm_up, steps)?;
-        let ms = |s: f64| s * 1e3;
         println!(
-            "{:>7} {:>9.2} {:>8.2} {:>8.1} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>8.2}",
+            "{:>7} {:>9.2} {:>8.2} {:>8.1}{}",
             t.vertices,
             t.ms_per_step,
             t.newton_per_step,
             t.cg_per_newton,
-            ms(t.phases.prelude_s),
-            ms(t.phases.detect_s),
-            ms(t.phases.assemble_s),
-            ms(t.phases.solve_s),
-            ms(t.phases.search_s),
-            ms(t.phases.epilogue_s),
+            phase_columns(&t.phases)
         );
     }
     Ok(())

@@ -23,6 +23,17 @@ pub fn edge_for_vertices(verts: f64) -> f64 {
     0.020 * (2950.0 / verts).sqrt()
 }
 
+/// An approximate vertex count as the bench takes it: `3k`, `40k` or a plain number (`None`
+/// when it is neither).
+pub fn parse_vertices(s: &str) -> Option<f64> {
+    let t = s.trim().to_ascii_lowercase();
+    let (num, mult) = match t.strip_suffix('k') {
+        Some(n) => (n, 1e3),
+        None => (t.as_str(), 1.0),
+    };
+    num.parse::<f64>().ok().map(|n| n * mult)
+}
+
 /// The bench's scene with a sheet of about `verts` vertices, settings tuned by `tune`.
 pub fn sheet_on_sphere(verts: f64, tune: impl FnOnce(&mut SimParams)) -> Result<Simulation> {
     let mut scene = Scene {
@@ -62,6 +73,19 @@ pub struct Timing {
     pub phases: PhaseTimes,
 }
 
+/// The phase columns' header, as [`phase_columns`] fills them.
+pub fn phase_header() -> String {
+    PhaseTimes::NAMES.map(|n| format!(" {n:>8}")).concat()
+}
+
+/// `phases`' times in ms, one column each under [`phase_header`].
+pub fn phase_columns(phases: &PhaseTimes) -> String {
+    phases
+        .seconds()
+        .map(|s| format!(" {:>8.2}", s * 1e3))
+        .concat()
+}
+
 /// Runs `warm_up` steps of `sim`, then times `steps` more.
 pub fn time_steps(sim: &mut Simulation, warm_up: usize, steps: usize) -> Result<Timing> {
     for _ in 0..warm_up {
@@ -78,17 +102,6 @@ pub fn time_steps(sim: &mut Simulation, warm_up: usize, steps: usize) -> Result<
         phases.add(&f.steps.times);
     }
     let per = 1.0 / steps.max(1) as f64;
-    let scale = |p: &mut f64| *p *= per;
-    for p in [
-        &mut phases.prelude_s,
-        &mut phases.detect_s,
-        &mut phases.assemble_s,
-        &mut phases.solve_s,
-        &mut phases.search_s,
-        &mut phases.epilogue_s,
-    ] {
-        scale(p);
-    }
     Ok(Timing {
         vertices: sim.sim.model.num_vertices(),
         triangles: sim.sim.model.mesh.triangles.len(),
@@ -96,6 +109,6 @@ pub fn time_steps(sim: &mut Simulation, warm_up: usize, steps: usize) -> Result<
         newton_per_step: newton as f64 * per,
         cg_per_newton: cg as f64 / newton.max(1) as f64,
         contacts,
-        phases,
+        phases: phases.scaled(per),
     })
 }

@@ -9,7 +9,9 @@ use std::time::Instant;
 use clothsr::garment::Fabric;
 use clothsr::io::SceneFiles;
 use clothsr::scene::Scene;
-use clothsr::sim::bench::{sheet_on_sphere, time_steps, Timing, WARM_UP_STEPS};
+use clothsr::sim::bench::{
+    parse_vertices, phase_columns, phase_header, sheet_on_sphere, time_steps, Timing, WARM_UP_STEPS,
+};
 use clothsr::sim::driver::Simulation;
 use clothsr::sim::step::LinearSolver;
 use nalgebra::Vector3;
@@ -76,15 +78,7 @@ pub struct Args {
 }
 
 fn parse_size(s: &str) -> anyhow::Result<f64> {
-    let t = s.trim().to_ascii_lowercase();
-    let (num, mult) = match t.strip_suffix('k') {
-        Some(n) => (n, 1e3),
-        None => (t.as_str(), 1.0),
-    };
-    Ok(num
-        .parse::<f64>()
-        .map_err(|_| anyhow::anyhow!("bad size '{s}' (e.g. 3k, 40000)"))?
-        * mult)
+    parse_vertices(s).ok_or_else(|| anyhow::anyhow!("bad size '{s}' (e.g. 3k, 40000)"))
 }
 
 /// Runs `bench`.
@@ -142,7 +136,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     println!(
-        "{:>10} {:>8} {:>8} {:>9} {:>7} {:>7} {:>8} | ms/step: {:>7} {:>7} {:>7} {:>7} {:>7} {:>7}",
+        "{:>10} {:>8} {:>8} {:>9} {:>7} {:>7} {:>8} | ms/step:{}",
         "mode",
         "verts",
         "tris",
@@ -150,33 +144,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "newton",
         "cg/nt",
         "contacts",
-        "prelude",
-        "detect",
-        "assemble",
-        "solve",
-        "search",
-        "epilog"
+        phase_header()
     );
     let mut ours = Vec::new();
     for (&(mode, _), runs) in cases.iter().zip(&mut timings) {
         runs.sort_by(|a, b| a.ms_per_step.total_cmp(&b.ms_per_step));
         let t = runs[runs.len() / 2];
-        let ms = |s: f64| s * 1e3;
-        let p = &t.phases;
         println!(
-            "{mode:>10} {:>8} {:>8} {:>9.2} {:>7.2} {:>7.1} {:>8} |          {:>7.2} {:>7.2} {:>8.2} {:>7.2} {:>7.2} {:>7.2}",
+            "{mode:>10} {:>8} {:>8} {:>9.2} {:>7.2} {:>7.1} {:>8} |         {}",
             t.vertices,
             t.triangles,
             t.ms_per_step,
             t.newton_per_step,
             t.cg_per_newton,
             t.contacts,
-            ms(p.prelude_s),
-            ms(p.detect_s),
-            ms(p.assemble_s),
-            ms(p.solve_s),
-            ms(p.search_s),
-            ms(p.epilogue_s),
+            phase_columns(&t.phases)
         );
         ours.push((mode, t.vertices, t.ms_per_step));
     }

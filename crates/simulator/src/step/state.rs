@@ -86,14 +86,39 @@ pub struct PhaseTimes {
 }
 
 impl PhaseTimes {
+    /// The phases' names, in the order of [`Self::seconds`].
+    pub const NAMES: [&'static str; 6] =
+        ["prelude", "detect", "assemble", "solve", "search", "epilog"];
+
+    /// Each phase's time, s, in the order of [`Self::NAMES`].
+    pub fn seconds(&self) -> [f64; 6] {
+        [
+            self.prelude_s,
+            self.detect_s,
+            self.assemble_s,
+            self.solve_s,
+            self.search_s,
+            self.epilogue_s,
+        ]
+    }
+
     /// The sum of the phases, s.
     pub fn total_s(&self) -> f64 {
-        self.prelude_s
-            + self.detect_s
-            + self.assemble_s
-            + self.solve_s
-            + self.search_s
-            + self.epilogue_s
+        self.seconds().iter().sum()
+    }
+
+    /// These times multiplied by `k`.
+    pub fn scaled(&self, k: f64) -> PhaseTimes {
+        let [prelude_s, detect_s, assemble_s, solve_s, search_s, epilogue_s] =
+            self.seconds().map(|t| t * k);
+        PhaseTimes {
+            prelude_s,
+            detect_s,
+            assemble_s,
+            solve_s,
+            search_s,
+            epilogue_s,
+        }
     }
 
     /// Adds `other`'s times to these.
