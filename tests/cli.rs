@@ -886,6 +886,33 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(err.contains("not a corrector model directory"), "{err}");
 }
 
+/// Without `--models`, `run` takes the generic models: `$CLOTHSR_MODELS` first.
+#[test]
+fn run_without_models_takes_the_folder_clothsr_models_names() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("fine.usda");
+    let models = root.join("samples/models/three_balls");
+    let run = clothsr()
+        .env("CLOTHSR_MODELS", &models)
+        .arg("run")
+        .arg(root.join("samples/sheet_three_balls.usda"))
+        .args(["--frames", "1", "-o"])
+        .arg(&out)
+        .output()
+        .expect("run");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let text = std::fs::read_to_string(&out).expect("output");
+    assert!(
+        text.contains(&format!("with models {}", models.display())),
+        "the output does not name the models it was made with"
+    );
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).expect("mkdir");
     for e in std::fs::read_dir(from).expect("read_dir") {

@@ -266,6 +266,7 @@ fn geometry_channels_measure_stretch_normal_and_curvature_of_the_coarse_map() {
         0.01,
         0.001,
         Some(g.view()),
+        None,
     )
     .expect("masked pixels");
     assert_eq!(input.len(), (7 + GEOMETRY_CHANNELS) * p * p);
@@ -275,7 +276,8 @@ fn geometry_channels_measure_stretch_normal_and_curvature_of_the_coarse_map() {
     );
     assert_eq!(input[15 * p * p + 5 * p + 5], 0.0);
     assert_eq!(input[15 * p * p], 1.0);
-    let without = patch_input(plane.view(), None, mask.view(), 0.01, 0.001, None).expect("masked");
+    let without =
+        patch_input(plane.view(), None, mask.view(), 0.01, 0.001, None, None).expect("masked");
     assert_eq!(without.len(), 4 * p * p);
 }
 
@@ -552,8 +554,8 @@ fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
 
     // Moving M_int by 1 m moves the fine mesh by 1 m and changes nothing else.
     let shift = Vector3::new(1.0, -0.5, 2.0);
-    let mut a = SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh).expect("sr");
-    let mut b = SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh).expect("sr");
+    let mut a = SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh, &[]).expect("sr");
+    let mut b = SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh, &[]).expect("sr");
     for int in seq.int_x.iter().take(2) {
         let moved: Vec<Vector3<f64>> = int.iter().map(|p| p + shift).collect();
         let fa = a.frame(int).expect("frame");
@@ -566,4 +568,50 @@ fn super_resolution_runs_on_a_sequence_and_ignores_where_the_garment_is() {
             .fold(0.0, f64::max);
         assert!(worst < 1e-5, "moved output differs by {worst} m");
     }
+}
+
+#[test]
+fn a_fabric_conditioned_network_reads_the_data_sets_fabric_and_answers_to_it() {
+    let seqs = vec![IsrSequence::load(&dataset(), None, FINE_M, 0.5, 1.0).expect("load")];
+    let conditions = seqs[0]
+        .conditions
+        .clone()
+        .expect("the data set records its fabric");
+    let silk = clothsr::garment::Fabric::preset("silk").expect("silk");
+    assert!(!conditions.is_empty());
+    for c in &conditions {
+        assert_eq!(c.bending_n_m, silk.bending_n_m);
+        // 40 mm over 10 mm, as meshed.
+        assert!((c.ratio - 4.0).abs() < 0.6, "{}", c.ratio);
+    }
+    let mut cfg = tiny_config().with_steps(30);
+    cfg.model = tiny_model().with_condition_input(Some(true));
+    assert_eq!(cfg.model.in_channels(), tiny_model().in_channels() + 4);
+    let out = tempfile::tempdir().expect("tmp");
+    let dir = out.path().join("isr");
+    train(&cfg, &seqs, &dir, |_| ControlFlow::Continue(())).expect("train");
+    let isr = Isr::load(&dir).expect("load");
+    let seq = &seqs[0];
+    // The network needs one condition per panel.
+    assert!(SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh, &[]).is_err());
+    let run = |c: &[clothsr::msr::Condition]| {
+        let mut sr =
+            SuperResolver::new(&isr, &seq.coarse_mesh, &seq.fine_mesh, c).expect("resolver");
+        sr.frame(&seq.int_x[3]).expect("frame")
+    };
+    let stiffer: Vec<_> = conditions
+        .iter()
+        .map(|c| clothsr::msr::Condition {
+            bending_n_m: c.bending_n_m * 100.0,
+            ..*c
+        })
+        .collect();
+    let (a, b) = (run(&conditions), run(&stiffer));
+    let moved = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max);
+    assert!(moved > 1e-7, "the fabric does not reach the network");
+    assert_eq!(a, run(&conditions));
 }

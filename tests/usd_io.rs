@@ -300,3 +300,50 @@ fn the_bridge_registers_the_schema_without_the_environment() {
     assert!(registered, "ClothPanel is unknown to USD's schema registry");
     assert_eq!(std::env::var_os("PXR_PLUGINPATH_NAME"), before);
 }
+
+#[test]
+fn a_catalogue_shot_writes_and_reads_back_with_its_moving_collider_and_mixed_fabric() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_clothsr"))
+        .args([
+            "lab",
+            "scenes",
+            "strip-silk_cotton-cube-swing",
+            "--frames",
+            "12",
+            "-o",
+        ])
+        .arg(dir.path())
+        .status()
+        .expect("run clothsr");
+    assert!(status.success());
+    let path = dir.path().join("strip-silk_cotton-cube-swing.usda");
+    assert_valid(&path);
+    let fabric = Fabric::preset("cotton").expect("cotton");
+    let read = Scene::load(&path, &fabric).expect("load");
+    let made = clothsr::scene::catalogue::scene("strip-silk_cotton-cube-swing", 12).expect("shot");
+    let (silk, cotton) = (
+        Fabric::preset("silk").expect("silk"),
+        Fabric::preset("cotton").expect("cotton"),
+    );
+    let g = &read.garments[0];
+    assert_eq!(g.fabric.name, "silk_cotton");
+    let mid = (silk.bending_n_m * cotton.bending_n_m).sqrt();
+    assert!((g.fabric.bending_n_m - mid).abs() < 1e-12 * mid.max(1.0));
+    let cube = read
+        .colliders
+        .iter()
+        .find(|c| c.name.contains("cube"))
+        .expect("the cube");
+    let want = &made.colliders[0];
+    assert_eq!(cube.frames.len(), want.frames.len());
+    assert!(cube.is_animated());
+    for (a, b) in cube.frames.iter().zip(&want.frames) {
+        for (p, q) in a.iter().zip(b) {
+            assert!((p - q).norm() < 1e-6, "{p} vs {q}");
+        }
+    }
+    for (a, b) in cube.times_s.iter().zip(&want.times_s) {
+        assert!((a - b).abs() < 1e-9);
+    }
+}

@@ -1,4 +1,4 @@
-//! `clothsr run SCENE… (-o OUT.usdc | --out-dir DIR) --models DIR`: the whole pipeline (see
+//! `clothsr run SCENE… (-o OUT.usdc | --out-dir DIR) [--models DIR]`: the whole pipeline (see
 //! [`clothsr::pipeline`]) — coarse simulation, corrector, mesh super-resolution — writing the
 //! fine garments as time-sampled points frame by frame, with an optional Rerun recording. A
 //! killed run continues from its last published frame when called again with the same settings.
@@ -45,8 +45,13 @@ pub struct Args {
     restart: bool,
     /// Models folder: `isr/` (required), `corrector/` and `coarse.json` (optional), and
     /// `models.json`, the held-out figures each path through them was validated with.
+    /// Default: the generic models ($CLOTHSR_MODELS, else `models/generic` beside the
+    /// executable or in the source tree it was built from).
     #[arg(long, help_heading = "Models")]
-    models: PathBuf,
+    models: Option<PathBuf>,
+    /// The models folder in use: `--models`, or the generic models found.
+    #[arg(skip)]
+    models_dir: PathBuf,
     /// Whether the corrector runs: `auto` takes the path the folder's models.json validated
     /// as better (the corrector where a folder without one has it), `on` or `off` forces it.
     #[arg(
@@ -217,7 +222,11 @@ pub fn run_lab(args: LabArgs) -> anyhow::Result<()> {
     run_with(args.user, args.knobs)
 }
 
-fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
+fn run_with(mut args: Args, knobs: Knobs) -> anyhow::Result<()> {
+    args.models_dir = match &args.models {
+        Some(m) => m.clone(),
+        None => clothsr::pipeline::models::find_generic_models().map_err(anyhow::Error::msg)?,
+    };
     anyhow::ensure!(
         knobs.coarse_mm.is_finite() && knobs.coarse_mm > 0.0,
         "--coarse-mm must be positive"
@@ -239,16 +248,16 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
     {
         clothsr::io::usd::check_extension(extra)?;
     }
-    let isr_dir = args.models.join("isr");
+    let isr_dir = args.models_dir.join("isr");
     anyhow::ensure!(
         isr_dir.join("config.json").exists(),
         "{}: no ISR model here (expected {}/config.json; train one with 'clothsr lab train isr')",
-        args.models.display(),
+        args.models_dir.display(),
         isr_dir.display()
     );
     let isr = Isr::load(&isr_dir)?;
-    let corrector_dir = args.models.join("corrector");
-    let (path, why) = choose_path(&args.models, args.corrector)?;
+    let corrector_dir = args.models_dir.join("corrector");
+    let (path, why) = choose_path(&args.models_dir, args.corrector)?;
     tracing::info!("path: {path} ({why})");
     let corrector = (path == ModelPath::Corrector).then_some(corrector_dir.as_path());
     let given = Options {
@@ -261,12 +270,12 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
         push_out: !knobs.no_push_out,
     };
     // Without a corrector, the models folder's own coarse calibration, under the options.
-    let (opts, cal) = options_for_run(&args.models, corrector, given)?;
+    let (opts, cal) = options_for_run(&args.models_dir, corrector, given)?;
     if cal.is_some() {
         tracing::info!(
             "coarse model: {} ({} under the options given)",
             opts.coarse,
-            args.models.join(CoarseCalibration::FILE).display()
+            args.models_dir.join(CoarseCalibration::FILE).display()
         );
     }
     let multi = MultiProgress::new();
@@ -414,7 +423,7 @@ fn outputs(
         "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
          colliders={:?} avatar={:?} fabric={}",
         super::absolute(&job.scene)?.display(),
-        super::absolute(&args.models)?.display(),
+        super::absolute(&args.models_dir)?.display(),
         has_corrector,
         args.inputs.collider,
         args.inputs.avatar,
@@ -428,7 +437,7 @@ fn outputs(
         doc: format!(
             "clothsr run {} with models {} (corrector {})",
             job.scene.display(),
-            args.models.display(),
+            args.models_dir.display(),
             if has_corrector { "on" } else { "off" }
         ),
         resume: !args.restart,

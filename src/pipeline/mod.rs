@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::garment::Fabric;
 use crate::mesh::ClothMesh;
 use crate::msr::inference::InitMaps;
-use crate::msr::{Isr, SuperResolver};
+use crate::msr::{condition, Isr, SuperResolver};
 use crate::scene::Scene;
 use crate::sim::collide::{push_out, Collider, PushOut};
 use crate::sim::driver::Simulation;
@@ -216,7 +216,10 @@ impl<'a> Pipeline<'a> {
             }
             None => opts.coarse.apply(&mut coarse)?,
         }
-        let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine)?;
+        let fabrics: Vec<_> = model.parts.iter().map(|p| p.fabric.clone()).collect();
+        let conditions =
+            condition::panel_conditions(&fine, &fabrics, coarse.edge_m, fine_sim.edge_m)?;
+        let sr = SuperResolver::new(isr, &coarse.sim.model.mesh, &fine, &conditions)?;
         Ok(Pipeline {
             coarse,
             fine,

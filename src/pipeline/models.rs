@@ -8,7 +8,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
@@ -156,6 +156,46 @@ impl ModelsManifest {
     pub fn best(&self) -> ModelPath {
         ModelPath::from_key(&self.best).unwrap_or(ModelPath::CoarseAlone)
     }
+}
+
+/// Environment variable naming the generic models folder.
+pub const MODELS_ENV: &str = "CLOTHSR_MODELS";
+
+/// Where the generic models may be, in order: `$CLOTHSR_MODELS`; `models/generic` beside the
+/// executable, or in `../share/clothsr/` from it (an installed tree); the source tree the
+/// program was built from.
+pub fn generic_models_candidates() -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    if let Some(dir) = std::env::var_os(MODELS_ENV) {
+        out.push(PathBuf::from(dir));
+    }
+    if let Some(exe_dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(Path::to_path_buf))
+    {
+        out.push(exe_dir.join("models/generic"));
+        out.push(exe_dir.join("../share/clothsr/models/generic"));
+    }
+    out.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("models/generic"));
+    out
+}
+
+/// The first of [`generic_models_candidates`] that holds an ISR model; otherwise an error
+/// listing where it looked.
+pub fn find_generic_models() -> std::result::Result<PathBuf, String> {
+    let candidates = generic_models_candidates();
+    candidates
+        .iter()
+        .find(|d| d.join("isr").join("config.json").is_file())
+        .cloned()
+        .ok_or_else(|| {
+            let looked: Vec<String> = candidates.iter().map(|d| d.display().to_string()).collect();
+            format!(
+                "no --models given and no generic models found (looked in {}); pass --models DIR \
+                 or set {MODELS_ENV}",
+                looked.join(", ")
+            )
+        })
 }
 
 /// Whether the folder `models` has a corrector.

@@ -8,6 +8,7 @@ mod dataset;
 mod fork;
 mod rollout;
 mod samples;
+mod scenes;
 mod sr;
 mod train;
 
@@ -41,6 +42,8 @@ pub enum Command {
     Bench(bench::Args),
     /// Regenerate the sample scenes shipped in samples/.
     Samples(samples::Args),
+    /// Write the procedural shots the generic models are trained and measured on (USD).
+    Scenes(scenes::Args),
 }
 
 /// Runs a research command.
@@ -55,5 +58,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Run(a) => super::run::run_lab(a),
         Command::Bench(a) => bench::run(a),
         Command::Samples(a) => samples::run(a),
+        Command::Scenes(a) => scenes::run(a),
     }
 }

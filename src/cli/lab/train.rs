@@ -65,6 +65,10 @@ pub struct IsrArgs {
     /// channels beyond the paper; measured to lower the error, see the sample models' README).
     #[arg(long)]
     no_geometry_input: bool,
+    /// Condition the network on each panel's fabric (bending, density, stretch) and the
+    /// coarse/fine ratio: four more input channels, read from the data sets' manifests.
+    #[arg(long)]
+    condition: bool,
     /// Feature channels.
     #[arg(long, default_value_t = 32)]
     embed_dim: usize,
@@ -478,7 +482,8 @@ fn isr(a: IsrArgs) -> anyhow::Result<()> {
         .with_window(a.window)
         .with_init_input(!a.no_init)
         .with_geometry_input(Some(!a.no_geometry_input))
-        .with_unshuffle(Some(a.unshuffle));
+        .with_unshuffle(Some(a.unshuffle))
+        .with_condition_input(Some(a.condition));
     model
         .check()
         .map_err(|e| anyhow::anyhow!("ISR network: {e}"))?;

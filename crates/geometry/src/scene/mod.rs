@@ -6,6 +6,7 @@ use nalgebra::Vector3;
 use crate::garment::{Fabric, Garment};
 use crate::mesh::ClothMesh;
 
+pub mod catalogue;
 pub mod samples;
 
 /// Default simulation time step (the paper's 1/300 s).

@@ -27,6 +27,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::garment::Fabric;
 use crate::mesh::ClothMesh;
 use crate::scene::Scene;
 use crate::scene_files::SceneFiles;
@@ -163,6 +164,10 @@ pub struct Manifest {
     pub panels: Vec<String>,
     /// Fabric preset names per garment part.
     pub fabrics: Vec<String>,
+    /// The fabric of each garment part, with its parameters (what the ISR is conditioned on);
+    /// empty in data sets made before it was recorded.
+    #[serde(default)]
+    pub fabric_values: Vec<Fabric>,
     /// Whether garments were sewn and settled before frame 0 (at the coarse resolution, then
     /// on the fine mesh from the coarse result: [`crate::sim::driver::Simulation::dress_from`]).
     pub dressed: bool,
@@ -421,6 +426,13 @@ fn new_manifest(
             .iter()
             .map(|p| p.fabric.name.clone())
             .collect(),
+        fabric_values: fine
+            .sim
+            .model
+            .parts
+            .iter()
+            .map(|p| p.fabric.clone())
+            .collect(),
         dressed: opts.dress && !fm.seam_pairs.is_empty(),
         git_revision: env!("CLOTHSR_GIT_REVISION").to_string(),
         fast: opts.fast,
@@ -445,6 +457,12 @@ fn resume_point(dir: &Path, manifest: &mut Manifest) -> Result<usize> {
         frames_requested: old.frames_requested,
         git_revision: old.git_revision.clone(),
         fork: old.fork.clone(),
+        // Recorded since; a run made before still resumes.
+        fabric_values: if old.fabric_values.is_empty() {
+            Vec::new()
+        } else {
+            manifest.fabric_values.clone()
+        },
         ..manifest.clone()
     };
     if same != old {

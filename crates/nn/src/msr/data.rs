@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 use ndarray::{Array2, Array3};
 
+use super::condition::{data_conditions, Condition};
 use super::coordmap::{Boundary, PanelGrid, Rasteriser};
 use crate::data::{
     read_coarse_mesh, read_fine_mesh, read_frame_positions, read_manifest, Manifest,
@@ -41,6 +42,9 @@ pub struct IsrSequence {
     pub fine_mesh: ClothMesh,
     /// Panel grids at the fine pixel size (made from the fine mesh).
     pub grids: Vec<PanelGrid>,
+    /// Each panel's fabric and resolution ratio; `None` when the data set does not say its
+    /// fabric's parameters ([`super::condition::data_conditions`]).
+    pub conditions: Option<Vec<Condition>>,
     /// First frame loaded (1-based).
     pub first_frame: usize,
     /// Maps of every loaded frame, in order.
@@ -85,6 +89,7 @@ impl IsrSequence {
             ));
         }
         let grids = PanelGrid::for_mesh(&fine_mesh, pixel_m, Boundary::Extended)?;
+        let conditions = data_conditions(&manifest, &fine_mesh).ok();
         let coarse_r = Rasteriser::new(&coarse_mesh, &grids)?.with_phong(phong_alpha);
         let fine_r = Rasteriser::new(&fine_mesh, &grids)?;
         let (nc, nf) = (coarse_mesh.num_vertices(), fine_mesh.num_vertices());
@@ -95,6 +100,7 @@ impl IsrSequence {
             coarse_mesh,
             fine_mesh,
             grids,
+            conditions,
             frames: Vec::new(),
             int_x: Vec::new(),
             fine_x: Vec::new(),

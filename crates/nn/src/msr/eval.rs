@@ -127,7 +127,8 @@ pub fn evaluate(
     teacher_forcing: bool,
     mut progress: impl FnMut(usize, usize) -> ControlFlow<()>,
 ) -> Result<SequenceErrors> {
-    let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh)?;
+    let conditions = seq.conditions.clone().unwrap_or_default();
+    let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh, &conditions)?;
     let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
     let mut out = SequenceErrors::default();
     // The last two frames' SR and Phong meshes, for the jitter.

@@ -11,6 +11,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Vector3;
 use ndarray::{s, Array3, Array4, ArrayView2, ArrayView3};
 
+use super::condition::{Condition, CONDITION_CHANNELS};
 use super::coordmap::{Boundary, PanelGrid, Rasteriser, Readout};
 use super::model::IsrNet;
 use super::patches::{blend_patches, split_patches, PatchLayout, DEFAULT_OVERLAP, DEFAULT_SIGMA};
@@ -127,8 +128,9 @@ pub fn geometry_channels(
 
 /// The network's input for one patch, normalised: channels coarse shape (3), initialisation
 /// detail (3, when `init` is given), the coarse map's geometry (9, when `geometry` is given:
-/// the patch of [`geometry_channels`] of the whole map) and mask (1), each `P × P`, zero off
-/// the mask. The coarse
+/// the patch of [`geometry_channels`] of the whole map), the condition (4, when `condition`
+/// is given: [`Condition::channels`], constant) and mask (1), each `P × P`, zero off the
+/// mask. The coarse
 /// positions are centred on the mean of the patch's masked pixels and divided by `scale_m`;
 /// the initialisation enters as its difference to the coarse patch divided by `detail_m`.
 /// `None` when no pixel is masked.
@@ -139,6 +141,7 @@ pub fn patch_input(
     scale_m: f32,
     detail_m: f32,
     geometry: Option<ArrayView3<f32>>,
+    condition: Option<&[f32; CONDITION_CHANNELS]>,
 ) -> Option<Vec<f32>> {
     let count = mask.iter().filter(|&&m| m).count();
     if count == 0 {
@@ -156,8 +159,10 @@ pub fn patch_input(
         *centre = (sum / count as f64) as f32;
     }
     let (_, p, q) = coarse.dim();
-    let channels =
-        4 + 3 * usize::from(init.is_some()) + GEOMETRY_CHANNELS * usize::from(geometry.is_some());
+    let channels = 4
+        + 3 * usize::from(init.is_some())
+        + GEOMETRY_CHANNELS * usize::from(geometry.is_some())
+        + CONDITION_CHANNELS * usize::from(condition.is_some());
     let mut out = Vec::with_capacity(channels * p * q);
     for (c, centre) in centre.iter().enumerate() {
         for ((i, j), &m) in mask.indexed_iter() {
@@ -183,6 +188,9 @@ pub fn patch_input(
         for ((_, i, j), &v) in g.indexed_iter() {
             out.push(if mask[(i, j)] { v } else { 0.0 });
         }
+    }
+    for &v in condition.into_iter().flatten() {
+        out.extend(mask.iter().map(|&m| if m { v } else { 0.0 }));
     }
     out.extend(mask.iter().map(|&m| if m { 1.0 } else { 0.0 }));
     Some(out)
@@ -265,6 +273,8 @@ pub struct SuperResolver<'a> {
     rasteriser: Rasteriser,
     readout: Readout,
     layouts: Vec<PatchLayout>,
+    /// Each grid's condition channels (when the network takes them).
+    conditions: Vec<[f32; CONDITION_CHANNELS]>,
     /// The previous frame's fine maps (the initialisation), metres.
     prev: Option<Vec<Array3<f32>>>,
     /// The previous frame's coarse maps, metres.
@@ -287,9 +297,33 @@ pub struct InitMaps {
 
 impl<'a> SuperResolver<'a> {
     /// Prepares super-resolving `coarse` (the M_int mesh) into `fine` (same panels and material
-    /// space), on grids at the model's pixel size.
-    pub fn new(isr: &'a Isr, coarse: &ClothMesh, fine: &ClothMesh) -> Result<SuperResolver<'a>> {
+    /// space), on grids at the model's pixel size, each panel with its condition in
+    /// `conditions` (one per panel of `fine`; read only by networks that take it).
+    pub fn new(
+        isr: &'a Isr,
+        coarse: &ClothMesh,
+        fine: &ClothMesh,
+        conditions: &[Condition],
+    ) -> Result<SuperResolver<'a>> {
         let grids = PanelGrid::for_mesh(fine, isr.cfg.pixel_m, Boundary::Extended)?;
+        let conditions = if isr.cfg.model.condition() {
+            if conditions.len() != fine.panel_names.len() {
+                return Err(Error::Invalid(format!(
+                    "the ISR network takes each panel's fabric: {} conditions for {} panels",
+                    conditions.len(),
+                    fine.panel_names.len()
+                )));
+            }
+            for c in conditions {
+                c.check()?;
+            }
+            grids
+                .iter()
+                .map(|g| conditions[g.panel as usize].channels())
+                .collect()
+        } else {
+            Vec::new()
+        };
         let rasteriser = Rasteriser::new(coarse, &grids)?.with_phong(isr.cfg.phong_alpha);
         let readout = Readout::new(fine, &grids)?;
         let layouts = grids
@@ -305,6 +339,7 @@ impl<'a> SuperResolver<'a> {
             rasteriser,
             readout,
             layouts,
+            conditions,
             prev: None,
             prev_coarse: None,
             // Patches per call: small batches stay in cache, and 8 was the fastest of the
@@ -413,6 +448,7 @@ impl<'a> SuperResolver<'a> {
                     scale,
                     detail,
                     geometry_k,
+                    self.conditions.get(g),
                 ) {
                     inputs.extend(input);
                     index.push((g, k));

@@ -3,6 +3,7 @@
 //! ([`model`]), its training ([`training`]), per-frame inference ([`inference`]) and evaluation
 //! against fine simulations ([`eval`]).
 
+pub mod condition;
 pub mod coordmap;
 pub mod data;
 pub mod eval;
@@ -12,6 +13,7 @@ pub mod model;
 pub mod patches;
 pub mod training;
 
+pub use condition::Condition;
 pub use coordmap::{CoordMap, Normalisation, PanelGrid};
 pub use inference::{Isr, SuperResolver};
 pub use patches::{blend_patches, split_patches, PatchLayout};

@@ -67,14 +67,18 @@ pub struct IsrConfig {
     /// cost falls by s² and a window covers s² times the cloth; the fine cloth's folds are
     /// 10–20 mm wide, several 2.5 mm pixels. `None` (models saved before it existed) is 1.
     pub unshuffle: Option<usize>,
+    /// The panel's fabric and the coarse/fine ratio are inputs ([`super::condition`]: four
+    /// constant channels). `None` (models saved before it existed) is off.
+    pub condition_input: Option<bool>,
 }
 
 impl IsrConfig {
     /// Input channels: coarse (3), previous fine (3, with `init_input`), coarse geometry (9,
-    /// with `geometry_input`), mask (1).
+    /// with `geometry_input`), condition (4, with `condition_input`), mask (1).
     pub fn in_channels(&self) -> usize {
         4 + 3 * usize::from(self.init_input)
             + super::inference::GEOMETRY_CHANNELS * usize::from(self.geometry())
+            + super::condition::CONDITION_CHANNELS * usize::from(self.condition())
     }
 
     /// The pixel-unshuffle factor (1: none).
@@ -90,6 +94,11 @@ impl IsrConfig {
     /// Whether the coarse map's geometry is an input.
     pub fn geometry(&self) -> bool {
         self.geometry_input.unwrap_or(false)
+    }
+
+    /// Whether the fabric and the coarse/fine ratio are inputs.
+    pub fn condition(&self) -> bool {
+        self.condition_input.unwrap_or(false)
     }
 
     /// Checks the sizes; `Err` names the problem.

@@ -42,6 +42,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use super::condition::{Condition, CONDITION_CHANNELS};
 use super::data::IsrSequence;
 use super::inference::{
     geometry_channels, patch_input, CONFIG_FILE, CURVATURE_STENCIL_PX, WEIGHTS_FILE,
@@ -198,6 +199,8 @@ struct RawPatch {
     coarse: Array3<f32>,
     /// The coarse map's geometry channels (with `geometry_input`).
     geometry: Option<Array3<f32>>,
+    /// The panel's condition channels (with `condition_input`).
+    condition: Option<[f32; CONDITION_CHANNELS]>,
     init: Array3<f32>,
     fine: Array3<f32>,
     mask: Array2<bool>,
@@ -246,6 +249,12 @@ fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
                 s.dir.display(),
                 s.grids[0].pixel_m,
                 cfg.pixel_m
+            ));
+        }
+        if cfg.model.condition() && s.conditions.is_none() {
+            return bad(format!(
+                "{} does not record its fabric's parameters, which the network takes",
+                s.dir.display()
             ));
         }
     }
@@ -607,6 +616,16 @@ struct Location {
 }
 
 impl Location {
+    /// The condition channels of this location's panel (checked present by [`check`]).
+    fn condition(&self, seqs: &[IsrSequence]) -> [f32; CONDITION_CHANNELS] {
+        let seq = &seqs[self.seq];
+        let panel = seq.grids[self.grid].panel as usize;
+        seq.conditions
+            .as_ref()
+            .and_then(|c| c.get(panel))
+            .map_or([0.0; CONDITION_CHANNELS], Condition::channels)
+    }
+
     /// The `(3, P, P)` crop of `maps` (one frame's maps of this location's sequence).
     fn crop(&self, maps: &[Array3<f32>], p: usize) -> Array3<f32> {
         let (r0, c0) = (self.origin.0 as isize, self.origin.1 as isize);
@@ -746,6 +765,7 @@ fn training_batch(
             .model
             .geometry()
             .then(|| l.geometry(seqs, &seqs[l.seq].frames[frame].coarse, p, pixel_m)),
+        condition: cfg.model.condition().then(|| l.condition(seqs)),
         init,
         fine: l.crop(&seqs[l.seq].frames[frame].fine, p),
         mask: m.clone(),
@@ -812,6 +832,7 @@ fn batch_tensors(cfg: &IsrTrainingConfig, raws: &[RawPatch], device: &Device) ->
             scale,
             detail,
             geometry,
+            r.condition.as_ref(),
         ) {
             Some(input) => {
                 inputs.extend(input);
