@@ -29,7 +29,8 @@ pub const FABRICS: [&str; 7] = [
 /// Colliders: a sphere of radius 0.15 m, three balls of 0.07 m, a table edge, a cube turned
 /// 45° about the vertical, a horizontal bar of radius 4 cm.
 pub const COLLIDERS: [&str; 5] = ["sphere", "balls", "table", "cube", "bar"];
-/// Motions: none; sliding sideways ±6 cm every 2 s; spinning about the vertical at 120°/s;
+/// Motions: none; sliding sideways ±6 cm every 2 s; spinning at 60°/s about the vertical
+/// through the garment's centre;
 /// rising 8 cm over the first second; swinging ±20° about a horizontal axis every 1.6 s.
 pub const MOTIONS: [&str; 5] = ["still", "slide", "spin", "rise", "swing"];
 
@@ -274,12 +275,13 @@ fn animate(body: Collider, motion: &str, duration_s: f64) -> Option<Collider> {
             let x = 0.06 * (std::f64::consts::TAU * t / 2.0).sin();
             (Rotation3::identity(), Vector3::new(x, 0.0, 0.0))
         }),
-        "spin" => Box::new(|t: f64| {
-            let a = 120f64.to_radians() * t;
-            (
-                Rotation3::from_axis_angle(&Vector3::y_axis(), a),
-                Vector3::zeros(),
-            )
+        // About the vertical through the garment's centre, not the body's: a table turned
+        // about its own middle would sweep its edge out from under the cloth.
+        "spin" => Box::new(move |t: f64| {
+            let r = Rotation3::from_axis_angle(&Vector3::y_axis(), 60f64.to_radians() * t);
+            let centre = Vector3::new(0.0, pivot.y, 0.0);
+            // Turning about `centre` instead of the pivot the caller applies.
+            (r, (centre - pivot) - r * (centre - pivot))
         }),
         "rise" => Box::new(|t: f64| {
             let s = t.clamp(0.0, 1.0);
@@ -376,6 +378,23 @@ mod tests {
                 assert!(c.frames.iter().any(|f| (f[0] - rest[0]).norm() > 0.01));
             }
         }
+    }
+
+    #[test]
+    fn spinning_turns_about_the_garments_vertical() {
+        let c = animate(collider_named("table").expect("table"), "spin", 2.0).expect("spin");
+        let radius = |p: &Vector3<f32>| (p.x * p.x + p.z * p.z).sqrt();
+        for (k, p) in c.frames[0].iter().enumerate() {
+            for f in &c.frames {
+                assert!((radius(&f[k]) - radius(p)).abs() < 1e-5);
+                assert!((f[k].y - p.y).abs() < 1e-6);
+            }
+        }
+        // A quarter turn in 1.5 s at 60°/s.
+        let q = &c.frames[45][0];
+        let p = &c.frames[0][0];
+        let turned = (p.x * q.x + p.z * q.z) / (radius(p) * radius(q));
+        assert!(turned.abs() < 1e-4, "{turned}");
     }
 
     #[test]
