@@ -37,7 +37,7 @@ pub enum Command {
     Sr(sr::Args),
     /// The whole pipeline with every research setting (coarse model, variations, extra
     /// outputs).
-    Run(super::run::LabArgs),
+    Run(Box<super::run::LabArgs>),
     /// Benchmarks (the simulator side by side with Newton 1.8; the pipeline's stages).
     Bench(bench::Args),
     /// Regenerate the sample scenes shipped in samples/.
@@ -55,7 +55,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Rollout(a) => rollout::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Sr(a) => sr::run(a),
-        Command::Run(a) => super::run::run_lab(a),
+        Command::Run(a) => super::run::run_lab(*a),
         Command::Bench(a) => bench::run(a),
         Command::Samples(a) => samples::run(a),
         Command::Scenes(a) => scenes::run(a),

@@ -263,13 +263,16 @@ fn rigid(c: &Collider, f: impl Fn(Vector3<f64>) -> Vector3<f64>) -> Collider {
     Collider::fixed(&c.name, points, c.triangles.clone())
 }
 
+/// A rigid motion at one time: turn about the body's pivot, then move.
+type Pose = (Rotation3<f64>, Vector3<f64>);
+
 /// `body` moving by `motion` for `duration_s` (one frame of the shot's rate per sample).
 fn animate(body: Collider, motion: &str, duration_s: f64) -> Option<Collider> {
     let pivot = {
         let pts = &body.frames[0];
         pts.iter().map(|p| p.cast::<f64>()).sum::<Vector3<f64>>() / pts.len().max(1) as f64
     };
-    let pose: Box<dyn Fn(f64) -> (Rotation3<f64>, Vector3<f64>)> = match motion {
+    let pose: Box<dyn Fn(f64) -> Pose> = match motion {
         "still" => return Some(body),
         "slide" => Box::new(|t: f64| {
             let x = 0.06 * (std::f64::consts::TAU * t / 2.0).sin();
