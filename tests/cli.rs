@@ -944,7 +944,7 @@ fn help_lists_the_users_commands_and_the_lab_holds_the_research_tools() {
     let top = help(&[]);
     assert_eq!(
         commands(&top),
-        ["run", "eval", "inspect", "convert", "mesh", "simulate", "lab", "help"],
+        ["run", "fit", "eval", "inspect", "convert", "mesh", "simulate", "lab", "help"],
         "{top}"
     );
     let lab = help(&["lab"]);

@@ -2,6 +2,7 @@
 
 mod convert;
 mod eval;
+mod fit;
 mod inspect;
 mod lab;
 mod mesh;
@@ -31,6 +32,9 @@ enum Command {
     /// The whole pipeline on a scene: coarse simulation, corrector, mesh super-resolution,
     /// fine garments to time-sampled USD.
     Run(run::Args),
+    /// The best models for one garment and shot: simulations of variations of it, the coarse
+    /// model calibrated, the ISR network fine-tuned, a held-out report.
+    Fit(fit::Args),
     /// Errors of a run's fine meshes (and baselines) against a fine simulation: table, CSV,
     /// plot over time, Rerun heat map.
     Eval(eval::Args),
@@ -65,6 +69,7 @@ pub fn run() -> anyhow::Result<i32> {
         .init();
     match cli.command {
         Command::Run(a) => run::run(a),
+        Command::Fit(a) => fit::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Convert(a) => convert::run(a),

@@ -23,6 +23,7 @@ use crate::sim::driver::Simulation;
 use crate::sim::step::SimState;
 
 pub mod calibrate;
+pub mod fit;
 pub mod models;
 mod run;
 pub use crate::sim::coarse::{crease_label, CoarseCalibration};

@@ -118,6 +118,9 @@ pub struct IsrTrainingConfig {
     /// Random seed.
     #[config(default = 7)]
     pub seed: u64,
+    /// Start from the weights of this trained model (a directory with the same network)
+    /// instead of random ones: fine-tuning. `None`: from scratch.
+    pub fine_tune_from: Option<String>,
 }
 
 /// Progress, reported after each optimiser step.
@@ -284,14 +287,18 @@ pub fn train(
             .load(dir.join("optim.bpk"))
             .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
         tracing::info!("resuming at step {}", position.done);
+    } else if let Some(from) = &cfg.fine_tune_from {
+        net = start_from(net, &cfg.model, Path::new(from))?;
     }
     let mut log = LossLog::open(out, resuming)?;
-    let mut rng = StdRng::seed_from_u64(cfg.seed ^ (position.done as u64) << 20);
     let t0 = Instant::now();
     let mut losses = Vec::new();
     let mut stopped = false;
     while position.done < cfg.steps {
         let step = position.done;
+        // Each step's draws depend on the step alone: a run resumed from any checkpoint
+        // trains exactly as one that never stopped.
+        let mut rng = StdRng::seed_from_u64(cfg.seed ^ ((step as u64) << 20));
         let lr =
             cfg.lr_start * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
         let unroll = if cfg.model.init_input && cfg.unroll_max > 0 {
@@ -364,6 +371,7 @@ fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
             let mut c = c.clone();
             c.model.geometry_input = Some(c.model.geometry());
             c.model.unshuffle = Some(c.model.unshuffle_factor());
+            c.model.condition_input = Some(c.model.condition());
             c
         };
         if settled(&old) != settled(cfg) {
@@ -384,6 +392,27 @@ fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
         write_json(&config_path, cfg)?;
     }
     Ok((position, resuming))
+}
+
+/// `net` with the weights of the trained model in `dir`, whose network must be `model`.
+fn start_from(net: IsrNet, model: &IsrConfig, dir: &Path) -> Result<IsrNet> {
+    let path = dir.join(CONFIG_FILE);
+    let theirs =
+        IsrTrainingConfig::load(&path).map_err(|e| Error::bad_input(&path, e.to_string()))?;
+    let settled = |m: &IsrConfig| {
+        let mut m = m.clone();
+        m.geometry_input = Some(m.geometry());
+        m.unshuffle = Some(m.unshuffle_factor());
+        m.condition_input = Some(m.condition());
+        m
+    };
+    if settled(&theirs.model) != settled(model) {
+        return Err(Error::bad_input(
+            &path,
+            "its network differs from the one to fine-tune; it cannot be the start",
+        ));
+    }
+    crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))
 }
 
 /// One optimiser step's losses, as logged.

@@ -1,0 +1,585 @@
+//! `clothsr fit`: the best models for one garment and shot.
+//!
+//! A fit first writes a deterministic plan ([`Plan`], `plan.json`): the variations of the shot
+//! to simulate (the shot as given, turned, moved and started later in its motion), each a
+//! data set task, then the tasks that need them: the coarse model calibrated on the training
+//! variations, the ISR network trained on them (fine-tuned from the generic one where it
+//! fits), and the held-out measurement written to `report.md`. Tasks are independent units
+//! (what a cluster fans out); each one done is recorded in `tasks/`, so a fit killed at any
+//! point and run again goes on where it stopped, with the same result.
+
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+use super::calibrate::{best, score, CalibrationSet, Grid, Scored};
+use crate::data::{generate, Options, SceneSource, Variation};
+use crate::error::{Error, Result};
+use crate::eval::FrameMetrics;
+use crate::msr::data::IsrSequence;
+use crate::msr::eval::evaluate;
+use crate::msr::model::IsrConfig;
+use crate::msr::training::{train, IsrTrainingConfig};
+use crate::msr::Isr;
+
+/// Version of `plan.json`.
+pub const PLAN_VERSION: u32 = 1;
+/// The plan's file in a fit's folder.
+pub const PLAN_FILE: &str = "plan.json";
+
+/// How much a fit simulates and trains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Quality {
+    /// Two training variations and one held out, 30 frames each: about an hour on 2 cores
+    /// for a small garment.
+    Preview,
+    /// Five training variations and two held out, 90 frames each: overnight.
+    Final,
+}
+
+impl FromStr for Quality {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "preview" => Ok(Quality::Preview),
+            "final" => Ok(Quality::Final),
+            _ => Err(format!("quality '{s}': expected preview or final")),
+        }
+    }
+}
+
+/// Whether a variation trains or measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    /// Trained and calibrated on.
+    Train,
+    /// Only measured on.
+    HeldOut,
+}
+
+/// One variation of the shot and the data set made of it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlannedVariation {
+    /// Its name, also its data set's folder under `data/`.
+    pub id: String,
+    /// Training or held out.
+    pub role: Role,
+    /// How the shot is varied.
+    pub variation: Variation,
+}
+
+/// What a task does.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum TaskKind {
+    /// The fine and coarse simulation of one variation (`data/<variation>`).
+    Dataset {
+        /// The variation's id.
+        variation: String,
+    },
+    /// The coarse model calibrated over the training data sets (`coarse.json`).
+    Calibrate,
+    /// The ISR network trained on the training data sets (`isr/`).
+    TrainIsr,
+    /// The models measured on the held-out data sets (`report.md`).
+    Evaluate,
+}
+
+/// One unit of work and the tasks it needs done first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Task {
+    /// Unique id; a finished task leaves `tasks/<id>.done`.
+    pub id: String,
+    /// What it does.
+    #[serde(flatten)]
+    pub kind: TaskKind,
+    /// Ids of the tasks it needs.
+    pub after: Vec<String>,
+}
+
+/// Everything a fit does, decided before it starts.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// [`PLAN_VERSION`].
+    pub format_version: u32,
+    /// The shot's files.
+    pub shot: SceneSource,
+    /// Its size.
+    pub quality: Quality,
+    /// Coarse and fine edge lengths, m.
+    pub coarse_edge_m: f64,
+    /// Fine edge length, m (the ISR network's pixel).
+    pub fine_edge_m: f64,
+    /// Frames of every variation.
+    pub frames: usize,
+    /// Fine simulations in fast mode without self-collision, as the shipped models' data.
+    pub fast: bool,
+    /// The ISR model fine-tuned from (`None`: trained from scratch).
+    pub fine_tune_from: Option<PathBuf>,
+    /// Optimiser steps of the ISR training.
+    pub isr_steps: usize,
+    /// The variations.
+    pub variations: Vec<PlannedVariation>,
+    /// The tasks, in an order that runs each after those it needs.
+    pub tasks: Vec<Task>,
+}
+
+/// What a fit is asked for, beyond the shot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// Its size.
+    pub quality: Quality,
+    /// Coarse edge length, m.
+    pub coarse_edge_m: f64,
+    /// Fine edge length, m.
+    pub fine_edge_m: f64,
+    /// Frames of each variation (`None`: the quality's).
+    pub frames: Option<usize>,
+    /// ISR optimiser steps (`None`: the quality's).
+    pub isr_steps: Option<usize>,
+    /// A trained ISR model to fine-tune (the generic one), used when its pixel is the fine
+    /// edge.
+    pub generic_isr: Option<PathBuf>,
+}
+
+/// (yaw °, garment offset m, clip start s) of the training and held-out variations.
+type Turn = (f64, [f64; 3], f64);
+const PREVIEW_TRAIN: [Turn; 2] = [(0.0, [0.0; 3], 0.0), (20.0, [0.01, 0.0, -0.01], 0.5)];
+const PREVIEW_HELD_OUT: [Turn; 1] = [(-15.0, [-0.01, 0.0, 0.015], 0.25)];
+const FINAL_TRAIN: [Turn; 5] = [
+    (0.0, [0.0; 3], 0.0),
+    (20.0, [0.01, 0.0, -0.01], 0.5),
+    (-25.0, [-0.015, 0.0, 0.01], 1.0),
+    (40.0, [0.02, 0.0, 0.02], 1.5),
+    (-40.0, [-0.02, 0.0, -0.015], 2.0),
+];
+const FINAL_HELD_OUT: [Turn; 2] = [
+    (-15.0, [-0.01, 0.0, 0.015], 0.25),
+    (30.0, [0.015, 0.0, -0.02], 1.25),
+];
+
+impl Plan {
+    /// The plan for `shot` (whose scene is `scene`: an animated collider makes the variations
+    /// start later in its motion, and move the garment half as far).
+    pub fn new(shot: SceneSource, scene: &crate::scene::Scene, opts: &FitOptions) -> Result<Plan> {
+        let ok = |v: f64| v.is_finite() && v > 0.0;
+        if !ok(opts.coarse_edge_m)
+            || !ok(opts.fine_edge_m)
+            || opts.coarse_edge_m <= opts.fine_edge_m
+        {
+            return Err(Error::Invalid(format!(
+                "the coarse edge ({} m) must be longer than the fine one ({} m)",
+                opts.coarse_edge_m, opts.fine_edge_m
+            )));
+        }
+        let animated = scene.colliders.iter().any(|c| c.is_animated());
+        let (train_turns, held_turns, frames, steps): (&[Turn], &[Turn], usize, usize) =
+            match opts.quality {
+                Quality::Preview => (&PREVIEW_TRAIN, &PREVIEW_HELD_OUT, 30, 2000),
+                Quality::Final => (&FINAL_TRAIN, &FINAL_HELD_OUT, 90, 8000),
+            };
+        let variation = |&(yaw, off, clip): &Turn| Variation {
+            garment_offset_m: off.map(|o| if animated { 0.5 * o } else { o }),
+            collider_offset_m: [0.0; 3],
+            garment_yaw_deg: yaw,
+            clip_start_s: if animated { clip } else { 0.0 },
+        };
+        let mut variations = Vec::new();
+        for (k, t) in train_turns.iter().enumerate() {
+            variations.push(PlannedVariation {
+                id: format!("train_{k}"),
+                role: Role::Train,
+                variation: variation(t),
+            });
+        }
+        for (k, t) in held_turns.iter().enumerate() {
+            variations.push(PlannedVariation {
+                id: format!("held_out_{k}"),
+                role: Role::HeldOut,
+                variation: variation(t),
+            });
+        }
+        let fine_tune_from = opts.generic_isr.clone().filter(|dir| {
+            Isr::load(dir).is_ok_and(|isr| (isr.cfg.pixel_m - opts.fine_edge_m).abs() < 1e-9)
+        });
+        let frames = opts.frames.unwrap_or(frames).max(2);
+        let isr_steps = opts.isr_steps.unwrap_or(if fine_tune_from.is_some() {
+            steps / 2
+        } else {
+            steps
+        });
+        Ok(Plan {
+            format_version: PLAN_VERSION,
+            shot,
+            quality: opts.quality,
+            coarse_edge_m: opts.coarse_edge_m,
+            fine_edge_m: opts.fine_edge_m,
+            frames,
+            fast: true,
+            fine_tune_from,
+            isr_steps,
+            tasks: tasks(&variations),
+            variations,
+        })
+    }
+
+    /// The variations of `role`.
+    pub fn of_role(&self, role: Role) -> impl Iterator<Item = &PlannedVariation> {
+        self.variations.iter().filter(move |v| v.role == role)
+    }
+}
+
+/// The tasks of a plan with these variations.
+fn tasks(variations: &[PlannedVariation]) -> Vec<Task> {
+    let data_id = |v: &PlannedVariation| format!("data_{}", v.id);
+    let mut out: Vec<Task> = variations
+        .iter()
+        .map(|v| Task {
+            id: data_id(v),
+            kind: TaskKind::Dataset {
+                variation: v.id.clone(),
+            },
+            after: Vec::new(),
+        })
+        .collect();
+    let training: Vec<String> = variations
+        .iter()
+        .filter(|v| v.role == Role::Train)
+        .map(data_id)
+        .collect();
+    out.push(Task {
+        id: "calibrate".into(),
+        kind: TaskKind::Calibrate,
+        after: training.clone(),
+    });
+    out.push(Task {
+        id: "train_isr".into(),
+        kind: TaskKind::TrainIsr,
+        after: training,
+    });
+    let mut all: Vec<String> = variations
+        .iter()
+        .filter(|v| v.role == Role::HeldOut)
+        .map(data_id)
+        .collect();
+    all.extend(["calibrate".to_string(), "train_isr".to_string()]);
+    out.push(Task {
+        id: "evaluate".into(),
+        kind: TaskKind::Evaluate,
+        after: all,
+    });
+    out
+}
+
+/// Where a fit is, for progress.
+#[derive(Debug, Clone)]
+pub struct FitProgress {
+    /// Tasks done.
+    pub done: usize,
+    /// Tasks in the plan.
+    pub total: usize,
+    /// The task now running, and what it reports.
+    pub message: String,
+}
+
+/// Runs `plan` in `dir` (where `plan.json` is written first; a plan already there must be the
+/// same), skipping tasks already done. `progress` sees each task start and its steps; a
+/// `Break` stops the fit at the next point it can resume from (before the next task, or at a
+/// training step). Returns whether every task is done.
+pub fn run(
+    plan: &Plan,
+    dir: &Path,
+    mut progress: impl FnMut(&FitProgress) -> ControlFlow<()>,
+) -> Result<bool> {
+    std::fs::create_dir_all(dir.join("tasks")).map_err(|e| Error::io(dir, e))?;
+    write_or_check_plan(plan, dir)?;
+    let total = plan.tasks.len();
+    for (k, task) in plan.tasks.iter().enumerate() {
+        let marker = dir.join("tasks").join(format!("{}.done", task.id));
+        if marker.exists() {
+            continue;
+        }
+        let mut report = |message: String| {
+            progress(&FitProgress {
+                done: k,
+                total,
+                message: format!("{}: {message}", task.id),
+            })
+        };
+        if report("started".into()).is_break() || !run_task(plan, dir, task, &mut report)? {
+            return Ok(false);
+        }
+        write_atomically(&marker, b"done\n")?;
+    }
+    let _ = progress(&FitProgress {
+        done: total,
+        total,
+        message: "done".into(),
+    });
+    Ok(true)
+}
+
+fn write_or_check_plan(plan: &Plan, dir: &Path) -> Result<()> {
+    let path = dir.join(PLAN_FILE);
+    let text = serde_json::to_string_pretty(plan).map_err(|e| Error::Invalid(e.to_string()))?;
+    if path.exists() {
+        let old = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        if old.trim_end() != text.trim_end() {
+            return Err(Error::bad_input(
+                &path,
+                "another fit's plan is here (other shot, quality or options); choose another \
+                 folder",
+            ));
+        }
+        return Ok(());
+    }
+    write_atomically(&path, (text + "\n").as_bytes())
+}
+
+/// Writes `bytes` to `path` through a temporary file renamed over it.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    crate::io::write_atomic(path, bytes)
+}
+
+fn data_dir(dir: &Path, variation: &str) -> PathBuf {
+    dir.join("data").join(variation)
+}
+
+/// Reports a task's progress; `Break` asks it to stop.
+type Report<'a> = dyn FnMut(String) -> ControlFlow<()> + 'a;
+
+/// Runs one task; false when it stopped before its end.
+fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result<bool> {
+    match &task.kind {
+        TaskKind::Dataset { variation } => {
+            let v = plan
+                .variations
+                .iter()
+                .find(|v| &v.id == variation)
+                .ok_or_else(|| Error::Invalid(format!("the plan has no variation {variation}")))?;
+            let scene = plan.shot.load()?;
+            let opts = Options {
+                coarse_edge_m: plan.coarse_edge_m,
+                fine_edge_m: plan.fine_edge_m,
+                frames: plan.frames,
+                dress: true,
+                self_collision: !plan.fast,
+                variation: v.variation,
+                fast: plan.fast,
+                source: Some(plan.shot.clone()),
+                match_contact_thickness: true,
+            };
+            let name = plan.shot.scene.display().to_string();
+            generate(&scene, &name, &opts, &data_dir(dir, variation), |p| {
+                let _ = report(format!("frame {}/{}", p.frames_done, p.frames));
+            })?;
+            Ok(true)
+        }
+        TaskKind::Calibrate => calibrate(plan, dir, report).map(|()| true),
+        TaskKind::TrainIsr => train_isr(plan, dir, report),
+        TaskKind::Evaluate => evaluate_held_out(plan, dir, report).map(|()| true),
+    }
+}
+
+fn calibration_sets(plan: &Plan, dir: &Path, role: Role) -> Result<Vec<CalibrationSet>> {
+    plan.of_role(role)
+        .map(|v| CalibrationSet::load(plan.shot.load()?, &data_dir(dir, &v.id), None))
+        .collect()
+}
+
+/// The calibration grid of a fit: the default one.
+fn calibrate(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
+    let sets = calibration_sets(plan, dir, Role::Train)?;
+    let candidates = Grid::default().candidates().map_err(Error::Invalid)?;
+    let _ = report(format!("{} candidates", candidates.len()));
+    let scored = score(&sets, &candidates, &[], || {})?;
+    let i = best(&scored)
+        .ok_or_else(|| Error::Simulation("the simulator failed on every candidate".into()))?;
+    let json = serde_json::to_string_pretty(&scored[i].calibration)
+        .map_err(|e| Error::Invalid(e.to_string()))?;
+    write_atomically(&dir.join("coarse.json"), (json + "\n").as_bytes())
+}
+
+/// The ISR recipe of the shipped models: geometry channels and the fabric as inputs, no
+/// initialisation input, the Swin body on 4 × 4 pixel blocks.
+fn isr_config(plan: &Plan) -> Result<IsrTrainingConfig> {
+    if let Some(from) = &plan.fine_tune_from {
+        let generic = Isr::load(from)?;
+        return Ok(generic
+            .cfg
+            .clone()
+            .with_steps(plan.isr_steps)
+            .with_lr_start(1e-4)
+            .with_lr_end(1e-5)
+            .with_fine_tune_from(Some(from.display().to_string())));
+    }
+    let model = IsrConfig::new()
+        .with_depths(vec![2, 2, 2])
+        .with_init_input(false)
+        .with_geometry_input(Some(true))
+        .with_unshuffle(Some(4))
+        .with_condition_input(Some(true));
+    Ok(IsrTrainingConfig::new(model, plan.fine_edge_m).with_steps(plan.isr_steps))
+}
+
+fn train_isr(plan: &Plan, dir: &Path, report: &mut Report) -> Result<bool> {
+    let cfg = isr_config(plan)?;
+    let seqs = plan
+        .of_role(Role::Train)
+        .map(|v| {
+            IsrSequence::load(
+                &data_dir(dir, &v.id),
+                None,
+                cfg.pixel_m,
+                cfg.phong_alpha,
+                cfg.init_blur_px,
+            )
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let summary = train(&cfg, &seqs, &dir.join("isr"), |p| {
+        report(format!("step {}/{}: loss {:.4}", p.step, p.total, p.loss))
+    })?;
+    if summary.interrupted {
+        return Ok(false);
+    }
+    let _ = std::fs::remove_dir_all(dir.join("isr").join("checkpoint"));
+    Ok(true)
+}
+
+/// The held-out figures of one variation.
+#[derive(Debug, Clone)]
+struct HeldOut {
+    id: String,
+    /// Coarse simulation alone against M_int, mean over frames, mm: the simulator's own model
+    /// and the calibrated one.
+    coarse_own_mm: f64,
+    coarse_calibrated_mm: f64,
+    /// The ISR on M_int against the fine simulation, and M_int upsampled, mean over frames, mm.
+    isr_mm: f64,
+    upsampled_mm: f64,
+    /// Per frame: (ISR, upsampled) mm.
+    per_frame: Vec<(f64, f64)>,
+}
+
+fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
+    let path = dir.join("coarse.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+    let chosen = serde_json::from_str(&text).map_err(|e| Error::bad_input(&path, e.to_string()))?;
+    let sets = calibration_sets(plan, dir, Role::HeldOut)?;
+    let coarse: Vec<Scored> = score(&sets, &[Default::default(), chosen], &[], || {})?;
+    let isr = Isr::load(&dir.join("isr"))?;
+    let mut rows = Vec::new();
+    for (k, v) in plan.of_role(Role::HeldOut).enumerate() {
+        let _ = report(format!("measuring {}", v.id));
+        let data = data_dir(dir, &v.id);
+        let seq = IsrSequence::load(&data, None, isr.cfg.pixel_m, isr.cfg.phong_alpha, 0.0)?;
+        let e = evaluate(&seq, &isr, false, |_, _| ControlFlow::Continue(()))?;
+        let per_frame: Vec<(f64, f64)> =
+            e.frames.iter().map(|f| (f.sr_mm, f.upsampled_mm)).collect();
+        let n = per_frame.len().max(1) as f64;
+        rows.push(HeldOut {
+            id: v.id.clone(),
+            coarse_own_mm: coarse[0].run_means_mm[k]
+                .first()
+                .copied()
+                .unwrap_or(f64::NAN),
+            coarse_calibrated_mm: coarse[1].run_means_mm[k]
+                .first()
+                .copied()
+                .unwrap_or(f64::NAN),
+            isr_mm: per_frame.iter().map(|p| p.0).sum::<f64>() / n,
+            upsampled_mm: per_frame.iter().map(|p| p.1).sum::<f64>() / n,
+            per_frame,
+        });
+    }
+    write_atomically(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
+    let series: Vec<(String, Vec<FrameMetrics>)> = rows
+        .iter()
+        .flat_map(|r| {
+            let metrics = |pick: fn(&(f64, f64)) -> f64| {
+                r.per_frame
+                    .iter()
+                    .enumerate()
+                    .map(|(k, p)| FrameMetrics {
+                        time_code: (k + 1) as f64,
+                        mean_mm: pick(p),
+                        max_mm: pick(p),
+                        std_mm: 0.0,
+                        normal_deg: 0.0,
+                        jitter_mm: None,
+                        gt_jitter_mm: None,
+                    })
+                    .collect()
+            };
+            [
+                (format!("ISR {}", r.id), metrics(|p| p.0)),
+                (format!("upsampled {}", r.id), metrics(|p| p.1)),
+            ]
+        })
+        .collect();
+    let plotted = crate::eval::plot(
+        &dir.join("held_out.png"),
+        &series,
+        "held-out error over time",
+    )
+    .map_err(|e| tracing::warn!("no plot: {e}"))
+    .is_ok();
+    let text = report_text(plan, &chosen_label(&text), &rows, plotted);
+    write_atomically(&dir.join("report.md"), text.as_bytes())
+}
+
+fn chosen_label(json: &str) -> String {
+    json.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+fn report_text(plan: &Plan, chosen: &str, rows: &[HeldOut], plotted: bool) -> String {
+    let mut s = format!(
+        "# Fit of {}\n\nQuality {:?}: {} training and {} held-out variations of {} frames, \
+         {:.1} mm coarse / {:.1} mm fine; the ISR network {}.\n\n\
+         Coarse model chosen on the training variations: `{chosen}`.\n\n\
+         ## Held out\n\n\
+         | variation | coarse alone, simulator's model (mm to M_int) | calibrated | ISR on M_int (mm to the fine simulation) | M_int upsampled | ISR / upsampled |\n\
+         |---|---|---|---|---|---|\n",
+        plan.shot.scene.display(),
+        plan.quality,
+        plan.of_role(Role::Train).count(),
+        plan.of_role(Role::HeldOut).count(),
+        plan.frames,
+        plan.coarse_edge_m * 1e3,
+        plan.fine_edge_m * 1e3,
+        match &plan.fine_tune_from {
+            Some(d) => format!("fine-tuned from {}", d.display()),
+            None => "trained from scratch".into(),
+        }
+    );
+    for r in rows {
+        s += &format!(
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+            r.id,
+            r.coarse_own_mm,
+            r.coarse_calibrated_mm,
+            r.isr_mm,
+            r.upsampled_mm,
+            r.isr_mm / r.upsampled_mm
+        );
+    }
+    s += "\nPer-frame errors: `held_out.csv`.\n";
+    if plotted {
+        s += "\n![Error over time](held_out.png)\n";
+    }
+    s
+}
+
+fn csv(rows: &[HeldOut]) -> String {
+    let mut s = String::from("variation,frame,isr_mm,upsampled_mm\n");
+    for r in rows {
+        for (k, (a, b)) in r.per_frame.iter().enumerate() {
+            s += &format!("{},{},{a:.4},{b:.4}\n", r.id, k + 1);
+        }
+    }
+    s
+}
