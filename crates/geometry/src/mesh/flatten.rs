@@ -223,7 +223,8 @@ impl<'a> Surface<'a> {
             normals.push(n.normalize());
         }
         // Edge (min, max) → (triangle, local edge, forward?) of every triangle using it.
-        let mut edges: HashMap<(u32, u32), Vec<(u32, usize, bool)>> = HashMap::new();
+        type EdgeUse = (u32, usize, bool);
+        let mut edges: HashMap<(u32, u32), Vec<EdgeUse>> = HashMap::new();
         for (t, tri) in tris.iter().enumerate() {
             for k in 0..3 {
                 let (a, b) = (tri[k], tri[(k + 1) % 3]);
