@@ -940,7 +940,7 @@ mod tests {
     fn report(name: &str, f: &Flattening) {
         let d = f.distortion;
         eprintln!(
-            "{name}: {} charts, area mean {:.5} max {:.5}, angle mean {:.4}° max {:.4}°, {} flipped",
+            "{name}: {} charts, area mean {:.2e} max {:.2e}, angle mean {:.2e}° max {:.2e}°, {} flipped",
             f.charts, d.area_mean, d.area_max, d.angle_mean_deg, d.angle_max_deg, d.flipped
         );
     }
@@ -1021,6 +1021,22 @@ mod tests {
         report("hemisphere, one chart", &g);
         assert_eq!(g.charts, 1);
         assert!(g.distortion.area_mean > f.distortion.area_mean);
+        // On that one doubly curved chart, ARAP brings edge lengths closer than LSCM alone.
+        let lscm = FlattenOptions {
+            arap_iterations: 0,
+            ..one
+        };
+        let h = flatten(&points, &tris, &lscm).expect("flatten");
+        report("hemisphere, one chart, LSCM only", &h);
+        let (e_arap, e_lscm) = (
+            edge_error(&points, &tris, &g),
+            edge_error(&points, &tris, &h),
+        );
+        eprintln!(
+            "hemisphere, one chart: worst edge length error ARAP {e_arap:.3}, LSCM {e_lscm:.3}"
+        );
+        assert!(e_arap < 0.8 * e_lscm, "ARAP {e_arap} vs LSCM {e_lscm}");
+        assert!(g.distortion.angle_mean_deg < h.distortion.angle_mean_deg + 5.0);
     }
 
     #[test]
@@ -1089,6 +1105,31 @@ mod tests {
             })
             .sum();
         assert!((area - 0.4).abs() < 1e-9, "{area}");
+    }
+
+    #[test]
+    fn garment_panels_placed_in_3d_recover_their_pattern_lengths() {
+        // The skirt sample's panels, meshed and placed around the body, without their material
+        // coordinates: flattening must give back the pattern's edge lengths.
+        let g = crate::scene::samples::skirt(crate::garment::Fabric::default());
+        let mesh = crate::mesh::mesh_garment(&g, &crate::mesh::MeshOptions::with_edge(0.03))
+            .expect("mesh");
+        let f =
+            flatten(&mesh.positions, &mesh.triangles, &FlattenOptions::default()).expect("flatten");
+        report("skirt panels", &f);
+        assert_eq!(f.charts, mesh.panel_names.len());
+        assert_charts_apart(&f);
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            for j in 0..3 {
+                let (a, b) = (tri[j] as usize, tri[(j + 1) % 3] as usize);
+                let pattern = (mesh.material[b] - mesh.material[a]).norm();
+                let flat = (f.corner_uv[3 * t + (j + 1) % 3] - f.corner_uv[3 * t + j]).norm();
+                assert!(
+                    (flat - pattern).abs() < 1e-6 * pattern.max(1.0),
+                    "{flat} vs {pattern}"
+                );
+            }
+        }
     }
 
     #[test]
