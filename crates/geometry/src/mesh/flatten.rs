@@ -187,9 +187,7 @@ fn check_input(points: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Result<()> {
             .max((c - b).norm_squared())
             .max((a - c).norm_squared());
         if (b - a).cross(&(c - a)).norm() <= 1e-12 * longest || longest == 0.0 {
-            return Err(Error::Invalid(format!(
-                "triangle {t} has zero area: it cannot be flattened"
-            )));
+            return Err(Error::Invalid(format!("triangle {t} has zero area")));
         }
     }
     Ok(())
