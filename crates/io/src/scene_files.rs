@@ -496,6 +496,27 @@ mod tests {
     }
 
     #[test]
+    fn scanned_bunny_without_vt_flattens_into_discs() {
+        // A closed scanned surface (the Stanford bunny, low resolution) loaded as a cloth: it
+        // must be cut, split where it is curved, and give a valid mesh with no flipped triangle.
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/colliders/bunny.obj");
+        let m = obj::read_obj(&path).expect("bunny");
+        let f = flatten(&m.positions, &m.triangles, &FlattenOptions::default()).expect("flatten");
+        let d = f.distortion;
+        eprintln!(
+            "bunny: {} triangles, {} charts, {d:?}",
+            m.triangles.len(),
+            f.charts
+        );
+        assert_eq!(d.flipped, 0);
+        assert!(d.area_mean < 0.05, "{d:?}");
+        let cloth = cloth_from_obj(&path, Fabric::default()).expect("cloth");
+        cloth.mesh.validate().expect("valid");
+        assert_eq!(cloth.mesh.panel_names.len(), f.charts);
+    }
+
+    #[test]
     fn obj_that_cannot_be_flattened_is_refused() {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("line.obj");
