@@ -28,7 +28,7 @@
 //!    exceeds [`FlattenOptions::max_area_distortion`] is grown again, inside its own triangles,
 //!    with a normal-cone limit (every triangle within a cone around its seed's normal), the
 //!    cone halving until the pieces flatten well or the cone reaches
-//!    [`FlattenOptions::min_cone_deg`]. Developable pieces (a tube, a folded panel) stay whole;
+//!    [`FlattenOptions::min_cone_deg`]. Developable pieces (a tube, a bent panel) stay whole;
 //!    doubly curved ones (a hemisphere) are split into pieces of bounded curvature.
 //! 4. **Layout.** Each chart is turned so that its principal axis lies along x, and the charts
 //!    are packed on shelves, tallest first, with a gap between them: no two charts overlap.
