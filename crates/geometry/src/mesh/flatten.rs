@@ -15,7 +15,8 @@
 //!    growing was chosen over cutting along paths to the boundary because it needs no genus
 //!    or boundary-loop analysis and handles every topology alike: a closed tube grows around
 //!    until its fronts meet and is cut there, a closed surface is cut along a tree of edges,
-//!    and non-manifold or badly oriented regions simply end charts. Every chart is a disc by
+//!    and non-manifold regions simply end charts. Triangles wound against their neighbours
+//!    are turned over first (a non-orientable surface is cut where the winding disagrees). Every chart is a disc by
 //!    construction, which LSCM and ARAP need; cutting inside a chart keeps tubes whole instead
 //!    of leaving a strip one triangle wide where the fronts met.
 //! 2. **Flattening.** Each chart is flattened with least-squares conformal maps (Lévy et al.
@@ -91,7 +92,8 @@ pub struct Distortion {
 pub struct Flattening {
     /// Flattened coordinate of each triangle corner (three per triangle, in triangle order), in
     /// the points' units (metres when the points are). Corners of one point in one chart share
-    /// their coordinate; points on chart boundaries have one per chart.
+    /// their coordinate; points on chart boundaries have one per chart. Triangles come out
+    /// counter-clockwise, except those wound against their neighbours in the input (clockwise).
     pub corner_uv: Vec<Vector2<f64>>,
     /// Chart of each triangle.
     pub chart_of_triangle: Vec<u32>,
@@ -159,6 +161,10 @@ pub fn flatten(
         }
     }
     let distortion = surface.distortion(&all, |t, j| corner_uv[3 * t + j]);
+    // Back to the input's winding.
+    for (t, _) in surface.flipped.iter().enumerate().filter(|(_, &f)| f) {
+        corner_uv.swap(3 * t + 1, 3 * t + 2);
+    }
     Ok(Flattening {
         corner_uv,
         chart_of_triangle,
@@ -196,7 +202,10 @@ fn check_input(points: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Result<()> {
 /// The mesh with what chart growing and flattening need per triangle.
 struct Surface<'a> {
     points: &'a [Vector3<f64>],
-    tris: &'a [[u32; 3]],
+    /// The triangles, wound consistently with their neighbours.
+    tris: Vec<[u32; 3]>,
+    /// Whether each triangle's winding is the input's reversed (corners 1 and 2 swapped).
+    flipped: Vec<bool>,
     normals: Vec<Vector3<f64>>,
     area3: Vec<f64>,
     /// `neighbour[t][k]`: the triangle across edge (tri[k], tri[k+1]) when a chart may cross it.
@@ -211,6 +220,57 @@ struct Chart {
     /// Chart vertex of each corner of each triangle.
     corners: Vec<[u32; 3]>,
     uv: Vec<Vector2<f64>>,
+}
+
+/// One use of an edge: (triangle, local edge k from corner k to k + 1, whether it runs from
+/// the smaller point index to the larger).
+type EdgeUse = (u32, usize, bool);
+
+/// Every triangle using each edge (smaller point, larger point).
+fn edge_uses(tris: &[[u32; 3]]) -> HashMap<(u32, u32), Vec<EdgeUse>> {
+    let mut edges: HashMap<(u32, u32), Vec<EdgeUse>> = HashMap::new();
+    for (t, tri) in tris.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            edges
+                .entry((a.min(b), a.max(b)))
+                .or_default()
+                .push((t as u32, k, a < b));
+        }
+    }
+    edges
+}
+
+/// Which triangles to turn over so that neighbours across manifold edges agree on their
+/// winding (breadth-first from the lowest triangle of each piece). A non-orientable surface
+/// keeps a disagreement somewhere, where charts are then cut.
+fn consistent_winding(tris: &[[u32; 3]]) -> Vec<bool> {
+    let mut across: Vec<Vec<(u32, bool)>> = vec![Vec::new(); tris.len()];
+    for uses in edge_uses(tris).values() {
+        if let &[(t0, _, f0), (t1, _, f1)] = uses.as_slice() {
+            // Same direction along the shared edge: the two disagree.
+            across[t0 as usize].push((t1, f0 == f1));
+            across[t1 as usize].push((t0, f0 == f1));
+        }
+    }
+    let mut flip: Vec<Option<bool>> = vec![None; tris.len()];
+    for start in 0..tris.len() {
+        if flip[start].is_some() {
+            continue;
+        }
+        flip[start] = Some(false);
+        let mut queue = VecDeque::from([start]);
+        while let Some(t) = queue.pop_front() {
+            let ft = flip[t].unwrap_or(false);
+            for &(n, disagree) in &across[t] {
+                if flip[n as usize].is_none() {
+                    flip[n as usize] = Some(ft ^ disagree);
+                    queue.push_back(n as usize);
+                }
+            }
+        }
+    }
+    flip.into_iter().map(|f| f.unwrap_or(false)).collect()
 }
 
 /// A chart being grown: its triangles and numbered corners so far.
@@ -324,30 +384,24 @@ impl Growth {
 }
 
 impl<'a> Surface<'a> {
-    fn new(points: &'a [Vector3<f64>], tris: &'a [[u32; 3]], crease_deg: f64) -> Self {
+    fn new(points: &'a [Vector3<f64>], input: &[[u32; 3]], crease_deg: f64) -> Self {
+        let flipped = consistent_winding(input);
+        let tris: Vec<[u32; 3]> = input
+            .iter()
+            .zip(&flipped)
+            .map(|(t, &f)| if f { [t[0], t[2], t[1]] } else { *t })
+            .collect();
         let mut normals = Vec::with_capacity(tris.len());
         let mut area3 = Vec::with_capacity(tris.len());
-        for t in tris {
+        for t in &tris {
             let [a, b, c] = t.map(|v| points[v as usize]);
             let n = (b - a).cross(&(c - a));
             area3.push(0.5 * n.norm());
             normals.push(n.normalize());
         }
-        // Edge (min, max) → (triangle, local edge, forward?) of every triangle using it.
-        type EdgeUse = (u32, usize, bool);
-        let mut edges: HashMap<(u32, u32), Vec<EdgeUse>> = HashMap::new();
-        for (t, tri) in tris.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                edges
-                    .entry((a.min(b), a.max(b)))
-                    .or_default()
-                    .push((t as u32, k, a < b));
-            }
-        }
         let cos_crease = crease_deg.to_radians().cos();
         let mut neighbour = vec![[None; 3]; tris.len()];
-        for uses in edges.values() {
+        for uses in edge_uses(&tris).values() {
             let &[(t0, k0, f0), (t1, k1, f1)] = uses.as_slice() else {
                 continue; // boundary or non-manifold
             };
@@ -360,6 +414,7 @@ impl<'a> Surface<'a> {
         Surface {
             points,
             tris,
+            flipped,
             normals,
             area3,
             neighbour,
@@ -1167,8 +1222,30 @@ mod tests {
     }
 
     #[test]
-    fn non_manifold_and_inconsistent_edges_cut_charts() {
-        // Three triangles on one edge (a fin), and a fourth wound the other way.
+    fn triangles_wound_against_their_neighbours_are_turned_over() {
+        let (points, mut tris) = grid(6, 6, 1.0, 1.0, |x, y| Vector3::new(x, 0.2 * y, y));
+        for t in tris.iter_mut().step_by(3) {
+            t.swap(0, 1);
+        }
+        let f = flatten(&points, &tris, &FlattenOptions::default()).expect("flatten");
+        assert_eq!(f.charts, 1);
+        assert!(edge_error(&points, &tris, &f) < 1e-9);
+        assert!(f.distortion.area_max < 1e-9 && f.distortion.flipped == 0);
+        // Corners keep the input's winding: triangles wound one way come out counter-clockwise,
+        // the others clockwise.
+        let ccw = |t: usize| {
+            let [a, b, c] = [0, 1, 2].map(|j| f.corner_uv[3 * t + j]);
+            (b - a).perp(&(c - a)) > 0.0
+        };
+        for t in 0..tris.len() {
+            assert_eq!(ccw(t) == ccw(0), t % 3 == 0, "triangle {t}");
+        }
+    }
+
+    #[test]
+    fn non_manifold_edges_cut_charts() {
+        // Three triangles on one edge (a fin), and a fourth wound the other way (turned over,
+        // it joins its neighbour).
         let p = vec![
             Vector3::zeros(),
             Vector3::x(),
@@ -1179,7 +1256,8 @@ mod tests {
         ];
         let tris = [[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 2, 5]];
         let f = flatten(&p, &tris, &FlattenOptions::default()).expect("flatten");
-        assert_eq!(f.charts, 4);
+        assert_eq!(f.charts, 3);
+        assert_eq!(f.chart_of_triangle[0], f.chart_of_triangle[3]);
         assert!(edge_error(&p, &tris, &f) < 1e-9);
         assert_charts_apart(&f);
     }
