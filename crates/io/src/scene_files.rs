@@ -8,7 +8,7 @@ use nalgebra::{Vector2, Vector3};
 
 use crate::error::{Error, Result};
 use crate::garment::{garmentcode, Fabric};
-use crate::mesh::{cloth_from_corners, flatten, ClothMesh, FlattenOptions};
+use crate::mesh::{cloth_from_corners, flatten, ClothMesh, FlattenOptions, Flattening};
 use crate::obj;
 use crate::scene::{ClothPiece, Collider, Scene};
 use crate::usd::{self, write_usd, MeshOut, SolverSettings, StageOut};
@@ -79,22 +79,7 @@ fn stem(path: &Path) -> String {
 pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
     let m = obj::read_obj(path)?;
     let corners: Vec<u32> = m.triangles.iter().flatten().copied().collect();
-    // tobj split points at UV (and normal) seams; weld them back by position to find the seams.
-    let mut welded: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
-    let mut points = Vec::new();
-    let remap: Vec<u32> = m
-        .positions
-        .iter()
-        .map(|p| {
-            *welded
-                .entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
-                .or_insert_with(|| {
-                    points.push(*p);
-                    (points.len() - 1) as u32
-                })
-        })
-        .collect();
-    let corner_point: Vec<u32> = corners.iter().map(|&v| remap[v as usize]).collect();
+    let (points, corner_point) = welded(&m);
     let Some(uv) = m.uv.as_ref() else {
         let mesh = flattened_cloth(path, "the mesh", &points, &corner_point)?;
         return Ok(ClothPiece {
@@ -119,6 +104,63 @@ pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
     })
 }
 
+/// The points of an OBJ mesh welded by position (tobj splits them at UV and normal seams), and
+/// the welded point of every face corner.
+fn welded(m: &obj::ObjMesh) -> (Vec<Vector3<f64>>, Vec<u32>) {
+    let mut welded: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
+    let mut points = Vec::new();
+    let remap: Vec<u32> = m
+        .positions
+        .iter()
+        .map(|p| {
+            *welded
+                .entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+                .or_insert_with(|| {
+                    points.push(*p);
+                    (points.len() - 1) as u32
+                })
+        })
+        .collect();
+    let corner_point = m
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&v| remap[v as usize])
+        .collect();
+    (points, corner_point)
+}
+
+/// The flattening that [`cloth_from_obj`] gives an OBJ without `vt` (charts and distortion, for
+/// reports); `None` when the OBJ has `vt`.
+pub fn obj_flattening(path: &Path) -> Result<Option<Flattening>> {
+    let m = obj::read_obj(path)?;
+    if m.uv.is_some() {
+        return Ok(None);
+    }
+    let (points, corner_point) = welded(&m);
+    flattening(path, "the mesh", &points, &corner_point).map(Some)
+}
+
+/// Flattens the triangles given by `corner_point` (see [`flatten`]), the error naming `what`
+/// in `path`.
+fn flattening(
+    path: &Path,
+    what: &str,
+    points: &[Vector3<f64>],
+    corner_point: &[u32],
+) -> Result<Flattening> {
+    let triangles: Vec<[u32; 3]> = corner_point
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    flatten(points, &triangles, &FlattenOptions::default()).map_err(|e| {
+        Error::bad_input(
+            path,
+            format!("{what} has no texture coordinates and cannot be flattened: {e}"),
+        )
+    })
+}
+
 /// A cloth mesh for a triangle mesh without texture coordinates (`what` names it in `path`):
 /// flattened into charts whose coordinates become material coordinates (in the points' units,
 /// metres), and points on chart boundaries sewn.
@@ -128,16 +170,7 @@ fn flattened_cloth(
     points: &[Vector3<f64>],
     corner_point: &[u32],
 ) -> Result<ClothMesh> {
-    let triangles: Vec<[u32; 3]> = corner_point
-        .chunks_exact(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
-    let f = flatten(points, &triangles, &FlattenOptions::default()).map_err(|e| {
-        Error::bad_input(
-            path,
-            format!("{what} has no texture coordinates and cannot be flattened: {e}"),
-        )
-    })?;
+    let f = flattening(path, what, points, corner_point)?;
     let d = f.distortion;
     tracing::info!(
         "{}: {what} has no texture coordinates; flattened into {} chart(s), area distortion \
@@ -501,14 +534,11 @@ mod tests {
         // must be cut, split where it is curved, and give a valid mesh with no flipped triangle.
         let path =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/colliders/bunny.obj");
-        let m = obj::read_obj(&path).expect("bunny");
-        let f = flatten(&m.positions, &m.triangles, &FlattenOptions::default()).expect("flatten");
+        let f = obj_flattening(&path)
+            .expect("flatten")
+            .expect("the bunny has no vt");
         let d = f.distortion;
-        eprintln!(
-            "bunny: {} triangles, {} charts, {d:?}",
-            m.triangles.len(),
-            f.charts
-        );
+        eprintln!("bunny: {} charts, {d:?}", f.charts);
         assert_eq!(d.flipped, 0);
         assert!(d.area_mean < 0.05, "{d:?}");
         let cloth = cloth_from_obj(&path, Fabric::default()).expect("cloth");
