@@ -29,8 +29,9 @@
 //!    exceeds [`FlattenOptions::max_area_distortion`] is grown again, inside its own triangles,
 //!    with a normal-cone limit (every triangle within a cone around its seed's normal), the
 //!    cone halving until the pieces flatten well or the cone reaches
-//!    [`FlattenOptions::min_cone_deg`]. Developable pieces (a tube, a bent panel) stay whole;
-//!    doubly curved ones (a hemisphere) are split into pieces of bounded curvature.
+//!    [`FlattenOptions::min_cone_deg`]; small pieces left between the cones are given to
+//!    their neighbours. Developable pieces (a tube, a bent panel) stay whole; doubly curved
+//!    ones (a hemisphere) are split into pieces of bounded curvature.
 //! 4. **Layout.** Each chart is turned so that its principal axis lies along x, and the charts
 //!    are packed on shelves, tallest first, with a gap between them: no two charts overlap.
 
@@ -222,6 +223,13 @@ struct Chart {
     uv: Vec<Vector2<f64>>,
 }
 
+/// Charts grown with a normal cone smaller than this (triangles) are given to their
+/// neighbours.
+const SMALL_CHART: usize = 16;
+
+/// Slot of a triangle not yet in a chart (chart, index in chart otherwise).
+const FREE: (u32, u32) = (u32::MAX, u32::MAX);
+
 /// One use of an edge: (triangle, local edge k from corner k to k + 1, whether it runs from
 /// the smaller point index to the larger).
 type EdgeUse = (u32, usize, bool);
@@ -312,6 +320,48 @@ impl Growth {
         slot.insert(t, (self.id, self.chart.tris.len() as u32));
         self.chart.tris.push(t);
         self.chart.corners.push(corners);
+    }
+
+    /// Joins free triangles from `queue` and their neighbours, within `cone` (a normal and the
+    /// cosine of its half angle) if given, cutting the chart open when nothing else can join.
+    fn grow(
+        &mut self,
+        surface: &Surface,
+        slot: &mut HashMap<u32, (u32, u32)>,
+        mut queue: VecDeque<u32>,
+        cone: Option<(Vector3<f64>, f64)>,
+    ) {
+        let mut deferred = Vec::new();
+        loop {
+            // Join every triangle that keeps the chart a disc without a cut...
+            while let Some(t) = queue.pop_front() {
+                let outside =
+                    cone.is_some_and(|(n, cos)| surface.normals[t as usize].dot(&n) < cos);
+                if slot.get(&t) != Some(&FREE) || outside {
+                    continue;
+                }
+                match self.join(surface, slot, t) {
+                    Some(ids) => {
+                        self.add(surface, slot, t, ids);
+                        queue.extend(surface.neighbour[t as usize].iter().flatten());
+                    }
+                    None => deferred.push(t),
+                }
+            }
+            // ...then cut: join one waiting triangle by one edge, its third point copied.
+            let mut cut = None;
+            while let Some(t) = deferred.pop() {
+                if slot.get(&t) == Some(&FREE) {
+                    cut = self.join_with_cut(surface, slot, t).map(|ids| (t, ids));
+                    if cut.is_some() {
+                        break;
+                    }
+                }
+            }
+            let Some((t, ids)) = cut else { break };
+            self.add(surface, slot, t, ids);
+            queue.extend(surface.neighbour[t as usize].iter().flatten());
+        }
     }
 
     /// The chart vertices of `t`'s corners as its chart neighbours number them, per edge
@@ -423,11 +473,11 @@ impl<'a> Surface<'a> {
 
     /// Grows disc-shaped charts covering `region` (see the module documentation); with `cone`
     /// (half angle, degrees), every triangle of a chart lies within that cone around its
-    /// seed's normal. Returned charts have their corners numbered (`corners`, `verts`), a
-    /// point on a cut inside a chart having one vertex per side; `uv` is left empty.
+    /// seed's normal, except that pieces of fewer than [`SMALL_CHART`] triangles left between
+    /// charts are given to their neighbours where they can join. Returned charts have their
+    /// corners numbered (`corners`, `verts`), a point on a cut inside a chart having one vertex
+    /// per side; `uv` is left empty.
     fn grow_charts(&self, region: &[u32], cone: Option<f64>) -> Vec<Chart> {
-        // Chart of each region triangle and its index there; FREE while unassigned.
-        const FREE: (u32, u32) = (u32::MAX, u32::MAX);
         let mut slot: HashMap<u32, (u32, u32)> = region.iter().map(|&t| (t, FREE)).collect();
         let mean: Vector3<f64> = region
             .iter()
@@ -442,15 +492,54 @@ impl<'a> Surface<'a> {
             db.total_cmp(&da).then(a.cmp(&b))
         });
         let cos_cone = cone.map_or(-2.0, |c| c.to_radians().cos());
-        let mut charts: Vec<Chart> = Vec::new();
-        for &seed in &seeds {
+        let mut growths = self.grow_from_seeds(&seeds, &mut slot, cos_cone, Vec::new());
+        if cone.is_some() && growths.len() > 1 {
+            // Free the small pieces, let the others grow into them without the cone, and grow
+            // what is left from seeds again.
+            let small: Vec<usize> = (0..growths.len())
+                .filter(|&k| growths[k].chart.tris.len() < SMALL_CHART)
+                .collect();
+            if small.len() < growths.len() {
+                for &k in &small {
+                    for &t in &growths[k].chart.tris {
+                        slot.insert(t, FREE);
+                    }
+                    growths[k].chart.tris.clear();
+                }
+                for g in growths.iter_mut().filter(|g| !g.chart.tris.is_empty()) {
+                    let queue = g
+                        .chart
+                        .tris
+                        .iter()
+                        .flat_map(|&t| self.neighbour[t as usize].iter().flatten().copied())
+                        .collect();
+                    g.grow(self, &mut slot, queue, None);
+                }
+                growths = self.grow_from_seeds(&seeds, &mut slot, -2.0, growths);
+            }
+        }
+        growths
+            .into_iter()
+            .map(|g| g.chart)
+            .filter(|c| !c.tris.is_empty())
+            .collect()
+    }
+
+    /// Grows a chart from each free triangle of `seeds` in turn (see [`Surface::grow_charts`])
+    /// after the `growths` there are already.
+    fn grow_from_seeds(
+        &self,
+        seeds: &[u32],
+        slot: &mut HashMap<u32, (u32, u32)>,
+        cos_cone: f64,
+        mut growths: Vec<Growth>,
+    ) -> Vec<Growth> {
+        for &seed in seeds {
             if slot.get(&seed) != Some(&FREE) {
                 continue;
             }
-            let id = charts.len() as u32;
-            let seed_normal = self.normals[seed as usize];
             let mut g = Growth {
-                id,
+                id: growths.len() as u32,
                 chart: Chart {
                     tris: Vec::new(),
                     verts: Vec::new(),
@@ -460,40 +549,17 @@ impl<'a> Surface<'a> {
                 in_chart: HashMap::new(),
                 boundary_edges: 0,
             };
-            let mut queue = VecDeque::new();
-            let mut deferred = Vec::new();
-            let mut next = Some((seed, [None; 3]));
-            while let Some((t, ids)) = next.take() {
-                g.add(self, &mut slot, t, ids);
-                queue.extend(self.neighbour[t as usize].iter().flatten());
-                // Join every triangle that keeps the chart a disc without a cut...
-                while let Some(t) = queue.pop_front() {
-                    if slot.get(&t) != Some(&FREE)
-                        || self.normals[t as usize].dot(&seed_normal) < cos_cone
-                    {
-                        continue;
-                    }
-                    match g.join(self, &slot, t) {
-                        Some(ids) => {
-                            g.add(self, &mut slot, t, ids);
-                            queue.extend(self.neighbour[t as usize].iter().flatten());
-                        }
-                        None => deferred.push(t),
-                    }
-                }
-                // ...then cut: join one waiting triangle by one edge, its third point copied.
-                while let Some(t) = deferred.pop() {
-                    if slot.get(&t) == Some(&FREE) {
-                        next = g.join_with_cut(self, &slot, t).map(|ids| (t, ids));
-                        if next.is_some() {
-                            break;
-                        }
-                    }
-                }
-            }
-            charts.push(g.chart);
+            g.add(self, slot, seed, [None; 3]);
+            let queue = self.neighbour[seed as usize]
+                .iter()
+                .flatten()
+                .copied()
+                .collect();
+            let cone = (cos_cone > -1.0).then(|| (self.normals[seed as usize], cos_cone));
+            g.grow(self, slot, queue, cone);
+            growths.push(g);
         }
-        charts
+        growths
     }
 
     /// Triangle `t` in an orthonormal frame of its plane (counter-clockwise, first corner at 0).
@@ -990,8 +1056,18 @@ mod tests {
         (points, tris)
     }
 
+    /// Triangles in each chart.
+    fn chart_sizes(f: &Flattening) -> Vec<usize> {
+        let mut sizes = vec![0usize; f.charts];
+        for &c in &f.chart_of_triangle {
+            sizes[c as usize] += 1;
+        }
+        sizes
+    }
+
     fn report(name: &str, f: &Flattening) {
         let d = f.distortion;
+        eprintln!("{name}: chart sizes {:?}", chart_sizes(f));
         eprintln!(
             "{name}: {} charts, area mean {:.2e} max {:.2e}, angle mean {:.2e}° max {:.2e}°, {} flipped",
             f.charts, d.area_mean, d.area_max, d.angle_mean_deg, d.angle_max_deg, d.flipped
@@ -1060,6 +1136,8 @@ mod tests {
         let f = flatten(&points, &tris, &FlattenOptions::default()).expect("flatten");
         report("hemisphere", &f);
         assert_charts_are_discs(&tris, &f);
+        // Pieces left between cones are given to their neighbours: no slivers.
+        assert!(chart_sizes(&f).iter().all(|&n| n >= SMALL_CHART));
         assert_charts_apart(&f);
         assert!(f.distortion.area_mean < 0.05, "{:?}", f.distortion);
         assert!(f.distortion.area_max < 0.5, "{:?}", f.distortion);
@@ -1112,6 +1190,7 @@ mod tests {
         let f = flatten(&points, &tris, &FlattenOptions::default()).expect("flatten");
         report("sphere", &f);
         assert_charts_are_discs(&tris, &f);
+        assert!(chart_sizes(&f).iter().all(|&n| n >= SMALL_CHART));
         assert_charts_apart(&f);
         assert!(f.charts > 1);
         assert!(f.distortion.area_mean < 0.05, "{:?}", f.distortion);
