@@ -559,4 +559,24 @@ mod tests {
             "{err}"
         );
     }
+
+    #[test]
+    fn usd_cloth_that_cannot_be_flattened_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("line.usda");
+        std::fs::write(
+            &path,
+            "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\n\
+             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {\n\
+             int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n\
+             point3f[] points = [(0,0,0), (1,0,0), (2,0,0)]\n}\n",
+        )
+        .expect("write");
+        let err = Scene::load(&path, &Fabric::default())
+            .expect_err("zero area")
+            .to_string();
+        for part in ["line.usda", "/Cloth", "no texture coordinates", "zero area"] {
+            assert!(err.contains(part), "{part}: {err}");
+        }
+    }
 }
