@@ -466,7 +466,11 @@ mod tests {
             assert_eq!(mesh.positions[*a as usize], mesh.positions[*b as usize]);
         }
         let err = edge_error(mesh);
-        assert!(err < 0.03, "edge lengths off by {err}");
+        eprintln!(
+            "sleeve: {} panels, worst edge length error {err:.2e}",
+            mesh.panel_names.len()
+        );
+        assert!(err < 1e-3, "edge lengths off by {err}");
         let area3: f64 = mesh
             .triangles
             .iter()
