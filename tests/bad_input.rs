@@ -209,10 +209,11 @@ fn bad_meshes_and_stages_fail_clearly() {
             expect: &["OBJ"],
         },
         Case {
-            name: "obj_without_vt",
+            // Without vt the mesh is flattened; a zero-area triangle cannot be.
+            name: "obj_without_vt_unflattenable",
             file: "novt.obj",
-            content: "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".into(),
-            expect: &["texture coordinates"],
+            content: "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n".into(),
+            expect: &["no texture coordinates", "cannot be flattened", "zero area"],
         },
         Case { name: "usd_garbage", file: "garbage.usda", content: "#usda 1.0\ndef Mesh \"M\" {{{ nonsense\n".into(), expect: &["cannot open as USD"] },
         Case {
@@ -222,10 +223,11 @@ fn bad_meshes_and_stages_fail_clearly() {
             expect: &["metersPerUnit"],
         },
         Case {
-            name: "usd_cloth_without_st",
+            // Without primvars:st the mesh is flattened; a zero-area triangle cannot be.
+            name: "usd_cloth_without_st_unflattenable",
             file: "nost.usda",
-            content: "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\ndef Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {\n int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n point3f[] points = [(0,0,0), (1,0,0), (0,1,0)]\n}\n".into(),
-            expect: &["/Cloth", "primvars:st"],
+            content: "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\ndef Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {\n int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n point3f[] points = [(0,0,0), (1,0,0), (2,0,0)]\n}\n".into(),
+            expect: &["/Cloth", "cannot be flattened"],
         },
         Case {
             name: "usd_face_index_out_of_range",

@@ -8,7 +8,7 @@ use nalgebra::{Vector2, Vector3};
 
 use crate::error::{Error, Result};
 use crate::garment::{garmentcode, Fabric};
-use crate::mesh::{cloth_from_corners, ClothMesh};
+use crate::mesh::{cloth_from_corners, flatten, ClothMesh, FlattenOptions, Flattening};
 use crate::obj;
 use crate::scene::{ClothPiece, Collider, Scene};
 use crate::usd::{self, write_usd, MeshOut, SolverSettings, StageOut};
@@ -16,7 +16,8 @@ use crate::usd::{self, write_usd, MeshOut, SolverSettings, StageOut};
 /// Reading a [`Scene`] from files and writing it to USD.
 pub trait SceneFiles: Sized {
     /// Loads a scene from a GarmentCode JSON (one garment made of `fabric`), an OBJ (one cloth
-    /// mesh with `vt`) or a USD stage (garments, cloth meshes, colliders, solver settings).
+    /// mesh, flattened when it has no `vt`) or a USD stage (garments, cloth meshes, colliders,
+    /// solver settings).
     fn load(path: &Path, fabric: &Fabric) -> Result<Self>;
     /// Adds a collider file: OBJ, OBJ sequence (`%04d` / `####`, frames at the scene's fps) or
     /// USD (every mesh of the stage, skinned where UsdSkel).
@@ -73,18 +74,39 @@ fn stem(path: &Path) -> String {
         .to_string()
 }
 
-/// A cloth piece from an OBJ whose `vt` are material coordinates.
+/// A cloth piece from an OBJ: its `vt` are the material coordinates, or, without `vt`, the mesh
+/// is flattened into charts (see [`flatten`]) that become its panels.
 pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
     let m = obj::read_obj(path)?;
-    let uv = m.uv.as_ref().ok_or_else(|| {
-        Error::bad_input(
-            path,
-            "no texture coordinates (vt): a cloth mesh needs them as material coordinates",
-        )
-    })?;
     let corners: Vec<u32> = m.triangles.iter().flatten().copied().collect();
+    let (points, corner_point) = welded(&m);
+    let Some(uv) = m.uv.as_ref() else {
+        let mesh = flattened_cloth(path, "the mesh", &points, &corner_point)?;
+        return Ok(ClothPiece {
+            name: stem(path),
+            mesh,
+            fabric,
+        });
+    };
     let corner_uv: Vec<Vector2<f64>> = corners.iter().map(|&v| uv[v as usize]).collect();
-    // tobj split points at UV seams already; weld them back by position to find the seams.
+    let (mesh, rescaled) =
+        cloth_from_corners(&points, &corner_point, &corner_uv).map_err(|e| e.in_file(path))?;
+    if let Some(s) = rescaled {
+        tracing::warn!(
+            "{}: texture coordinates are not in metres; UV charts scaled to their 3D areas (layout by {s:.4})",
+            path.display()
+        );
+    }
+    Ok(ClothPiece {
+        name: stem(path),
+        mesh,
+        fabric,
+    })
+}
+
+/// The points of an OBJ mesh welded by position (tobj splits them at UV and normal seams), and
+/// the welded point of every face corner.
+fn welded(m: &obj::ObjMesh) -> (Vec<Vector3<f64>>, Vec<u32>) {
     let mut welded: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
     let mut points = Vec::new();
     let remap: Vec<u32> = m
@@ -99,35 +121,91 @@ pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
                 })
         })
         .collect();
-    let corner_point: Vec<u32> = corners.iter().map(|&v| remap[v as usize]).collect();
-    let (mesh, rescaled) =
-        cloth_from_corners(&points, &corner_point, &corner_uv).map_err(|e| e.in_file(path))?;
-    if let Some(s) = rescaled {
-        tracing::warn!(
-            "{}: texture coordinates are not in metres; scaled by {s:.4} to match the 3D area",
-            path.display()
-        );
+    let corner_point = m
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&v| remap[v as usize])
+        .collect();
+    (points, corner_point)
+}
+
+/// The flattening that [`cloth_from_obj`] gives an OBJ without `vt` (charts and distortion, for
+/// reports); `None` when the OBJ has `vt`.
+pub fn obj_flattening(path: &Path) -> Result<Option<Flattening>> {
+    let m = obj::read_obj(path)?;
+    if m.uv.is_some() {
+        return Ok(None);
     }
-    Ok(ClothPiece {
-        name: stem(path),
-        mesh,
-        fabric,
+    let (points, corner_point) = welded(&m);
+    flattening(path, "the mesh", &points, &corner_point).map(Some)
+}
+
+/// Flattens the triangles given by `corner_point` (see [`flatten`]), the error naming `what`
+/// in `path`.
+fn flattening(
+    path: &Path,
+    what: &str,
+    points: &[Vector3<f64>],
+    corner_point: &[u32],
+) -> Result<Flattening> {
+    let triangles: Vec<[u32; 3]> = corner_point
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    flatten(points, &triangles, &FlattenOptions::default()).map_err(|e| {
+        Error::bad_input(
+            path,
+            format!("{what} has no texture coordinates and cannot be flattened: {e}"),
+        )
     })
+}
+
+/// A cloth mesh for a triangle mesh without texture coordinates (`what` names it in `path`):
+/// flattened into charts whose coordinates become material coordinates (in the points' units,
+/// metres), and points on chart boundaries sewn.
+fn flattened_cloth(
+    path: &Path,
+    what: &str,
+    points: &[Vector3<f64>],
+    corner_point: &[u32],
+) -> Result<ClothMesh> {
+    let f = flattening(path, what, points, corner_point)?;
+    let d = f.distortion;
+    tracing::info!(
+        "{}: {what} has no texture coordinates; flattened into {} chart(s), area distortion \
+         mean {:.2}% max {:.2}%, angle distortion mean {:.2}° max {:.2}°{}",
+        path.display(),
+        f.charts,
+        100.0 * d.area_mean,
+        100.0 * d.area_max,
+        d.angle_mean_deg,
+        d.angle_max_deg,
+        if d.flipped > 0 {
+            format!(", {} flipped triangle(s)", d.flipped)
+        } else {
+            String::new()
+        }
+    );
+    let (mesh, _) =
+        cloth_from_corners(points, corner_point, &f.corner_uv).map_err(|e| e.in_file(path))?;
+    Ok(mesh)
 }
 
 fn cloth_from_usd_mesh(path: &Path, m: &usd::UsdMesh, fabric: Fabric) -> Result<ClothPiece> {
     let points: Vec<Vector3<f64>> = m.frames[0].iter().map(|p| p.cast::<f64>()).collect();
     let tris = m.triangles();
-    let no_st = || {
-        Error::bad_input(
-            path,
-            format!(
-                "cloth mesh {} has no primvars:st (material coordinates)",
-                m.path
-            ),
-        )
+    let Some(uv) = m.uv.as_ref() else {
+        let corner_point: Vec<u32> = tris.iter().flatten().copied().collect();
+        let what = format!("cloth mesh {}", m.path);
+        let mesh = flattened_cloth(path, &what, &points, &corner_point)?;
+        return Ok(ClothPiece {
+            name: m.name.clone(),
+            mesh,
+            fabric,
+        });
     };
-    let mesh = match m.uv.as_ref().ok_or_else(no_st)? {
+    let mesh = match uv {
         // Per-point material coordinates: the points are the vertices, as clothsr writes them.
         usd::UvData::Vertex(uv) => {
             let mut mesh = ClothMesh {
@@ -182,7 +260,8 @@ fn cloth_from_usd_mesh(path: &Path, m: &usd::UsdMesh, fabric: Fabric) -> Result<
 
 impl SceneFiles for Scene {
     /// Loads a scene from a GarmentCode JSON (one garment made of `fabric`), an OBJ (one cloth
-    /// mesh with `vt`) or a USD stage (garments, cloth meshes, colliders, solver settings).
+    /// mesh, flattened when it has no `vt`) or a USD stage (garments, cloth meshes, colliders,
+    /// solver settings).
     fn load(path: &Path, fabric: &Fabric) -> Result<Scene> {
         let mut scene = Scene::default();
         match FileKind::of(path)? {
@@ -329,5 +408,179 @@ fn collider_from_usd_mesh(m: &usd::UsdMesh, fps: f64) -> Collider {
         triangles: m.triangles(),
         times_s: m.time_codes.iter().map(|t| t / fps).collect(),
         frames: m.frames.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fmt::Write as _;
+
+    /// Largest relative difference between material and 3D edge lengths of a cloth mesh.
+    fn edge_error(mesh: &ClothMesh) -> f64 {
+        mesh.edges()
+            .iter()
+            .map(|&[a, b]| {
+                let l3 = (mesh.positions[a as usize] - mesh.positions[b as usize]).norm();
+                let l2 = (mesh.material[a as usize] - mesh.material[b as usize]).norm();
+                (l2 / l3 - 1.0).abs()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// An open tube (a sleeve) of quads, 0.1 m in radius and 0.4 m long, as OBJ text without
+    /// `vt`; its rim is squeezed into an ellipse so that it is not a perfect cylinder.
+    fn sleeve_obj() -> String {
+        let (around, along) = (24, 12);
+        let mut text = String::new();
+        for j in 0..=along {
+            let y = 0.4 * j as f64 / along as f64;
+            for i in 0..around {
+                let a = std::f64::consts::TAU * i as f64 / around as f64;
+                let rx = 0.1 * (1.0 + 0.2 * y);
+                writeln!(text, "v {} {} {}", rx * a.cos(), y, 0.1 * a.sin()).expect("fmt");
+            }
+        }
+        let id = |i: usize, j: usize| j * around + i % around + 1;
+        for j in 0..along {
+            for i in 0..around {
+                let q = [id(i, j), id(i, j + 1), id(i + 1, j + 1), id(i + 1, j)];
+                writeln!(text, "f {} {} {} {}", q[0], q[1], q[2], q[3]).expect("fmt");
+            }
+        }
+        text
+    }
+
+    #[test]
+    fn obj_without_vt_is_flattened_into_material_coordinates() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("sleeve.obj");
+        std::fs::write(&path, sleeve_obj()).expect("write");
+        let scene = Scene::load(&path, &Fabric::default()).expect("load");
+        let mesh = &scene.cloths[0].mesh;
+        mesh.validate().expect("valid");
+        assert_eq!(mesh.triangles.len(), 2 * 24 * 12);
+        // The closed tube must be cut: points along the cut are sewn back.
+        assert!(!mesh.seam_pairs.is_empty());
+        for [a, b] in &mesh.seam_pairs {
+            assert_eq!(mesh.positions[*a as usize], mesh.positions[*b as usize]);
+        }
+        let err = edge_error(mesh);
+        eprintln!(
+            "sleeve: {} panels, worst edge length error {err:.2e}",
+            mesh.panel_names.len()
+        );
+        assert!(err < 1e-3, "edge lengths off by {err}");
+        let area3: f64 = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+                0.5 * (b - a).cross(&(c - a)).norm()
+            })
+            .sum();
+        let area2: f64 = (0..mesh.triangles.len())
+            .map(|t| mesh.material_area(t))
+            .sum();
+        assert!((area2 / area3 - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn usd_cloth_without_st_is_flattened() {
+        // A 1 m × 0.5 m panel folded by 90° (a crease: two charts), in centimetres.
+        let (nx, ny) = (10, 5);
+        let mut points = Vec::new();
+        for j in 0..=ny {
+            for i in 0..=nx {
+                let (x, y) = (100.0 * i as f64 / nx as f64, 50.0 * j as f64 / ny as f64);
+                let p = if x <= 40.0 {
+                    (x, y, 0.0)
+                } else {
+                    (40.0, y, x - 40.0)
+                };
+                points.push(format!("({}, {}, {})", p.0, p.1, p.2));
+            }
+        }
+        let mut indices = Vec::new();
+        for j in 0..ny {
+            for i in 0..nx {
+                let v = |i: usize, j: usize| (j * (nx + 1) + i).to_string();
+                indices.extend([v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]);
+            }
+        }
+        let usda = format!(
+            "#usda 1.0\n(\n metersPerUnit = 0.01\n upAxis = \"Y\"\n)\n\
+             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {{\n\
+             int[] faceVertexCounts = [{}]\n int[] faceVertexIndices = [{}]\n\
+             point3f[] points = [{}]\n}}\n",
+            vec!["4"; nx * ny].join(", "),
+            indices.join(", "),
+            points.join(", ")
+        );
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("folded.usda");
+        std::fs::write(&path, usda).expect("write");
+        let scene = Scene::load(&path, &Fabric::default()).expect("load");
+        let mesh = &scene.cloths[0].mesh;
+        assert_eq!(mesh.panel_names.len(), 2, "the fold is a crease");
+        assert_eq!(mesh.seam_pairs.len(), ny + 1, "sewn along the fold");
+        let err = edge_error(mesh);
+        assert!(err < 1e-5, "edge lengths off by {err}");
+        let area: f64 = (0..mesh.triangles.len())
+            .map(|t| mesh.material_area(t))
+            .sum();
+        assert!((area - 0.5).abs() < 1e-5, "{area} m²");
+    }
+
+    #[test]
+    fn scanned_bunny_without_vt_flattens_into_discs() {
+        // A closed scanned surface (the Stanford bunny, low resolution) loaded as a cloth: it
+        // must be cut, split where it is curved, and give a valid mesh with no flipped triangle.
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/colliders/bunny.obj");
+        let f = obj_flattening(&path)
+            .expect("flatten")
+            .expect("the bunny has no vt");
+        let d = f.distortion;
+        eprintln!("bunny: {} charts, {d:?}", f.charts);
+        assert_eq!(d.flipped, 0);
+        assert!(d.area_mean < 0.05, "{d:?}");
+        let cloth = cloth_from_obj(&path, Fabric::default()).expect("cloth");
+        cloth.mesh.validate().expect("valid");
+        assert_eq!(cloth.mesh.panel_names.len(), f.charts);
+    }
+
+    #[test]
+    fn obj_that_cannot_be_flattened_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("line.obj");
+        std::fs::write(&path, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").expect("write");
+        let err = Scene::load(&path, &Fabric::default())
+            .expect_err("zero area")
+            .to_string();
+        assert!(
+            err.contains("line.obj") && err.contains("cannot be flattened"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn usd_cloth_that_cannot_be_flattened_is_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("line.usda");
+        std::fs::write(
+            &path,
+            "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\n\
+             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {\n\
+             int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n\
+             point3f[] points = [(0,0,0), (1,0,0), (2,0,0)]\n}\n",
+        )
+        .expect("write");
+        let err = Scene::load(&path, &Fabric::default())
+            .expect_err("zero area")
+            .to_string();
+        for part in ["line.usda", "/Cloth", "no texture coordinates", "zero area"] {
+            assert!(err.contains(part), "{part}: {err}");
+        }
     }
 }

@@ -2,10 +2,12 @@
 //! panel's plane) and panel id, so that the coarse and fine meshes of one garment share a single
 //! material space (the paper's §3.2.1 rests on it).
 
+mod flatten;
 mod from_uv;
 mod pattern;
 mod quality;
 
+pub use flatten::{flatten, Distortion, FlattenOptions, Flattening};
 pub use from_uv::{cloth_from_corners, connected_components};
 pub use pattern::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
 pub use quality::{MeshStats, SHARP_CORNER_DEG};
