@@ -886,6 +886,24 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(err.contains("not a corrector model directory"), "{err}");
 }
 
+/// `inspect` on a mesh without texture coordinates reports how it was flattened.
+#[test]
+fn inspect_reports_the_flattening_of_a_mesh_without_uvs() {
+    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/colliders/bunny.obj");
+    let out = clothsr().arg("inspect").arg(&bunny).output().expect("run");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(text.contains("texture coordinates: no"), "{text}");
+    let charts: usize = text
+        .split("flattened into ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no flattening reported: {text}"));
+    assert!(charts >= 2, "{text}");
+    assert!(text.contains(&format!("as cloth: {charts} panels")), "{text}");
+}
+
 /// Without `--models`, `run` takes the generic models: `$CLOTHSR_MODELS` first.
 #[test]
 fn run_without_models_takes_the_folder_clothsr_models_names() {

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clothsr::garment::{garmentcode, Garment};
-use clothsr::io::scene_files::{cloth_from_obj, FileKind};
+use clothsr::io::scene_files::{cloth_from_obj, obj_flattening, FileKind};
 use clothsr::io::{obj, usd};
 use clothsr::mesh::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
 
@@ -87,11 +87,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 m.triangles.len(),
                 if m.uv.is_some() { "yes" } else { "no" }
             );
-            if m.uv.is_some() {
-                let c = cloth_from_obj(path, Default::default())?;
-                let st = c.mesh.stats();
-                println!("  as cloth: {} panels, {} seam pairs, material area {:.4} m², mean edge {:.1} mm", c.mesh.panel_names.len(), c.mesh.seam_pairs.len(), st.area_m2, st.mean_edge_m * 1e3);
+            if let Some(f) = obj_flattening(path)? {
+                let d = &f.distortion;
+                println!(
+                    "  flattened into {} charts: area distortion mean {:.2} % / max {:.2} %, \
+                     angle distortion mean {:.2}° / max {:.2}°",
+                    f.charts,
+                    d.area_mean * 100.0,
+                    d.area_max * 100.0,
+                    d.angle_mean_deg,
+                    d.angle_max_deg
+                );
             }
+            let c = cloth_from_obj(path, Default::default())?;
+            let st = c.mesh.stats();
+            println!(
+                "  as cloth: {} panels, {} seam pairs, material area {:.4} m², mean edge {:.1} mm",
+                c.mesh.panel_names.len(),
+                c.mesh.seam_pairs.len(),
+                st.area_m2,
+                st.mean_edge_m * 1e3
+            );
         }
         FileKind::Usd => {
             let s = usd::inspect_usd(path)?;
