@@ -892,7 +892,11 @@ fn inspect_reports_the_flattening_of_a_mesh_without_uvs() {
     let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/colliders/bunny.obj");
     let out = clothsr().arg("inspect").arg(&bunny).output().expect("run");
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(text.contains("texture coordinates: no"), "{text}");
     let charts: usize = text
         .split("flattened into ")
@@ -901,7 +905,10 @@ fn inspect_reports_the_flattening_of_a_mesh_without_uvs() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no flattening reported: {text}"));
     assert!(charts >= 2, "{text}");
-    assert!(text.contains(&format!("as cloth: {charts} panels")), "{text}");
+    assert!(
+        text.contains(&format!("as cloth: {charts} panels")),
+        "{text}"
+    );
 }
 
 /// Without `--models`, `run` takes the generic models: `$CLOTHSR_MODELS` first.
