@@ -823,3 +823,49 @@ fn with_one_sided_crease_contacts_no_coarse_edge_is_held_inside_the_table() {
         d.slide_m
     );
 }
+
+/// A sheet placed 1 cm into a ball starts outside it, and stays out; one placed above is
+/// left exactly where it was put.
+#[test]
+fn cloth_that_starts_inside_a_body_is_moved_out_before_the_first_step() {
+    use clothsr::sim::collide::count_inside;
+    let sheet_over_ball = |height_m: f64| Scene {
+        garments: vec![flat_sheet(
+            "sheet",
+            0.3,
+            0.3,
+            Vector3::new(0.0, height_m, 0.0),
+            Fabric::preset("cotton").expect("preset"),
+        )],
+        colliders: vec![Collider::sphere("ball", Vector3::zeros(), 0.15, 3)],
+        ..Scene::default()
+    };
+    // The ball's top is at 0.15 m.
+    let inside = sheet_over_ball(0.14);
+    let mut sim = Simulation::new(&inside, 0.02, |p| p.newton_exact = false).expect("sim");
+    let points = sim.collider_points();
+    let body = |pts: &[Vec<Vector3<f64>>]| (pts[0].clone(), inside.colliders[0].triangles.clone());
+    let (pts, tris) = body(&points);
+    let found = count_inside(&sim.state.x, &[(&pts, &tris)], 0.05);
+    assert_eq!(found.inside, 0, "{found:?}");
+    // The middle is lifted over the ball's top; the rim, outside it, stays where it was.
+    let lowest = sim.state.x.iter().map(|p| p.y).fold(f64::MAX, f64::min);
+    let highest = sim.state.x.iter().map(|p| p.y).fold(f64::MIN, f64::max);
+    assert!(
+        (lowest - 0.14).abs() < 1e-12,
+        "the rim was moved: lowest {lowest}"
+    );
+    assert!(
+        highest > 0.15,
+        "the middle was not lifted: highest {highest}"
+    );
+    for _ in 0..3 {
+        sim.advance_frame(|_| {}).expect("frame");
+    }
+    let after = count_inside(&sim.state.x, &[(&pts, &tris)], 0.05);
+    assert_eq!(after.inside, 0, "{after:?}");
+
+    let above = sheet_over_ball(0.17);
+    let sim = Simulation::new(&above, 0.02, |_| {}).expect("sim");
+    assert!(sim.state.x.iter().all(|p| (p.y - 0.17).abs() < 1e-12));
+}

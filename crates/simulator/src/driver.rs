@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 
 use super::arrange::{wrap_panels_around_body, WrapOptions};
+use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
 use super::step::{ColliderFrame, SimParams, SimState, Simulator, StepStats};
 use crate::error::{Error, Result};
@@ -110,7 +111,7 @@ impl Simulation {
         let sim = Simulator::new(model, params);
         let mut state = sim.initial_state();
         state.t_s = scene.frame_start as f64 / scene.fps;
-        Ok(Simulation {
+        let mut out = Simulation {
             sim,
             state,
             colliders: scene.colliders.clone(),
@@ -118,7 +119,39 @@ impl Simulation {
             fps: scene.fps,
             edge_m: mean_edge,
             buffers: [Vec::new(), Vec::new()],
-        })
+        };
+        // Garments with seams are dressed (`dress`), which places them around the body.
+        if out.sim.model.mesh.seam_pairs.is_empty() {
+            out.start_outside_bodies();
+        }
+        Ok(out)
+    }
+
+    /// Moves the cloth out of the bodies it starts in (a garment placed slightly into the
+    /// avatar): every vertex inside a body, or nearer one than half the contact thickness, to
+    /// that distance from its surface. Cloth that starts with no vertex inside any body is
+    /// left as it is. Vertices deeper than [`crate::collide::OBSTACLE_SEARCH_M`] are not found.
+    pub fn start_outside_bodies(&mut self) -> PushOut {
+        let points = self.collider_points();
+        let bodies: Vec<BodyMesh<'_>> = points
+            .iter()
+            .zip(&self.colliders)
+            .map(|(p, c)| (p.as_slice(), c.triangles.as_slice()))
+            .collect();
+        let mut x = self.state.x.clone();
+        let clearance = 0.5 * self.sim.params.collision.dhat_m;
+        let pushed = push_out(&mut x, &bodies, clearance);
+        if pushed.inside > 0 {
+            tracing::info!(
+                "{} cloth vertices started inside a body (deepest {:.1} mm): moved out to {:.2} mm \
+                 from its surface",
+                pushed.inside,
+                pushed.max_depth_m * 1e3,
+                clearance * 1e3
+            );
+            self.state.x = x;
+        }
+        pushed
     }
 
     /// One step of `dt` from `state` (at `state.t_s`) with the colliders interpolated over it;
