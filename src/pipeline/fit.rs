@@ -33,10 +33,9 @@ pub const PLAN_FILE: &str = "plan.json";
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Quality {
-    /// Two training variations and one held out, 30 frames each: about an hour on 2 cores
-    /// for a small garment.
+    /// Two training variations and one held out, 30 frames each.
     Preview,
-    /// Five training variations and two held out, 90 frames each: overnight.
+    /// Five training variations and two held out, 90 frames each.
     Final,
 }
 
