@@ -3,8 +3,9 @@
 # --models: trained across garments, fabrics, colliders and motions, not on one scene.
 #
 #   1. The training shots (`clothsr lab scenes --set training`: 24 procedural shots, each a
-#      flat garment dropped on a moving or still collider; see
-#      crates/geometry/src/scene/catalogue.rs), 60 frames each, and the held-out shots
+#      flat garment dropped on a moving or still collider, and 2 short skirts on the walking
+#      avatar of tests/data/avatars; see crates/geometry/src/scene/catalogue.rs), 60 frames
+#      each, and the held-out shots
 #      (`--set held-out`: an unseen garment, collider, motion and fabrics), 50 frames from
 #      three starts each.
 #   2. A fine (2.5 mm) and coarse (20 mm) simulation of each (`clothsr lab dataset`), in fast
@@ -26,6 +27,8 @@ OUT=${OUT:-models/generic}
 JOBS=${JOBS:-1}
 STAGE=${1:-all}
 COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
+# The avatar of the avatar shots: the walk baked to a point cache (2 s).
+AVATAR=tests/data/avatars/mh_walk_train_baked_2s.usdc
 # The held-out starts: the shot as written, and turned and moved.
 STARTS=("--garment-yaw-deg 0" "--garment-yaw-deg 25 --garment-offset 0.02,0,-0.01"
   "--garment-yaw-deg -35 --garment-offset -0.015,0,0.02")
@@ -49,7 +52,9 @@ if [ "$STAGE" = data ] || [ "$STAGE" = all ]; then
   jobs_list=()
   while read -r scene; do
     name=$(basename "$scene" .usda)
-    jobs_list+=("$scene|$DATA/train/$name|60|")
+    flags=""
+    case $name in *-avatar-*) flags="--avatar $AVATAR" ;; esac
+    jobs_list+=("$scene|$DATA/train/$name|60|$flags")
   done < "$DATA/training.txt"
   while read -r scene; do
     name=$(basename "$scene" .usda)

@@ -35,8 +35,9 @@ pub const COLLIDERS: [&str; 5] = ["sphere", "balls", "table", "cube", "bar"];
 pub const MOTIONS: [&str; 5] = ["still", "slide", "spin", "rise", "swing"];
 
 /// The generic models' training shots. Never in it: the disc, the bar, the swing, and the
-/// fabrics `silk_cotton` and `denim_leather` (kept for [`HELD_OUT`]).
-pub const TRAINING: [&str; 24] = [
+/// fabrics `silk_cotton` and `denim_leather` (kept for [`HELD_OUT`]). The last two are
+/// avatar shots ([`AVATAR`]).
+pub const TRAINING: [&str; 26] = [
     "square-silk-sphere-still",
     "square-cotton-table-still",
     "square-denim-balls-still",
@@ -61,7 +62,14 @@ pub const TRAINING: [&str; 24] = [
     "square-cotton-balls-still",
     "strip-leather-sphere-still",
     "strip-silk-table-still",
+    "miniskirt-cotton-avatar-walk",
+    "miniskirt-denim-avatar-walk",
 ];
+
+/// The collider and motion of avatar shots, `miniskirt-FABRIC-avatar-walk`: a two-panel
+/// A-line skirt 28 cm long at the waist of the walking avatar, which the shot does not hold:
+/// give it with `--avatar` (`tests/data/avatars`).
+pub const AVATAR: &str = "avatar-walk";
 
 /// Shots no generic model is trained on: an unseen garment (the disc), collider (the bar),
 /// motion (the swing) and fabrics (the mixes `silk_cotton`, `denim_leather`).
@@ -86,6 +94,14 @@ pub fn scene(name: &str, frames: usize) -> Option<Scene> {
         return None;
     };
     let fabric = fabric_named(fabric)?;
+    if (*collider, *motion) == ("avatar", "walk") {
+        return (*garment == "miniskirt").then(|| Scene {
+            garments: vec![miniskirt(fabric)],
+            fps: FPS,
+            frame_end: frames as i64,
+            ..Scene::default()
+        });
+    }
     let garment = garment_named(garment, fabric)?;
     let body = collider_named(collider)?;
     let duration_s = frames as f64 / FPS;
@@ -138,6 +154,24 @@ fn garment_named(name: &str, fabric: Fabric) -> Option<Garment> {
         seams: Vec::new(),
         fabric,
     })
+}
+
+/// The sample skirt ([`super::samples::skirt`]) cut to 28 cm: its panels' sides keep their
+/// slope, so the hem is narrower.
+fn miniskirt(fabric: Fabric) -> Garment {
+    let mut g = super::samples::skirt(fabric);
+    g.name = "miniskirt".into();
+    for p in &mut g.panels {
+        // Vertices 0 and 1 are the hem's ends, at -0.55 below the waist, ±0.36 wide; the
+        // waist's ends are ±0.19 wide.
+        let (len, hem_half) = (0.28, 0.19 + (0.36 - 0.19) * 0.28 / 0.55);
+        p.vertices[0] = Vector2::new(-hem_half, -len);
+        p.vertices[1] = Vector2::new(hem_half, -len);
+        p.edges[0].curve = Curve::Quadratic {
+            control: Vector2::new(0.0, -len - 0.035),
+        };
+    }
+    g
 }
 
 /// Rx(-90°) maps a panel's (u, v, 0) to (u, 0, -v): the panel lies flat, facing +y.
@@ -398,6 +432,20 @@ mod tests {
         let p = &c.frames[0][0];
         let turned = (p.x * q.x + p.z * q.z) / (radius(p) * radius(q));
         assert!(turned.abs() < 1e-4, "{turned}");
+    }
+
+    #[test]
+    fn the_miniskirt_is_the_sample_skirt_shortened_and_needs_the_avatar() {
+        let s = scene("miniskirt-cotton-avatar-walk", 60).expect("avatar shot");
+        assert!(s.colliders.is_empty());
+        let g = &s.garments[0];
+        g.validate().expect("valid");
+        assert_eq!(g.seams.len(), 2);
+        let full = super::super::samples::skirt(Fabric::preset("cotton").expect("cotton"));
+        assert!(g.area() < 0.55 * full.area() && g.area() > 0.35 * full.area());
+        assert!(scene("square-cotton-avatar-walk", 60).is_none());
+        assert!(scene("miniskirt-cotton-sphere-still", 60).is_none());
+        assert!(TRAINING.iter().any(|n| n.ends_with(AVATAR)));
     }
 
     #[test]
