@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use clothsr::garment::{garmentcode, Garment};
-use clothsr::io::scene_files::{cloth_from_obj, obj_flattening, FileKind};
+use clothsr::io::scene_files::{obj_cloth, FileKind};
 use clothsr::io::{obj, usd};
 use clothsr::mesh::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
 
@@ -87,7 +87,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 m.triangles.len(),
                 if m.uv.is_some() { "yes" } else { "no" }
             );
-            if let Some(f) = obj_flattening(path)? {
+            let (c, flattening) = obj_cloth(path, Default::default())?;
+            if let Some(f) = flattening {
                 let d = &f.distortion;
                 println!(
                     "  flattened into {} charts: area distortion mean {:.2} % / max {:.2} %, \
@@ -99,7 +100,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     d.angle_max_deg
                 );
             }
-            let c = cloth_from_obj(path, Default::default())?;
             let st = c.mesh.stats();
             println!(
                 "  as cloth: {} panels, {} seam pairs, material area {:.4} m², mean edge {:.1} mm",

@@ -77,18 +77,29 @@ fn stem(path: &Path) -> String {
 /// A cloth piece from an OBJ: its `vt` are the material coordinates, or, without `vt`, the mesh
 /// is flattened into charts (see [`flatten`]) that become its panels.
 pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
+    obj_cloth(path, fabric).map(|(cloth, _)| cloth)
+}
+
+/// As [`cloth_from_obj`], with the flattening it made (charts and distortion, for reports);
+/// `None` when the OBJ has `vt`.
+pub fn obj_cloth(path: &Path, fabric: Fabric) -> Result<(ClothPiece, Option<Flattening>)> {
     let m = obj::read_obj(path)?;
-    let corners: Vec<u32> = m.triangles.iter().flatten().copied().collect();
     let (points, corner_point) = welded(&m);
-    let Some(uv) = m.uv.as_ref() else {
-        let mesh = flattened_cloth(path, "the mesh", &points, &corner_point)?;
-        return Ok(ClothPiece {
-            name: stem(path),
-            mesh,
-            fabric,
-        });
+    let piece = |mesh| ClothPiece {
+        name: stem(path),
+        mesh,
+        fabric,
     };
-    let corner_uv: Vec<Vector2<f64>> = corners.iter().map(|&v| uv[v as usize]).collect();
+    let Some(uv) = m.uv.as_ref() else {
+        let (mesh, f) = flattened_cloth(path, "the mesh", &points, &corner_point)?;
+        return Ok((piece(mesh), Some(f)));
+    };
+    let corner_uv: Vec<Vector2<f64>> = m
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&v| uv[v as usize])
+        .collect();
     let (mesh, rescaled) =
         cloth_from_corners(&points, &corner_point, &corner_uv).map_err(|e| e.in_file(path))?;
     if let Some(s) = rescaled {
@@ -97,11 +108,7 @@ pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
             path.display()
         );
     }
-    Ok(ClothPiece {
-        name: stem(path),
-        mesh,
-        fabric,
-    })
+    Ok((piece(mesh), None))
 }
 
 /// The points of an OBJ mesh welded by position (tobj splits them at UV and normal seams), and
@@ -130,17 +137,6 @@ fn welded(m: &obj::ObjMesh) -> (Vec<Vector3<f64>>, Vec<u32>) {
     (points, corner_point)
 }
 
-/// The flattening that [`cloth_from_obj`] gives an OBJ without `vt` (charts and distortion, for
-/// reports); `None` when the OBJ has `vt`.
-pub fn obj_flattening(path: &Path) -> Result<Option<Flattening>> {
-    let m = obj::read_obj(path)?;
-    if m.uv.is_some() {
-        return Ok(None);
-    }
-    let (points, corner_point) = welded(&m);
-    flattening(path, "the mesh", &points, &corner_point).map(Some)
-}
-
 /// Flattens the triangles given by `corner_point` (see [`flatten`]), the error naming `what`
 /// in `path`.
 fn flattening(
@@ -163,13 +159,13 @@ fn flattening(
 
 /// A cloth mesh for a triangle mesh without texture coordinates (`what` names it in `path`):
 /// flattened into charts whose coordinates become material coordinates (in the points' units,
-/// metres), and points on chart boundaries sewn.
+/// metres), and points on chart boundaries sewn; with the flattening.
 fn flattened_cloth(
     path: &Path,
     what: &str,
     points: &[Vector3<f64>],
     corner_point: &[u32],
-) -> Result<ClothMesh> {
+) -> Result<(ClothMesh, Flattening)> {
     let f = flattening(path, what, points, corner_point)?;
     let d = f.distortion;
     tracing::info!(
@@ -189,7 +185,7 @@ fn flattened_cloth(
     );
     let (mesh, _) =
         cloth_from_corners(points, corner_point, &f.corner_uv).map_err(|e| e.in_file(path))?;
-    Ok(mesh)
+    Ok((mesh, f))
 }
 
 fn cloth_from_usd_mesh(path: &Path, m: &usd::UsdMesh, fabric: Fabric) -> Result<ClothPiece> {
@@ -198,7 +194,7 @@ fn cloth_from_usd_mesh(path: &Path, m: &usd::UsdMesh, fabric: Fabric) -> Result<
     let Some(uv) = m.uv.as_ref() else {
         let corner_point: Vec<u32> = tris.iter().flatten().copied().collect();
         let what = format!("cloth mesh {}", m.path);
-        let mesh = flattened_cloth(path, &what, &points, &corner_point)?;
+        let (mesh, _) = flattened_cloth(path, &what, &points, &corner_point)?;
         return Ok(ClothPiece {
             name: m.name.clone(),
             mesh,
@@ -538,14 +534,12 @@ mod tests {
         // must be cut, split where it is curved, and give a valid mesh with no flipped triangle.
         let path =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/colliders/bunny.obj");
-        let f = obj_flattening(&path)
-            .expect("flatten")
-            .expect("the bunny has no vt");
+        let (cloth, f) = obj_cloth(&path, Fabric::default()).expect("flatten");
+        let f = f.expect("the bunny has no vt");
         let d = f.distortion;
         eprintln!("bunny: {} charts, {d:?}", f.charts);
         assert_eq!(d.flipped, 0);
         assert!(d.area_mean < 0.05, "{d:?}");
-        let cloth = cloth_from_obj(&path, Fabric::default()).expect("cloth");
         cloth.mesh.validate().expect("valid");
         assert_eq!(cloth.mesh.panel_names.len(), f.charts);
     }
