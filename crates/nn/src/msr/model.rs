@@ -101,6 +101,16 @@ impl IsrConfig {
         self.condition_input.unwrap_or(false)
     }
 
+    /// The same network with every optional input spelled out (`None`, in models saved before
+    /// an input existed, is off; an unshuffle of `None` is 1), for comparing configurations.
+    pub fn settled(&self) -> IsrConfig {
+        let mut m = self.clone();
+        m.geometry_input = Some(self.geometry());
+        m.unshuffle = Some(self.unshuffle_factor());
+        m.condition_input = Some(self.condition());
+        m
+    }
+
     /// Checks the sizes; `Err` names the problem.
     pub fn check(&self) -> Result<(), String> {
         if self.embed_dim == 0 || self.heads == 0 || !self.embed_dim.is_multiple_of(self.heads) {

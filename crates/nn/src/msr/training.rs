@@ -365,13 +365,10 @@ fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
     if resuming {
         let old = IsrTrainingConfig::load(&config_path)
             .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
-        // A run saved before the geometry input or the unshuffle existed has `None`, which
-        // means off (factor 1).
+        // A run saved before an optional input existed has `None`, which means off.
         let settled = |c: &IsrTrainingConfig| {
             let mut c = c.clone();
-            c.model.geometry_input = Some(c.model.geometry());
-            c.model.unshuffle = Some(c.model.unshuffle_factor());
-            c.model.condition_input = Some(c.model.condition());
+            c.model = c.model.settled();
             c
         };
         if settled(&old) != settled(cfg) {
@@ -399,14 +396,7 @@ fn start_from(net: IsrNet, model: &IsrConfig, dir: &Path) -> Result<IsrNet> {
     let path = dir.join(CONFIG_FILE);
     let theirs =
         IsrTrainingConfig::load(&path).map_err(|e| Error::bad_input(&path, e.to_string()))?;
-    let settled = |m: &IsrConfig| {
-        let mut m = m.clone();
-        m.geometry_input = Some(m.geometry());
-        m.unshuffle = Some(m.unshuffle_factor());
-        m.condition_input = Some(m.condition());
-        m
-    };
-    if settled(&theirs.model) != settled(model) {
+    if theirs.model.settled() != model.settled() {
         return Err(Error::bad_input(
             &path,
             "its network differs from the one to fine-tune; it cannot be the start",
