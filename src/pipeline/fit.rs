@@ -15,9 +15,11 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use super::calibrate::{best, score, CalibrationSet, Grid, Scored};
+use super::CoarseCalibration;
 use crate::data::{generate, Options, SceneSource, Variation};
 use crate::error::{Error, Result};
 use crate::eval::FrameMetrics;
+use crate::io::write_atomic;
 use crate::msr::data::IsrSequence;
 use crate::msr::eval::evaluate;
 use crate::msr::model::IsrConfig;
@@ -312,7 +314,7 @@ pub fn run(
         if report("started".into()).is_break() || !run_task(plan, dir, task, &mut report)? {
             return Ok(false);
         }
-        write_atomically(&marker, b"done\n")?;
+        write_atomic(&marker, b"done\n")?;
     }
     let _ = progress(&FitProgress {
         done: total,
@@ -336,12 +338,7 @@ fn write_or_check_plan(plan: &Plan, dir: &Path) -> Result<()> {
         }
         return Ok(());
     }
-    write_atomically(&path, (text + "\n").as_bytes())
-}
-
-/// Writes `bytes` to `path` through a temporary file renamed over it.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::io::write_atomic(path, bytes)
+    write_atomic(&path, (text + "\n").as_bytes())
 }
 
 fn data_dir(dir: &Path, variation: &str) -> PathBuf {
@@ -385,8 +382,9 @@ fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result
 }
 
 fn calibration_sets(plan: &Plan, dir: &Path, role: Role) -> Result<Vec<CalibrationSet>> {
+    let scene = plan.shot.load()?;
     plan.of_role(role)
-        .map(|v| CalibrationSet::load(plan.shot.load()?, &data_dir(dir, &v.id), None))
+        .map(|v| CalibrationSet::load(scene.clone(), &data_dir(dir, &v.id), None))
         .collect()
 }
 
@@ -400,7 +398,7 @@ fn calibrate(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
         .ok_or_else(|| Error::Simulation("the simulator failed on every candidate".into()))?;
     let json = serde_json::to_string_pretty(&scored[i].calibration)
         .map_err(|e| Error::Invalid(e.to_string()))?;
-    write_atomically(&dir.join("coarse.json"), (json + "\n").as_bytes())
+    write_atomic(&dir.join(CoarseCalibration::FILE), (json + "\n").as_bytes())
 }
 
 /// The ISR recipe of the shipped models: geometry channels and the fabric as inputs, no
@@ -465,9 +463,12 @@ struct HeldOut {
 }
 
 fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
-    let path = dir.join("coarse.json");
-    let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-    let chosen = serde_json::from_str(&text).map_err(|e| Error::bad_input(&path, e.to_string()))?;
+    let chosen = CoarseCalibration::load(dir)?.ok_or_else(|| {
+        Error::Invalid(format!(
+            "{}: the calibration task left no coarse model",
+            dir.join(CoarseCalibration::FILE).display()
+        ))
+    })?;
     let sets = calibration_sets(plan, dir, Role::HeldOut)?;
     let coarse: Vec<Scored> = score(&sets, &[Default::default(), chosen], &[], || {})?;
     let isr = Isr::load(&dir.join("isr"))?;
@@ -495,7 +496,7 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
             per_frame,
         });
     }
-    write_atomically(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
+    write_atomic(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
     let series: Vec<(String, Vec<FrameMetrics>)> = rows
         .iter()
         .flat_map(|r| {
@@ -527,19 +528,15 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
     )
     .map_err(|e| tracing::warn!("no plot: {e}"))
     .is_ok();
-    let text = report_text(plan, &chosen_label(&text), &rows, plotted);
-    write_atomically(&dir.join("report.md"), text.as_bytes())
+    let text = report_text(plan, &chosen, &rows, plotted);
+    write_atomic(&dir.join("report.md"), text.as_bytes())
 }
 
-fn chosen_label(json: &str) -> String {
-    json.split_whitespace().collect::<Vec<_>>().join(" ")
-}
-
-fn report_text(plan: &Plan, chosen: &str, rows: &[HeldOut], plotted: bool) -> String {
+fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotted: bool) -> String {
     let mut s = format!(
         "# Fit of {}\n\nQuality {:?}: {} training and {} held-out variations of {} frames, \
          {:.1} mm coarse / {:.1} mm fine; the ISR network {}.\n\n\
-         Coarse model chosen on the training variations: `{chosen}`.\n\n\
+         Coarse model chosen on the training variations: {chosen}.\n\n\
          ## Held out\n\n\
          | variation | coarse alone, simulator's model (mm to M_int) | calibrated | ISR on M_int (mm to the fine simulation) | M_int upsampled | ISR / upsampled |\n\
          |---|---|---|---|---|---|\n",
