@@ -109,6 +109,16 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     let report = String::from_utf8(read(a.join("report.md"))).expect("utf-8");
     assert!(report.contains("| held_out_0 |"), "{report}");
     assert!(!a.join("isr/checkpoint").exists());
+    // The folder's manifest: the whole pipeline held out, beside the paper's baseline, which
+    // the held-out variation's own coarse and fine simulations do not match exactly.
+    let m = clothsr::pipeline::ModelsManifest::load(&a)
+        .expect("models.json")
+        .expect("written");
+    let f = m.paths["coarse_alone"];
+    let base = f.baseline_mm.expect("baseline");
+    assert!(f.fine_error_mm > 0.0 && base > 0.0, "{f:?}");
+    assert!(f.fine_error_mm < 10.0 * base && base < 10.0 * f.fine_error_mm, "{f:?}");
+    assert!(m.held_out.contains("held_out_0"), "{}", m.held_out);
     // Another plan is not mixed into a fit's folder.
     let other = Plan::new(
         shot(),

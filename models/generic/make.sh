@@ -13,10 +13,15 @@
 #   3. The ISR network conditioned on the fabric (`--condition`), and the same network blind
 #      to it (for the comparison in README.md; not shipped).
 #   4. The coarse model calibrated over all training shots (`clothsr lab calibrate`).
+#   5. The held-out figures (`eval` stage): on every held-out start, the whole pipeline with
+#      these models (`clothsr lab run`, then `clothsr eval`) beside the simulator's own coarse
+#      model upsampled and the ISR on it; the ISR alone on M_int (`clothsr lab sr`),
+#      conditioned and blind; and the predictability floor of each shot's first start (`clothsr
+#      lab fork`). `summarise.py` gathers them into models.json and held_out.md.
 #
 # Every step resumes where it stopped: run it again after a kill. Stages can be run alone:
 #
-#   CLOTHSR=path/to/clothsr DATA=/path/to/data bash models/generic/make.sh [data|train|all]
+#   CLOTHSR=path/to/clothsr DATA=/path/to/data bash models/generic/make.sh [data|train|eval|all]
 #
 # Data: about 6 CPU-minutes a training shot on this project's machine; JOBS=2 runs two at once.
 set -euo pipefail
@@ -97,4 +102,41 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
     sed "s|$(pwd)/||g" "${d%/}/manifest.json" > "$OUT/data/$(basename "$d").manifest.json"
   done
   rm -rf "$OUT/isr/checkpoint"
+fi
+
+if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
+  EV=$DATA/eval
+  mkdir -p "$EV"
+  # The simulator's own coarse model with the same ISR: a folder without coarse.json.
+  mkdir -p "$EV/paper_model"
+  ln -sfn "$(cd "$OUT" && pwd)/isr" "$EV/paper_model/isr"
+  while read -r scene; do
+    name=$(basename "$scene" .usda)
+    for k in 0 1 2; do
+      h=$DATA/held_out/${name}_s$k
+      e=$EV/${name}_s$k
+      [ -f "$e.eval.csv" ] && continue
+      # shellcheck disable=SC2086
+      "$BIN" lab sr --model "$OUT/isr" --data "$h" --csv "$e.sr.csv" > "$e.sr.txt"
+      # shellcheck disable=SC2086
+      "$BIN" lab sr --model "$DATA/isr_blind" --data "$h" --csv "$e.blind.csv" > "$e.blind.txt"
+      # shellcheck disable=SC2086
+      "$BIN" lab run "$scene" --models "$OUT" --frames 50 ${STARTS[$k]} -o "$e.generic.usdc" \
+        --upsampled-out "$e.calibrated_up.usdc" --restart > "$e.run.log" 2>&1
+      # shellcheck disable=SC2086
+      "$BIN" lab run "$scene" --models "$EV/paper_model" --frames 50 ${STARTS[$k]} \
+        -o "$e.paper.usdc" --upsampled-out "$e.paper_up.usdc" --restart > "$e.paper.log" 2>&1
+      floor=()
+      if [ "$k" = 0 ]; then
+        "$BIN" lab fork "$h" --frame 1 -o "$EV/${name}_s0_fork" > "$e.fork.log" 2>&1
+        floor=(--floor "$EV/${name}_s0_fork")
+      fi
+      "$BIN" eval --gt "$h" --pred "$e.generic.usdc" \
+        --baseline "paper_upsampled=$e.paper_up.usdc" \
+        --baseline "calibrated_upsampled=$e.calibrated_up.usdc" \
+        --baseline "paper_with_isr=$e.paper.usdc" "${floor[@]}" \
+        --csv "$e.eval.csv" > "$e.eval.txt"
+    done
+  done < "$DATA/held_out.txt"
+  python3 models/generic/summarise.py "$DATA" "$OUT"
 fi

@@ -194,6 +194,20 @@ fn print_errors(series: &[Series]) -> f64 {
             println!("prediction / {name}: {:.3}×", pred_mean / b);
         }
     }
+    // The folds and wrinkles in kind, wherever they lie: the distribution of bend angles
+    // (between the normals of triangles sharing an edge), which a twin of the ground truth
+    // reproduces even where its vertices have drifted away.
+    println!(
+        "{:<24} {:>12} {:>16} {:>18}",
+        "bend angles", "W1 to gt °", "mean °", "ground truth's °"
+    );
+    for (name, m) in series {
+        let s = summarise(m);
+        println!(
+            "{:<24} {:>12.3} {:>16.3} {:>18.3}",
+            name, s.bend_w1_deg, s.bend_mean_deg, s.gt_bend_mean_deg
+        );
+    }
     pred_mean
 }
 

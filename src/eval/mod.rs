@@ -10,7 +10,8 @@ use nalgebra::Vector3;
 use crate::error::{Error, Result};
 use crate::io::usd::{read_usd, MeshRole};
 pub use crate::metrics::{
-    jitter_m, mean_distance_mm, mean_max_std, normal_angle_deg, vertex_errors,
+    bend_angles_deg, hinges, jitter_m, mean_distance_mm, mean_max_std, normal_angle_deg,
+    vertex_errors, wasserstein1_sorted,
 };
 
 /// The cloth of an animation file: every cloth mesh of the stage, concatenated in prim order.
@@ -241,6 +242,14 @@ pub struct FrameMetrics {
     pub jitter_mm: Option<f64>,
     /// The same of the ground truth, mm.
     pub gt_jitter_mm: Option<f64>,
+    /// The 1-Wasserstein distance between the distributions of the prediction's and the ground
+    /// truth's bend angles (the angle between the normals of two triangles sharing an edge),
+    /// degrees: how far the folds and wrinkles differ in kind, wherever they lie.
+    pub bend_w1_deg: f64,
+    /// Mean bend angle of the prediction, degrees (more wrinkled: larger).
+    pub bend_mean_deg: f64,
+    /// The same of the ground truth, degrees.
+    pub gt_bend_mean_deg: f64,
 }
 
 /// Compares `pred` with `gt` at every time code they share. Fails when they share none or
@@ -269,19 +278,28 @@ pub fn compare(gt: &Animation, pred: &Animation, pred_path: &Path) -> Result<Vec
         (k > 0 && k + 1 < a.frames.len())
             .then(|| jitter_m(&a.frames[k - 1], &a.frames[k], &a.frames[k + 1]) * 1e3)
     };
+    let hinges = hinges(&gt.triangles);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     Ok(pairs
         .iter()
         .map(|&(i, j)| {
             let (g, p) = (&gt.frames[i], &pred.frames[j]);
-            let (mean, max, std) = mean_max_std(&vertex_errors(g, p));
+            let (mean_m, max, std) = mean_max_std(&vertex_errors(g, p));
+            let (bend_g, bend_p) = (
+                bend_angles_deg(&gt.triangles, &hinges, g),
+                bend_angles_deg(&gt.triangles, &hinges, p),
+            );
             FrameMetrics {
                 time_code: gt.time_codes[i],
-                mean_mm: mean * 1e3,
+                mean_mm: mean_m * 1e3,
                 max_mm: max * 1e3,
                 std_mm: std * 1e3,
                 normal_deg: normal_angle_deg(&gt.triangles, g, p),
                 jitter_mm: jitter(pred, j),
                 gt_jitter_mm: jitter(gt, i),
+                bend_w1_deg: wasserstein1_sorted(&bend_p, &bend_g),
+                bend_mean_deg: mean(&bend_p),
+                gt_bend_mean_deg: mean(&bend_g),
             }
         })
         .collect())
@@ -370,6 +388,12 @@ pub struct Summary {
     pub jitter_mm: f64,
     /// Mean jitter of the ground truth over the same frames, mm.
     pub gt_jitter_mm: f64,
+    /// Mean distance between the bend-angle distributions, degrees.
+    pub bend_w1_deg: f64,
+    /// Mean bend angle of the prediction, degrees.
+    pub bend_mean_deg: f64,
+    /// Mean bend angle of the ground truth over the same frames, degrees.
+    pub gt_bend_mean_deg: f64,
 }
 
 /// The summary of a series of frames.
@@ -389,25 +413,31 @@ pub fn summarise(m: &[FrameMetrics]) -> Summary {
         normal_deg: avg(&|x| x.normal_deg),
         jitter_mm: jit.iter().map(|j| j.0).sum::<f64>() / k,
         gt_jitter_mm: jit.iter().map(|j| j.1).sum::<f64>() / k,
+        bend_w1_deg: avg(&|x| x.bend_w1_deg),
+        bend_mean_deg: avg(&|x| x.bend_mean_deg),
+        gt_bend_mean_deg: avg(&|x| x.gt_bend_mean_deg),
     }
 }
 
 /// Writes every series' per-frame metrics as one CSV (a `series` column names each), atomically.
 pub fn write_csv(path: &Path, series: &[(String, Vec<FrameMetrics>)]) -> Result<()> {
     let mut s =
-        String::from("series,time_code,mean_mm,max_mm,std_mm,normal_deg,jitter_mm,gt_jitter_mm\n");
+        String::from("series,time_code,mean_mm,max_mm,std_mm,normal_deg,jitter_mm,gt_jitter_mm,bend_w1_deg,bend_mean_deg,gt_bend_mean_deg\n");
     let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     for (name, ms) in series {
         for m in ms {
             s.push_str(&format!(
-                "{name},{},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+                "{name},{},{:.6},{:.6},{:.6},{:.6},{},{},{:.4},{:.4},{:.4}\n",
                 m.time_code,
                 m.mean_mm,
                 m.max_mm,
                 m.std_mm,
                 m.normal_deg,
                 opt(m.jitter_mm),
-                opt(m.gt_jitter_mm)
+                opt(m.gt_jitter_mm),
+                m.bend_w1_deg,
+                m.bend_mean_deg,
+                m.gt_bend_mean_deg
             ));
         }
     }
@@ -516,12 +546,19 @@ mod tests {
             normal_deg: 1.0,
             jitter_mm: j,
             gt_jitter_mm: j.map(|x| 2.0 * x),
+            bend_w1_deg: mean,
+            bend_mean_deg: 10.0,
+            gt_bend_mean_deg: 12.0,
         };
         let s = summarise(&[f(1.0, 1.0, None), f(2.0, 3.0, Some(0.2)), f(3.0, 2.0, None)]);
         assert_eq!(s.frames, 3);
         assert!((s.mean_mm - 2.0).abs() < 1e-12);
         assert!((s.max_mm - 6.0).abs() < 1e-12);
         assert!((s.jitter_mm - 0.2).abs() < 1e-12 && (s.gt_jitter_mm - 0.4).abs() < 1e-12);
+        assert!((s.bend_w1_deg - 2.0).abs() < 1e-12);
+        assert!(
+            (s.bend_mean_deg - 10.0).abs() < 1e-12 && (s.gt_bend_mean_deg - 12.0).abs() < 1e-12
+        );
     }
 
     #[test]

@@ -458,8 +458,77 @@ struct HeldOut {
     /// The ISR on M_int against the fine simulation, and M_int upsampled, mean over frames, mm.
     isr_mm: f64,
     upsampled_mm: f64,
+    /// The bend-angle distributions' distance to the fine simulation's, of the ISR's meshes and
+    /// of M_int upsampled, mean over frames, degrees.
+    isr_bend_w1_deg: f64,
+    upsampled_bend_w1_deg: f64,
     /// Per frame: (ISR, upsampled) mm.
     per_frame: Vec<(f64, f64)>,
+    /// The whole pipeline with the fit's models (the calibrated coarse model and the ISR)
+    /// against the fine simulation, and the simulator's own coarse model upsampled from the
+    /// same start (the paper's baseline), per frame, mm.
+    run_per_frame: Vec<(f64, f64)>,
+}
+
+impl HeldOut {
+    /// Mean over frames of the whole pipeline and of the baseline, mm.
+    fn run_means_mm(&self) -> (f64, f64) {
+        let n = self.run_per_frame.len().max(1) as f64;
+        (
+            self.run_per_frame.iter().map(|p| p.0).sum::<f64>() / n,
+            self.run_per_frame.iter().map(|p| p.1).sum::<f64>() / n,
+        )
+    }
+}
+
+/// The whole pipeline on held-out variation `v` with the fit's ISR and coarse model `cal`,
+/// beside the simulator's own coarse model upsampled, against the variation's fine simulation:
+/// per frame (pipeline, baseline) mm.
+fn run_held_out(
+    plan: &Plan,
+    dir: &Path,
+    v: &PlannedVariation,
+    isr: &Isr,
+    cal: &CoarseCalibration,
+) -> Result<Vec<(f64, f64)>> {
+    let data = data_dir(dir, &v.id);
+    let gt = crate::eval::Animation::read_dataset(&data, 0.0)?;
+    let mut scene = plan.shot.load()?;
+    v.variation.apply(&mut scene);
+    let opts = |coarse: CoarseCalibration| super::Options {
+        coarse_edge_m: plan.coarse_edge_m,
+        fast: plan.fast,
+        self_collision: !plan.fast,
+        match_contact_thickness: true,
+        dress: true,
+        coarse,
+        push_out: true,
+    };
+    let mut run = super::Pipeline::new(&scene, isr, None, opts(cal.clone()))?;
+    let mut paper = super::Pipeline::new(&scene, isr, None, opts(CoarseCalibration::default()))?;
+    if run.fine.num_vertices() != gt.num_vertices() {
+        return Err(Error::bad_input(
+            &data,
+            format!(
+                "its fine mesh has {} vertices, the run's {}",
+                gt.num_vertices(),
+                run.fine.num_vertices()
+            ),
+        ));
+    }
+    run.super_resolve()?;
+    let mut out = Vec::with_capacity(gt.frames.len());
+    for truth in &gt.frames {
+        let fine = run.advance_frame()?;
+        for _ in 0..paper.coarse.steps_per_frame {
+            paper.coarse.step()?;
+        }
+        out.push((
+            crate::metrics::mean_distance_mm(truth, fine),
+            crate::metrics::mean_distance_mm(truth, &paper.upsampled()?),
+        ));
+    }
+    Ok(out)
 }
 
 fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
@@ -480,6 +549,8 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
         let e = evaluate(&seq, &isr, false, |_, _| ControlFlow::Continue(()))?;
         let per_frame: Vec<(f64, f64)> =
             e.frames.iter().map(|f| (f.sr_mm, f.upsampled_mm)).collect();
+        let _ = report(format!("running the pipeline on {}", v.id));
+        let run_per_frame = run_held_out(plan, dir, v, &isr, &chosen)?;
         let n = per_frame.len().max(1) as f64;
         rows.push(HeldOut {
             id: v.id.clone(),
@@ -493,7 +564,10 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
                 .unwrap_or(f64::NAN),
             isr_mm: per_frame.iter().map(|p| p.0).sum::<f64>() / n,
             upsampled_mm: per_frame.iter().map(|p| p.1).sum::<f64>() / n,
+            isr_bend_w1_deg: e.mean_bend_w1_deg().0,
+            upsampled_bend_w1_deg: e.mean_bend_w1_deg().1,
             per_frame,
+            run_per_frame,
         });
     }
     write_atomic(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
@@ -501,7 +575,7 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
         .iter()
         .flat_map(|r| {
             let metrics = |pick: fn(&(f64, f64)) -> f64| {
-                r.per_frame
+                r.run_per_frame
                     .iter()
                     .enumerate()
                     .map(|(k, p)| FrameMetrics {
@@ -512,12 +586,18 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
                         normal_deg: 0.0,
                         jitter_mm: None,
                         gt_jitter_mm: None,
+                        bend_w1_deg: 0.0,
+                        bend_mean_deg: 0.0,
+                        gt_bend_mean_deg: 0.0,
                     })
                     .collect()
             };
             [
-                (format!("ISR {}", r.id), metrics(|p| p.0)),
-                (format!("upsampled {}", r.id), metrics(|p| p.1)),
+                (format!("fit's models {}", r.id), metrics(|p| p.0)),
+                (
+                    format!("simulator's coarse model upsampled {}", r.id),
+                    metrics(|p| p.1),
+                ),
             ]
         })
         .collect();
@@ -529,7 +609,43 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
     .map_err(|e| tracing::warn!("no plot: {e}"))
     .is_ok();
     let text = report_text(plan, &chosen, &rows, plotted);
-    write_atomic(&dir.join("report.md"), text.as_bytes())
+    write_atomic(&dir.join("report.md"), text.as_bytes())?;
+    write_manifest(plan, dir, &rows)
+}
+
+/// The fit's `models.json`: the whole pipeline's held-out figures, which `clothsr run` reports
+/// and chooses its path by.
+fn write_manifest(plan: &Plan, dir: &Path, rows: &[HeldOut]) -> Result<()> {
+    let n = rows.len().max(1) as f64;
+    let mean =
+        |pick: fn((f64, f64)) -> f64| rows.iter().map(|r| pick(r.run_means_mm())).sum::<f64>() / n;
+    let ids: Vec<&str> = rows.iter().map(|r| r.id.as_str()).collect();
+    let manifest = super::ModelsManifest {
+        format_version: super::ModelsManifest::FORMAT_VERSION,
+        scene: plan.shot.scene.display().to_string(),
+        held_out: format!("data/{{{}}}", ids.join(",")),
+        protocol: format!(
+            "`clothsr fit`: the whole pipeline with these models on each held-out variation, \
+             {} frames, against its fine simulation, mean over frames and variations; baseline: \
+             the simulator's own coarse model, upsampled, from the same starts. report.md",
+            plan.frames
+        ),
+        paths: [(
+            super::ModelPath::CoarseAlone.key().to_string(),
+            super::models::PathFigures {
+                fine_error_mm: mean(|p| p.0),
+                baseline_mm: Some(mean(|p| p.1)),
+            },
+        )]
+        .into(),
+        best: super::ModelPath::CoarseAlone.key().to_string(),
+    };
+    let json =
+        serde_json::to_string_pretty(&manifest).map_err(|e| Error::Invalid(e.to_string()))?;
+    write_atomic(
+        &dir.join(super::ModelsManifest::FILE),
+        (json + "\n").as_bytes(),
+    )
 }
 
 fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotted: bool) -> String {
@@ -537,9 +653,15 @@ fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotte
         "# Fit of {}\n\nQuality {:?}: {} training and {} held-out variations of {} frames, \
          {:.1} mm coarse / {:.1} mm fine; the ISR network {}.\n\n\
          Coarse model chosen on the training variations: {chosen}.\n\n\
-         ## Held out\n\n\
-         | variation | coarse alone, simulator's model (mm to M_int) | calibrated | ISR on M_int (mm to the fine simulation) | M_int upsampled | ISR / upsampled |\n\
-         |---|---|---|---|---|---|\n",
+         ## The whole pipeline, held out\n\n\
+         `clothsr run` with these models on each held-out variation against its fine \
+         simulation, beside the simulator's own coarse model upsampled (the paper's baseline), \
+         mean over frames.\n\n\
+         | variation | fit's models (mm) | simulator's coarse model upsampled (mm) | ratio |\n\
+         |---|---|---|---|\n{}\n\
+         ## The stages, held out\n\n\
+         | variation | coarse alone, simulator's model (mm to M_int) | calibrated | ISR on M_int (mm to the fine simulation) | M_int upsampled | ISR / upsampled | bend angles, ISR (W1 °) | upsampled |\n\
+         |---|---|---|---|---|---|---|---|\n",
         plan.shot.scene.display(),
         plan.quality,
         plan.of_role(Role::Train).count(),
@@ -550,20 +672,30 @@ fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotte
         match &plan.fine_tune_from {
             Some(d) => format!("fine-tuned from {}", d.display()),
             None => "trained from scratch".into(),
-        }
+        },
+        rows.iter()
+            .map(|r| {
+                let (run, base) = r.run_means_mm();
+                format!("| {} | {run:.2} | {base:.2} | {:.2} |\n", r.id, run / base)
+            })
+            .collect::<String>()
     );
     for r in rows {
         s += &format!(
-            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
             r.id,
             r.coarse_own_mm,
             r.coarse_calibrated_mm,
             r.isr_mm,
             r.upsampled_mm,
-            r.isr_mm / r.upsampled_mm
+            r.isr_mm / r.upsampled_mm,
+            r.isr_bend_w1_deg,
+            r.upsampled_bend_w1_deg
         );
     }
-    s += "\nPer-frame errors: `held_out.csv`.\n";
+    s += "\nBend angles: the distance (1-Wasserstein, degrees) between the distribution of the \
+          angles between neighbouring triangles and the fine simulation's: the folds and \
+          wrinkles in kind, wherever they lie.\n\nPer-frame errors: `held_out.csv`.\n";
     if plotted {
         s += "\n![Error over time](held_out.png)\n";
     }

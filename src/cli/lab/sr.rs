@@ -71,7 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     if let Some(csv) = &args.csv {
         let mut text = String::from(
-            "frame,sr_mm,sr_max_mm,upsampled_mm,phong_mm,sr_normal_deg,phong_normal_deg,sr_jitter_mm,phong_jitter_mm,gt_jitter_mm,\
+            "frame,sr_mm,sr_max_mm,upsampled_mm,phong_mm,sr_normal_deg,phong_normal_deg,sr_bend_w1_deg,upsampled_bend_w1_deg,sr_jitter_mm,phong_jitter_mm,gt_jitter_mm,\
              sr_jitter_error_mm,phong_jitter_error_mm,rasterise_s,network_s,readout_s\n",
         );
         for f in &e.frames {
@@ -82,7 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             let _ = writeln!(
                 text,
-                "{},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{},{},{},{},{},{:.4},{:.4},{:.4}",
+                "{},{:.5},{:.5},{:.5},{:.5},{:.3},{:.3},{:.4},{:.4},{},{},{},{},{},{:.4},{:.4},{:.4}",
                 f.frame,
                 f.sr_mm,
                 f.sr_max_mm,
@@ -90,6 +90,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 f.phong_mm,
                 f.sr_normal_deg,
                 f.phong_normal_deg,
+                f.sr_bend_w1_deg,
+                f.upsampled_bend_w1_deg,
                 j(|j| j.sr),
                 j(|j| j.phong),
                 j(|j| j.gt),
@@ -119,6 +121,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let (sr_deg, phong_deg) = e.mean_normal_deg();
     println!("normal angle error       SR {sr_deg:.2}°, Phong {phong_deg:.2}°");
+    let (sr_bend, up_bend) = e.mean_bend_w1_deg();
+    println!(
+        "bend angles (W1 to gt)   SR {sr_bend:.3}°, upsampled {up_bend:.3}° (the folds' distribution)"
+    );
     if let Some(j) = e.mean_jitter_mm() {
         println!(
             "jitter                   SR {:.4} mm, Phong {:.4} mm, fine simulation {:.4} mm",

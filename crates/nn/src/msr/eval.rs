@@ -30,6 +30,11 @@ pub struct FrameErrors {
     pub sr_normal_deg: f64,
     /// The same for the Phong-upsampled M_int.
     pub phong_normal_deg: f64,
+    /// The 1-Wasserstein distance between the SR mesh's bend angles and the fine simulation's
+    /// ([`crate::metrics::bend_angles_deg`]), degrees: its folds and wrinkles in kind.
+    pub sr_bend_w1_deg: f64,
+    /// The same for the upsampled M_int.
+    pub upsampled_bend_w1_deg: f64,
     /// Temporal jitter ([`crate::metrics::jitter_m`], mean ‖x_t − 2x_{t−1} + x_{t−2}‖ over
     /// vertices) of the SR meshes, the Phong-upsampled M_int and the fine simulation, mm;
     /// from the third frame on.
@@ -85,6 +90,14 @@ impl SequenceErrors {
         )
     }
 
+    /// Mean over frames of the bend-angle distance of SR and of the upsampled M_int, degrees.
+    pub fn mean_bend_w1_deg(&self) -> (f64, f64) {
+        (
+            mean(self.frames.iter().map(|f| f.sr_bend_w1_deg)),
+            mean(self.frames.iter().map(|f| f.upsampled_bend_w1_deg)),
+        )
+    }
+
     /// Mean jitter over the frames that have one (SR, Phong, ground truth), mm.
     pub fn mean_jitter_mm(&self) -> Option<Jitter> {
         let j: Vec<Jitter> = self.frames.iter().filter_map(|f| f.jitter_mm).collect();
@@ -130,6 +143,7 @@ pub fn evaluate(
     let conditions = seq.conditions.clone().unwrap_or_default();
     let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh, &conditions)?;
     let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
+    let hinges = crate::metrics::hinges(&seq.fine_mesh.triangles);
     let mut out = SequenceErrors::default();
     // The last two frames' SR and Phong meshes, for the jitter.
     type Positions = Vec<Vector3<f64>>;
@@ -140,7 +154,15 @@ pub fn evaluate(
         }
         let fine = sr.frame(int)?;
         let (sr_mm, sr_max_mm) = vertex_error_mm(&fine, gt);
-        let (upsampled_mm, _) = vertex_error_mm(&transfer.upsample(int), gt);
+        let upsampled = transfer.upsample(int);
+        let (upsampled_mm, _) = vertex_error_mm(&upsampled, gt);
+        let bends = |x: &[Vector3<f64>]| {
+            crate::metrics::bend_angles_deg(&seq.fine_mesh.triangles, &hinges, x)
+        };
+        let gt_bends = bends(gt);
+        let sr_bend_w1_deg = crate::metrics::wasserstein1_sorted(&bends(&fine), &gt_bends);
+        let upsampled_bend_w1_deg =
+            crate::metrics::wasserstein1_sorted(&bends(&upsampled), &gt_bends);
         let phong = transfer.upsample_phong(int, &seq.coarse_mesh.triangles, isr.cfg.phong_alpha);
         let (phong_mm, _) = vertex_error_mm(&phong, gt);
         let tris = &seq.fine_mesh.triangles;
@@ -175,6 +197,8 @@ pub fn evaluate(
             phong_mm,
             sr_normal_deg,
             phong_normal_deg,
+            sr_bend_w1_deg,
+            upsampled_bend_w1_deg,
             jitter_mm,
             times: sr.times,
         });
