@@ -30,6 +30,72 @@ fn on_the_walking_avatar_at(pattern: &str, edge_m: f64) -> Simulation {
     Simulation::new(&scene, edge_m, |p| p.newton_exact = false).expect("set-up")
 }
 
+/// A dressed garment as a modelled one arrives: its seams welded (one vertex where the
+/// pattern has two), its pattern forgotten. Flattened (`mesh::flatten`), it must give the
+/// pattern back up to a rigid motion of each chart: returns the distortion against the
+/// pattern and the number of charts.
+fn flatten_dressed(sim: &Simulation, name: &str) -> (clothsr::mesh::Distortion, usize) {
+    let mesh = &sim.sim.model.mesh;
+    let n = mesh.num_vertices();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for &[a, b] in &mesh.seam_pairs {
+        let (ra, rb) = (root(&mut parent, a as usize), root(&mut parent, b as usize));
+        parent[ra.max(rb)] = ra.min(rb);
+    }
+    let mut index = vec![u32::MAX; n];
+    let mut points: Vec<nalgebra::Vector3<f64>> = Vec::new();
+    let mut counts: Vec<f64> = Vec::new();
+    for v in 0..n {
+        let r = root(&mut parent, v);
+        if index[r] == u32::MAX {
+            index[r] = points.len() as u32;
+            points.push(nalgebra::Vector3::zeros());
+            counts.push(0.0);
+        }
+        points[index[r] as usize] += sim.state.x[v];
+        counts[index[r] as usize] += 1.0;
+    }
+    for (p, c) in points.iter_mut().zip(&counts) {
+        *p /= *c;
+    }
+    let tris: Vec<[u32; 3]> = mesh
+        .triangles
+        .iter()
+        .map(|t| t.map(|v| index[root(&mut parent, v as usize)]))
+        .collect();
+    let f = clothsr::mesh::flatten(&points, &tris, &clothsr::mesh::FlattenOptions::default())
+        .expect("flatten");
+    let pattern: Vec<nalgebra::Vector2<f64>> = mesh
+        .triangles
+        .iter()
+        .flat_map(|t| t.map(|v| mesh.material[v as usize]))
+        .collect();
+    let d = f.distortion_against(&pattern);
+    println!(
+        "{name}: {} panels, {} vertices welded to {}; flattened into {} charts; against the \
+         pattern: area {:.2} % mean, {:.1} % max; angle {:.2}° mean, {:.1}° max; against the \
+         3D mesh: area {:.2} % mean, angle {:.2}° mean",
+        mesh.panel_names.len(),
+        n,
+        points.len(),
+        f.charts,
+        d.area_mean * 100.0,
+        d.area_max * 100.0,
+        d.angle_mean_deg,
+        d.angle_max_deg,
+        f.distortion.area_mean * 100.0,
+        f.distortion.angle_mean_deg
+    );
+    (d, f.charts)
+}
+
 /// The avatar's points at the simulation's time.
 fn body_now(sim: &Simulation) -> Vec<nalgebra::Vector3<f64>> {
     let mut pts = Vec::new();
@@ -69,6 +135,11 @@ fn issue_3_pencil_skirt_closes_around_the_walking_avatar_and_walks_with_it() {
         d.max_penetration_m * 1e3
     );
     assert!(sim.state.x.iter().all(|p| p.iter().all(|c| c.is_finite())));
+    // Issue 50: the dressed skirt, welded and stripped of its pattern, flattens back to it.
+    // The hips have zero ease: the dressed skirt is stretched there, which the flattening
+    // (rest lengths from the 3D mesh) keeps.
+    let (fl, _) = flatten_dressed(&sim, "pencil skirt");
+    assert!(fl.area_mean < 0.06 && fl.angle_mean_deg < 2.5, "{fl:?}");
 
     // Half a second of walking: the skirt stays outside the body and goes along with it (no
     // vertex far from the body, which walks 0.3 m meanwhile).
@@ -112,6 +183,8 @@ fn issue_3_circle_skirt_walks_without_passing_through_itself() {
         on_the_walking_avatar("patterns/mh_skirt_circle/mh_skirt_circle_specification.json");
     let dhat_m = sim.sim.params.collision.dhat_m;
     let d = sim.dress(2.0, 0.3, 1e-3).expect("dressing");
+    let (fl, _) = flatten_dressed(&sim, "circle skirt");
+    assert!(fl.area_mean < 0.02 && fl.angle_mean_deg < 1.0, "{fl:?}");
     assert!(d.seam_gap_m < 2e-3, "{d:?}");
     assert_eq!(sim.sim.self_intersections(&sim.state.x), 0, "dressed");
     let centroid =

@@ -104,6 +104,45 @@ pub struct Flattening {
     pub distortion: Distortion,
 }
 
+impl Flattening {
+    /// This flattening's distortion against other flat coordinates of the same triangles'
+    /// corners (`reference[3 t + j]`: corner `j` of triangle `t`), such as the sewing pattern a
+    /// garment was cut from: how well it recovers them up to a rigid motion of each chart.
+    /// Mirrored charts count as recovered (`flipped` stays 0); areas are weighted by the
+    /// reference's.
+    pub fn distortion_against(&self, reference: &[Vector2<f64>]) -> Distortion {
+        let angles = |p: [Vector2<f64>; 3]| {
+            [0, 1, 2].map(|j| {
+                let (e1, e2) = (p[(j + 1) % 3] - p[j], p[(j + 2) % 3] - p[j]);
+                e1.perp(&e2).abs().atan2(e1.dot(&e2)).to_degrees()
+            })
+        };
+        let area = |p: [Vector2<f64>; 3]| 0.5 * (p[1] - p[0]).perp(&(p[2] - p[0])).abs();
+        let mut d = Distortion::default();
+        let mut total = 0.0;
+        for (uv, r) in self.corner_uv.chunks_exact(3).zip(reference.chunks_exact(3)) {
+            let (p, q) = ([uv[0], uv[1], uv[2]], [r[0], r[1], r[2]]);
+            let a_ref = area(q);
+            if a_ref <= 0.0 {
+                continue;
+            }
+            let da = (area(p) / a_ref - 1.0).abs();
+            let (gp, gq) = (angles(p), angles(q));
+            let dg = (0..3).map(|j| (gp[j] - gq[j]).abs()).sum::<f64>() / 3.0;
+            d.area_mean += a_ref * da;
+            d.angle_mean_deg += a_ref * dg;
+            d.area_max = d.area_max.max(da);
+            d.angle_max_deg = d.angle_max_deg.max(dg);
+            total += a_ref;
+        }
+        if total > 0.0 {
+            d.area_mean /= total;
+            d.angle_mean_deg /= total;
+        }
+        d
+    }
+}
+
 /// Flattens a triangle mesh into charts laid out in the plane (see the module documentation).
 ///
 /// Errors, naming the element, on an empty mesh, an index out of range, a point that is not
@@ -1111,6 +1150,28 @@ mod tests {
             "{}",
             edge_error(&points, &tris, &f)
         );
+    }
+
+    #[test]
+    fn distortion_against_a_reference_is_zero_for_itself_and_known_for_a_stretch() {
+        let (points, tris) = hemisphere(8, 24, 0.3);
+        let f = flatten(&points, &tris, &FlattenOptions::default()).expect("flatten");
+        let same = f.distortion_against(&f.corner_uv);
+        assert!(same.area_max < 1e-12 && same.angle_max_deg < 1e-9, "{same:?}");
+        // Mirrored and moved: still the same up to a rigid motion and reflection.
+        let mirrored: Vec<Vector2<f64>> = f
+            .corner_uv
+            .iter()
+            .map(|p| Vector2::new(3.0 - p.x, p.y + 1.0))
+            .collect();
+        let m = f.distortion_against(&mirrored);
+        assert!(m.area_max < 1e-9 && m.angle_max_deg < 1e-7, "{m:?}");
+        // The reference stretched 1.25× along x: every triangle's area is 1/1.25 of it.
+        let stretched: Vec<Vector2<f64>> =
+            f.corner_uv.iter().map(|p| Vector2::new(1.25 * p.x, p.y)).collect();
+        let s = f.distortion_against(&stretched);
+        assert!((s.area_mean - 0.2).abs() < 1e-9 && (s.area_max - 0.2).abs() < 1e-9, "{s:?}");
+        assert!(s.angle_mean_deg > 0.5, "{s:?}");
     }
 
     #[test]
