@@ -117,8 +117,14 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     let f = m.paths["coarse_alone"];
     let base = f.baseline_mm.expect("baseline");
     assert!(f.fine_error_mm > 0.0 && base > 0.0, "{f:?}");
-    assert!(f.fine_error_mm < 10.0 * base && base < 10.0 * f.fine_error_mm, "{f:?}");
+    assert!(
+        f.fine_error_mm < 10.0 * base && base < 10.0 * f.fine_error_mm,
+        "{f:?}"
+    );
     assert!(m.held_out.contains("held_out_0"), "{}", m.held_out);
+    // The held-out variation's twin (its predictability floor) resumed its source's fork.
+    assert!(a.join("data/held_out_0_twin/manifest.json").exists());
+    assert!(report.contains("fit's / floor"), "{report}");
     // Another plan is not mixed into a fit's folder.
     let other = Plan::new(
         shot(),

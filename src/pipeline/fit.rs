@@ -27,7 +27,7 @@ use crate::msr::training::{train, IsrTrainingConfig};
 use crate::msr::Isr;
 
 /// Version of `plan.json`.
-pub const PLAN_VERSION: u32 = 1;
+pub const PLAN_VERSION: u32 = 2;
 /// The plan's file in a fit's folder.
 pub const PLAN_FILE: &str = "plan.json";
 
@@ -79,6 +79,13 @@ pub struct PlannedVariation {
 pub enum TaskKind {
     /// The fine and coarse simulation of one variation (`data/<variation>`).
     Dataset {
+        /// The variation's id.
+        variation: String,
+    },
+    /// The held-out variation's fine simulation again from its first frame with the garment
+    /// moved 0.1 mm (`data/<variation>_twin`): the shot's predictability floor, which no
+    /// prediction is expected to beat.
+    Twin {
         /// The variation's id.
         variation: String,
     },
@@ -267,6 +274,17 @@ fn tasks(variations: &[PlannedVariation]) -> Vec<Task> {
         .filter(|v| v.role == Role::HeldOut)
         .map(data_id)
         .collect();
+    // The floor of the first held-out variation.
+    if let Some(v) = variations.iter().find(|v| v.role == Role::HeldOut) {
+        out.push(Task {
+            id: format!("twin_{}", v.id),
+            kind: TaskKind::Twin {
+                variation: v.id.clone(),
+            },
+            after: vec![data_id(v)],
+        });
+        all.push(format!("twin_{}", v.id));
+    }
     all.extend(["calibrate".to_string(), "train_isr".to_string()]);
     out.push(Task {
         id: "evaluate".into(),
@@ -345,6 +363,27 @@ fn data_dir(dir: &Path, variation: &str) -> PathBuf {
     dir.join("data").join(variation)
 }
 
+fn twin_dir(dir: &Path, variation: &str) -> PathBuf {
+    dir.join("data").join(format!("{variation}_twin"))
+}
+
+/// The predictability floor of a held-out variation with a twin: the mean distance between
+/// its fine simulation and the twin's over its frames (the shared first frame counting as
+/// zero, as `clothsr eval --floor` counts it), mm; `None` without a twin.
+fn floor_mm(dir: &Path, variation: &str) -> Result<Option<f64>> {
+    let twin = twin_dir(dir, variation);
+    if !twin.join("manifest.json").exists() {
+        return Ok(None);
+    }
+    let a = crate::eval::Animation::read_dataset(&data_dir(dir, variation), 0.0)?;
+    let b = crate::eval::Animation::read_dataset(&twin, 0.0)?;
+    let n = a.frames.len().min(b.frames.len());
+    let sum: f64 = (1..n)
+        .map(|k| crate::metrics::mean_distance_mm(&a.frames[k], &b.frames[k]))
+        .sum();
+    Ok(Some(sum / n.max(1) as f64))
+}
+
 /// Reports a task's progress; `Break` asks it to stop.
 type Report<'a> = dyn FnMut(String) -> ControlFlow<()> + 'a;
 
@@ -373,6 +412,26 @@ fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result
             generate(&scene, &name, &opts, &data_dir(dir, variation), |p| {
                 let _ = report(format!("frame {}/{}", p.frames_done, p.frames));
             })?;
+            Ok(true)
+        }
+        TaskKind::Twin { variation } => {
+            let scene = plan.shot.load()?;
+            let data = data_dir(dir, variation);
+            let m = crate::data::fork(
+                &data,
+                1,
+                nalgebra::Vector3::new(1e-4, 0.0, 0.0),
+                &twin_dir(dir, variation),
+            )?;
+            generate(
+                &scene,
+                &m.scene,
+                &m.options(plan.frames),
+                &twin_dir(dir, variation),
+                |p| {
+                    let _ = report(format!("frame {}/{}", p.frames_done, p.frames));
+                },
+            )?;
             Ok(true)
         }
         TaskKind::Calibrate => calibrate(plan, dir, report).map(|()| true),
@@ -468,6 +527,8 @@ struct HeldOut {
     /// against the fine simulation, and the simulator's own coarse model upsampled from the
     /// same start (the paper's baseline), per frame, mm.
     run_per_frame: Vec<(f64, f64)>,
+    /// The predictability floor ([`floor_mm`]), where measured.
+    floor_mm: Option<f64>,
 }
 
 impl HeldOut {
@@ -568,6 +629,7 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
             upsampled_bend_w1_deg: e.mean_bend_w1_deg().1,
             per_frame,
             run_per_frame,
+            floor_mm: floor_mm(dir, &v.id)?,
         });
     }
     write_atomic(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
@@ -613,6 +675,10 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
     write_manifest(plan, dir, &rows)
 }
 
+fn round3(x: f64) -> f64 {
+    (x * 1e3).round() / 1e3
+}
+
 /// The fit's `models.json`: the whole pipeline's held-out figures, which `clothsr run` reports
 /// and chooses its path by.
 fn write_manifest(plan: &Plan, dir: &Path, rows: &[HeldOut]) -> Result<()> {
@@ -633,8 +699,8 @@ fn write_manifest(plan: &Plan, dir: &Path, rows: &[HeldOut]) -> Result<()> {
         paths: [(
             super::ModelPath::CoarseAlone.key().to_string(),
             super::models::PathFigures {
-                fine_error_mm: mean(|p| p.0),
-                baseline_mm: Some(mean(|p| p.1)),
+                fine_error_mm: round3(mean(|p| p.0)),
+                baseline_mm: Some(round3(mean(|p| p.1))),
             },
         )]
         .into(),
@@ -657,8 +723,10 @@ fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotte
          `clothsr run` with these models on each held-out variation against its fine \
          simulation, beside the simulator's own coarse model upsampled (the paper's baseline), \
          mean over frames.\n\n\
-         | variation | fit's models (mm) | simulator's coarse model upsampled (mm) | ratio |\n\
-         |---|---|---|---|\n{}\n\
+         | variation | fit's models (mm) | simulator's coarse model upsampled (mm) | ratio | floor (mm) | fit's / floor |\n\
+         |---|---|---|---|---|---|\n{}\n\
+         The floor: the distance between the variation's fine simulation and its twin from a \
+         start 0.1 mm away, which no prediction is expected to beat.\n\n\
          ## The stages, held out\n\n\
          | variation | coarse alone, simulator's model (mm to M_int) | calibrated | ISR on M_int (mm to the fine simulation) | M_int upsampled | ISR / upsampled | bend angles, ISR (W1 °) | upsampled |\n\
          |---|---|---|---|---|---|---|---|\n",
@@ -676,7 +744,15 @@ fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotte
         rows.iter()
             .map(|r| {
                 let (run, base) = r.run_means_mm();
-                format!("| {} | {run:.2} | {base:.2} | {:.2} |\n", r.id, run / base)
+                let (floor, share) = match r.floor_mm {
+                    Some(f) => (format!("{f:.2}"), format!("{:.2}", run / f)),
+                    None => ("".into(), "".into()),
+                };
+                format!(
+                    "| {} | {run:.2} | {base:.2} | {:.2} | {floor} | {share} |\n",
+                    r.id,
+                    run / base
+                )
             })
             .collect::<String>()
     );

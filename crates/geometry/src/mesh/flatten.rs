@@ -120,7 +120,11 @@ impl Flattening {
         let area = |p: [Vector2<f64>; 3]| 0.5 * (p[1] - p[0]).perp(&(p[2] - p[0])).abs();
         let mut d = Distortion::default();
         let mut total = 0.0;
-        for (uv, r) in self.corner_uv.chunks_exact(3).zip(reference.chunks_exact(3)) {
+        for (uv, r) in self
+            .corner_uv
+            .chunks_exact(3)
+            .zip(reference.chunks_exact(3))
+        {
             let (p, q) = ([uv[0], uv[1], uv[2]], [r[0], r[1], r[2]]);
             let a_ref = area(q);
             if a_ref <= 0.0 {
@@ -1157,7 +1161,10 @@ mod tests {
         let (points, tris) = hemisphere(8, 24, 0.3);
         let f = flatten(&points, &tris, &FlattenOptions::default()).expect("flatten");
         let same = f.distortion_against(&f.corner_uv);
-        assert!(same.area_max < 1e-12 && same.angle_max_deg < 1e-9, "{same:?}");
+        assert!(
+            same.area_max < 1e-12 && same.angle_max_deg < 1e-9,
+            "{same:?}"
+        );
         // Mirrored and moved: still the same up to a rigid motion and reflection.
         let mirrored: Vec<Vector2<f64>> = f
             .corner_uv
@@ -1167,10 +1174,16 @@ mod tests {
         let m = f.distortion_against(&mirrored);
         assert!(m.area_max < 1e-9 && m.angle_max_deg < 1e-7, "{m:?}");
         // The reference stretched 1.25× along x: every triangle's area is 1/1.25 of it.
-        let stretched: Vec<Vector2<f64>> =
-            f.corner_uv.iter().map(|p| Vector2::new(1.25 * p.x, p.y)).collect();
+        let stretched: Vec<Vector2<f64>> = f
+            .corner_uv
+            .iter()
+            .map(|p| Vector2::new(1.25 * p.x, p.y))
+            .collect();
         let s = f.distortion_against(&stretched);
-        assert!((s.area_mean - 0.2).abs() < 1e-9 && (s.area_max - 0.2).abs() < 1e-9, "{s:?}");
+        assert!(
+            (s.area_mean - 0.2).abs() < 1e-9 && (s.area_max - 0.2).abs() < 1e-9,
+            "{s:?}"
+        );
         assert!(s.angle_mean_deg > 0.5, "{s:?}");
     }
 

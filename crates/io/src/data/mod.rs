@@ -465,7 +465,13 @@ fn resume_point(dir: &Path, manifest: &mut Manifest) -> Result<usize> {
         },
         ..manifest.clone()
     };
-    if same != old {
+    // As stored: a value read back from JSON may differ from the one computed in its last bit
+    // (serde_json's default parser), and a manifest copied from a read one (a fork's) carries
+    // that; once more through JSON both are the same.
+    let as_stored = |m: &Manifest| -> Option<serde_json::Value> {
+        serde_json::from_str(&serde_json::to_string(m).ok()?).ok()
+    };
+    if as_stored(&same) != as_stored(&old) {
         return Err(Error::bad_input(
             &manifest_path,
             "a different data set is already here (scene, variation, resolutions or meshes \
