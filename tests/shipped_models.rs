@@ -3,7 +3,7 @@
 //! whole pipeline on its scene, compared with `tests/data/reference/<folder>_<path>.json`
 //! within 1e-6 m (the corrector's fused pass may sum in another order on another thread
 //! count). Refactors must keep these; a change meant to alter the output records new
-//! references with `CLOTHSR_BLESS=1 cargo test --test shipped_models -- --include-ignored`
+//! references with `CLOTHSR_BLESS=1 cargo test --release --test shipped_models -- --include-ignored`
 //! and says why in its commit.
 
 use std::path::{Path, PathBuf};

@@ -4,9 +4,9 @@
 #
 #   1. The training shots (`clothsr lab scenes --set training`: 24 procedural shots, each a
 #      flat garment dropped on a moving or still collider, and 2 short skirts on the walking
-#      avatar of tests/data/avatars; see crates/geometry/src/scene/catalogue.rs), 60 frames
+#      avatar of tests/data/avatars; see crates/geometry/src/scene/catalogue.rs), TRAIN_FRAMES
 #      each, and the held-out shots
-#      (`--set held-out`: an unseen garment, collider, motion and fabrics), 50 frames from
+#      (`--set held-out`: an unseen garment, collider, motion and fabrics), HELD_FRAMES from
 #      three starts each.
 #   2. A fine (2.5 mm) and coarse (20 mm) simulation of each (`clothsr lab dataset`), in fast
 #      mode without self-collision, as every shipped model's data.
@@ -24,13 +24,15 @@
 #
 #   CLOTHSR=path/to/clothsr DATA=/path/to/data bash models/generic/make.sh [data|train|eval|all]
 #
-# Data: about 6 CPU-minutes a training shot on this project's machine; JOBS=2 runs two at once.
+# Data: about 4 CPU-minutes a training shot on this project's machine; JOBS=2 runs two at once.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${CLOTHSR:-clothsr}
 DATA=${DATA:-data/generic}
 OUT=${OUT:-models/generic}
 JOBS=${JOBS:-1}
+TRAIN_FRAMES=${TRAIN_FRAMES:-40}
+HELD_FRAMES=${HELD_FRAMES:-40}
 STAGE=${1:-all}
 COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
 # The avatar of the avatar shots: the walk baked to a point cache (2 s).
@@ -40,8 +42,8 @@ STARTS=("--garment-yaw-deg 0" "--garment-yaw-deg 25 --garment-offset 0.02,0,-0.0
   "--garment-yaw-deg -35 --garment-offset -0.015,0,0.02")
 
 mkdir -p "$DATA/scenes" "$DATA/held_out_scenes"
-"$BIN" lab scenes --set training --frames 60 -o "$DATA/scenes" > "$DATA/training.txt"
-"$BIN" lab scenes --set held-out --frames 50 -o "$DATA/held_out_scenes" > "$DATA/held_out.txt"
+"$BIN" lab scenes --set training --frames "$TRAIN_FRAMES" -o "$DATA/scenes" > "$DATA/training.txt"
+"$BIN" lab scenes --set held-out --frames "$HELD_FRAMES" -o "$DATA/held_out_scenes" > "$DATA/held_out.txt"
 
 dataset() { # SCENE OUT FRAMES [variation flags…]
   local scene=$1 out=$2 frames=$3
@@ -60,12 +62,12 @@ if [ "$STAGE" = data ] || [ "$STAGE" = all ]; then
     name=$(basename "$scene" .usda)
     flags=""
     case $name in *-avatar-*) flags="--avatar $AVATAR" ;; esac
-    jobs_list+=("$scene|$DATA/train/$name|60|$flags")
+    jobs_list+=("$scene|$DATA/train/$name|$TRAIN_FRAMES|$flags")
   done < "$DATA/training.txt"
   while read -r scene; do
     name=$(basename "$scene" .usda)
     for k in 0 1 2; do
-      jobs_list+=("$scene|$DATA/held_out/${name}_s$k|50|${STARTS[$k]}")
+      jobs_list+=("$scene|$DATA/held_out/${name}_s$k|$HELD_FRAMES|${STARTS[$k]}")
     done
   done < "$DATA/held_out.txt"
   mkdir -p "$DATA/train" "$DATA/held_out"
@@ -134,10 +136,10 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
       # shellcheck disable=SC2086
       "$BIN" lab sr --model "$DATA/isr_blind" --data "$h" --csv "$e.blind.csv" > "$e.blind.txt"
       # shellcheck disable=SC2086
-      "$BIN" lab run "$scene" --models "$OUT" --frames 50 ${STARTS[$k]} -o "$e.generic.usdc" \
+      "$BIN" lab run "$scene" --models "$OUT" --frames "$HELD_FRAMES" ${STARTS[$k]} -o "$e.generic.usdc" \
         --upsampled-out "$e.calibrated_up.usdc" --restart > "$e.run.log" 2>&1
       # shellcheck disable=SC2086
-      "$BIN" lab run "$scene" --models "$EV/paper_model" --frames 50 ${STARTS[$k]} \
+      "$BIN" lab run "$scene" --models "$EV/paper_model" --frames "$HELD_FRAMES" ${STARTS[$k]} \
         -o "$e.paper.usdc" --upsampled-out "$e.paper_up.usdc" --restart > "$e.paper.log" 2>&1
       floor=()
       if [ "$k" = 0 ] && [ "${FLOOR:-1}" = 1 ]; then
@@ -151,7 +153,7 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
         --csv "$e.eval.csv" > "$e.eval.txt"
     done
   done < "$DATA/held_out.txt"
-  python3 models/generic/summarise.py "$DATA" "$OUT"
+  python3 models/generic/summarise.py "$DATA" "$OUT" "$HELD_FRAMES"
   # What the models came from and were measured on, relative to the repository.
   mkdir -p "$OUT/data"
   for d in "$DATA"/train/*/ "$DATA"/held_out/*/; do

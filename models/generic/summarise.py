@@ -1,9 +1,10 @@
 """Gathers the held-out figures of models/generic/make.sh's eval stage into the folder's
 models.json (the figures `clothsr run` reads) and held_out.md (the tables README.md quotes).
 
-    python3 models/generic/summarise.py DATA OUT
+    python3 models/generic/summarise.py DATA OUT [FRAMES]
 
-DATA is make.sh's data folder (held_out.txt, eval/), OUT the models folder. Standard library
+DATA is make.sh's data folder (held_out.txt, eval/), OUT the models folder, FRAMES the
+held-out shots' length. Standard library
 only. Every figure is a mean over frames; a shot's is the mean over its starts, with the
 smallest and largest start beside it.
 """
@@ -40,6 +41,7 @@ def spread(values):
 
 def main():
     data, out = Path(sys.argv[1]), Path(sys.argv[2])
+    frames = int(sys.argv[3]) if len(sys.argv) > 3 else 40
     ev = data / "eval"
     shots = [Path(l.strip()).stem for l in open(data / "held_out.txt") if l.strip()]
     rows = {}
@@ -74,7 +76,7 @@ def main():
         "",
         "Written by `summarise.py` from `make.sh`'s eval stage. Three held-out shots (`clothsr lab "
         "scenes --set held-out`: an unseen garment, collider, motion and fabrics), each from three "
-        "starts (the shot as written, and turned and moved), 50 frames; fine simulations at 2.5 mm "
+        f"starts (the shot as written, and turned and moved), {frames} frames; fine simulations at 2.5 mm "
         "in fast mode without self-collision. Mean over frames, per shot the mean over its starts "
         "(smallest–largest start).",
         "",
@@ -142,7 +144,7 @@ def main():
         "scene": "the held-out shots of `clothsr lab scenes --set held-out`: "
         + ", ".join(shots),
         "held_out": "data/<shot>_s<k>.manifest.json",
-        "protocol": "Whole pipeline on each held-out shot from three starts, 50 frames (`clothsr "
+        "protocol": f"Whole pipeline on each held-out shot from three starts, {frames} frames (`clothsr "
         "lab run` with the start's variation, then `clothsr eval --gt`), fine output against the "
         "fine simulation, mean over frames, starts and shots; baseline: the simulator's own "
         "(paper's) coarse model, upsampled, from the same starts (`--upsampled-out`). Tables: "
