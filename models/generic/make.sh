@@ -10,17 +10,17 @@
 #      three starts each.
 #   2. A fine (2.5 mm) and coarse (20 mm) simulation of each (`clothsr lab dataset`), in fast
 #      mode without self-collision, as every shipped model's data.
-#   3. The ISR network conditioned on the fabric (`--condition`), and the same network blind
-#      to it (for the comparison in README.md; not shipped).
+#   3. The ISR network conditioned on the fabric (`--condition`).
 #   4. The coarse model calibrated over all training shots (`clothsr lab calibrate`).
 #   5. The held-out figures (`eval` stage): on every held-out start, the whole pipeline with
 #      these models (`clothsr lab run`, then `clothsr eval`) beside the simulator's own coarse
-#      model upsampled and the ISR on it; the ISR alone on M_int (`clothsr lab sr`),
-#      conditioned and blind; and the predictability floor of each shot's first start (`clothsr
-#      lab fork`). `summarise.py` gathers them into models.json and held_out.md.
+#      model upsampled and the ISR on it; the ISR alone on M_int (`clothsr lab sr`); the
+#      predictability floor of each shot's first start (`clothsr lab fork`); then the same ISR
+#      network trained blind to the fabric, on M_int (for the comparison; not shipped).
+#      `summarise.py` gathers them into models.json and held_out.md.
 #
 # Every step resumes where it stopped: run it again after a kill (FLOOR=0 skips the floors'
-# fine simulations in the eval stage). Stages can be run alone:
+# fine simulations, BLIND=0 the blind network). Stages can be run alone:
 #
 #   CLOTHSR=path/to/clothsr DATA=/path/to/data bash models/generic/make.sh [data|train|eval|all]
 #
@@ -111,12 +111,6 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
   fi
   for p in "${pids[@]}"; do wait "$p"; done
   rm -rf "$OUT/isr/checkpoint"
-  # The same network blind to the fabric, for the comparison in held_out.md (not shipped).
-  if ! trained "$DATA/isr_blind"; then
-    "$BIN" lab train isr "${train_data[@]}" -o "$DATA/isr_blind" --steps 12000 --no-init \
-      --unshuffle 4 --depths 2,2,2 > "$DATA/isr_blind.log" 2>&1
-    rm -rf "$DATA/isr_blind/checkpoint"
-  fi
 fi
 
 if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
@@ -133,8 +127,6 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
       [ -f "$e.eval.csv" ] && continue
       # shellcheck disable=SC2086
       "$BIN" lab sr --model "$OUT/isr" --data "$h" --csv "$e.sr.csv" > "$e.sr.txt"
-      # shellcheck disable=SC2086
-      "$BIN" lab sr --model "$DATA/isr_blind" --data "$h" --csv "$e.blind.csv" > "$e.blind.txt"
       # shellcheck disable=SC2086
       "$BIN" lab run "$scene" --models "$OUT" --frames "$HELD_FRAMES" ${STARTS[$k]} -o "$e.generic.usdc" \
         --upsampled-out "$e.calibrated_up.usdc" --restart > "$e.run.log" 2>&1
@@ -153,6 +145,27 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
         --csv "$e.eval.csv" > "$e.eval.txt"
     done
   done < "$DATA/held_out.txt"
+  # The same network blind to the fabric, for the comparison in held_out.md (not shipped).
+  if [ "${BLIND:-1}" = 1 ]; then
+    train_data=()
+    for d in "$DATA"/train/*/; do
+      train_data+=(--data "${d%/}")
+    done
+    if ! { [ -f "$DATA/isr_blind/model.bpk" ] && [ ! -d "$DATA/isr_blind/checkpoint" ]; }; then
+      "$BIN" lab train isr "${train_data[@]}" -o "$DATA/isr_blind" --steps 12000 --no-init \
+        --unshuffle 4 --depths 2,2,2 > "$DATA/isr_blind.log" 2>&1
+      rm -rf "$DATA/isr_blind/checkpoint"
+    fi
+    while read -r scene; do
+      name=$(basename "$scene" .usda)
+      for k in 0 1 2; do
+        e=$EV/${name}_s$k
+        [ -f "$e.blind.csv" ] && continue
+        "$BIN" lab sr --model "$DATA/isr_blind" --data "$DATA/held_out/${name}_s$k" \
+          --csv "$e.blind.csv" > "$e.blind.txt"
+      done
+    done < "$DATA/held_out.txt"
+  fi
   python3 models/generic/summarise.py "$DATA" "$OUT" "$HELD_FRAMES"
   # What the models came from and were measured on, relative to the repository.
   mkdir -p "$OUT/data"

@@ -30,13 +30,22 @@ def series_means(path, column):
 
 
 def column_mean(path, column):
+    """Mean of `column` over frames; None when the file is missing (a stage skipped)."""
+    if not Path(path).exists():
+        return None
     with open(path, newline="") as f:
         values = [float(r[column]) for r in csv.DictReader(f)]
     return sum(values) / len(values)
 
 
 def spread(values):
+    if any(v is None for v in values):
+        return "not run"
     return f"{statistics.mean(values):.2f} ({min(values):.2f}–{max(values):.2f})"
+
+
+def ratio(a, b):
+    return "not run" if a is None or b is None else f"{a / b:.2f}"
 
 
 def main():
@@ -69,7 +78,12 @@ def main():
                 }
             )
     every = [r for rs in rows.values() for r in rs]
-    mean = lambda key, rs=every: statistics.mean(r[key] for r in rs)
+    def mean(key, rs=every):
+        values = [r[key] for r in rs]
+        return None if any(v is None for v in values) else statistics.mean(values)
+
+    def fmt(x):
+        return "not run" if x is None else f"{x:.2f}"
 
     md = [
         "# Held-out figures of the generic models",
@@ -110,11 +124,11 @@ def main():
         md.append(
             f"| {shot} | {spread([r['isr'] for r in rs])} | {spread([r['blind'] for r in rs])} | "
             f"{spread([r['int_up'] for r in rs])} | "
-            f"{statistics.mean(r['isr'] for r in rs) / statistics.mean(r['blind'] for r in rs):.2f} |"
+            f"{ratio(mean('isr', rs), mean('blind', rs))} |"
         )
     md.append(
-        f"| **all** | **{mean('isr'):.2f}** | {mean('blind'):.2f} | {mean('int_up'):.2f} | "
-        f"{mean('isr') / mean('blind'):.2f} |"
+        f"| **all** | **{fmt(mean('isr'))}** | {fmt(mean('blind'))} | {fmt(mean('int_up'))} | "
+        f"{ratio(mean('isr'), mean('blind'))} |"
     )
     md += [
         "",
