@@ -226,7 +226,7 @@ fn bad_meshes_and_stages_fail_clearly() {
             // Without primvars:st the mesh is flattened; a zero-area triangle cannot be.
             name: "usd_cloth_without_st_unflattenable",
             file: "nost.usda",
-            content: "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\ndef Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {\n int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n point3f[] points = [(0,0,0), (1,0,0), (2,0,0)]\n}\n".into(),
+            content: "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\ndef Mesh \"Cloth\" (prepend apiSchemas = [\"ClothsrGarmentAPI\"]) {\n int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n point3f[] points = [(0,0,0), (1,0,0), (2,0,0)]\n}\n".into(),
             expect: &["/Cloth", "cannot be flattened"],
         },
         Case {

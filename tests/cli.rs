@@ -111,7 +111,7 @@ fn committed_samples_are_what_the_generator_writes() {
         .expect("committed sample");
         assert!(
             fresh == committed,
-            "samples/{name}.usda is stale: run `clothsr samples -o samples`"
+            "samples/{name}.usda is stale: run `clothsr lab samples -o samples`"
         );
     }
 }

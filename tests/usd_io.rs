@@ -45,10 +45,18 @@ fn garmentcode_pattern_round_trips_through_usd_schema() {
             "{rel} differs after the USD round trip"
         );
         let text = std::fs::read_to_string(&out).expect("usda text");
-        assert!(
-            text.contains("def ClothPanel") && text.contains("ClothGarmentAPI"),
-            "schema types used"
-        );
+        for expected in [
+            "def ClothsrPanel",
+            "\"ClothsrGarmentAPI\"",
+            "int \"clothsr:schemaVersion\" = 1",
+            "\"PhysicsSurfaceDeformableMaterialAPI\"",
+            "rel material:binding:physics",
+        ] {
+            assert!(
+                text.contains(expected),
+                "{rel}: no {expected} in the written stage"
+            );
+        }
     }
 }
 
@@ -225,6 +233,8 @@ fn convert_writes_a_valid_scene_with_an_animated_avatar() {
         .is_some_and(|x| (x.dt_s - 1.0 / 300.0).abs() < 1e-12));
 }
 
+/// Written with schema version 0's type names (`ClothGarmentAPI`, `ClothPanel`), which clothsr
+/// still reads although USD no longer knows them as types.
 #[test]
 fn panel_placement_survives_units_axes_and_parent_transforms() {
     use clothsr::garment::Placement;
@@ -286,6 +296,93 @@ def Xform "World"
     }
 }
 
+/// A cloth mesh described only in OpenUSD's deformable-physics names (as Newton reads them), in
+/// centimetres and grams: its fabric comes from the bound physics material and the mesh's
+/// thickness. With clothsr's own fabric authored beside a disagreeing material, clothsr's wins
+/// and the reader says so.
+#[test]
+fn fabric_in_deformable_physics_names_is_read_and_clothsrs_wins() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let stage = |own: &str| {
+        format!(
+            r#"#usda 1.0
+(
+    metersPerUnit = 0.01
+    kilogramsPerUnit = 0.001
+    upAxis = "Y"
+)
+def Mesh "Cloth" (
+    prepend apiSchemas = ["PhysicsSurfaceDeformableSimAPI", "MaterialBindingAPI"{api}]
+)
+{{
+    int[] faceVertexCounts = [3, 3]
+    int[] faceVertexIndices = [0, 1, 2, 1, 3, 2]
+    point3f[] points = [(0, 0, 0), (100, 0, 0), (0, 0, 100), (100, 0, 100)]
+    texCoord2f[] primvars:st = [(0, 0), (1, 0), (0, 1), (1, 1)] (interpolation = "vertex")
+    float[] physics:thicknesses = [0.05]
+    uniform token physics:thicknesses:elementType = "constant"
+    rel material:binding:physics = </Fabric> (bindMaterialAs = "weakerThanDescendants")
+    {own}
+}}
+def Material "Fabric" (
+    prepend apiSchemas = ["PhysicsMaterialAPI", "PhysicsSurfaceDeformableMaterialAPI"]
+)
+{{
+    float physics:density = 0.4
+    float physics:surfaceStretchStiffness = 1000000
+    float physics:surfaceShearStiffness = 40000
+    float physics:surfaceBendStiffness = 30
+}}
+"#,
+            api = if own.is_empty() {
+                ""
+            } else {
+                ", \"ClothsrGarmentAPI\""
+            },
+        )
+    };
+    // Only the physics names: SI from centimetres and grams.
+    let path = dir.path().join("physics_only.usda");
+    std::fs::write(&path, stage("")).expect("write");
+    let s = read_usd(&path).expect("read");
+    let cloth = &s.meshes[0];
+    assert_eq!(cloth.role, MeshRole::Cloth);
+    let (f, _) = cloth.fabric.as_ref().expect("fabric");
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs();
+    assert!(close(f.thickness_m, 5e-4), "thickness {}", f.thickness_m);
+    // 0.4 g/cm³ = 400 kg/m³, times 0.5 mm.
+    assert!(
+        close(f.areal_density_kg_m2, 0.2),
+        "areal density {}",
+        f.areal_density_kg_m2
+    );
+    // 1e6 g/s² = 1000 N/m; 40000 g/s² = 40 N/m; 30 g·cm²/s² = 3e-6 N·m.
+    assert!(close(f.stretch_warp_n_m, 1000.0) && close(f.stretch_weft_n_m, 1000.0));
+    assert!(close(f.shear_n_m, 40.0), "shear {}", f.shear_n_m);
+    assert!(close(f.bending_n_m, 3e-6), "bending {}", f.bending_n_m);
+    assert_eq!(f.name, "Fabric");
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+
+    // clothsr's own fabric beside it, disagreeing on bending: clothsr's wins, with a warning.
+    let path = dir.path().join("both.usda");
+    std::fs::write(
+        &path,
+        stage(
+            "double clothsr:fabric:bending = 0.000005\n    double clothsr:fabric:thickness = 0.0005",
+        ),
+    )
+    .expect("write");
+    let s = read_usd(&path).expect("read");
+    let (f, _) = s.meshes[0].fabric.as_ref().expect("fabric");
+    assert!(close(f.bending_n_m, 5e-6), "bending {}", f.bending_n_m);
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("both.usda") && s.warnings[0].contains("/Cloth"),
+        "{}",
+        s.warnings[0]
+    );
+}
+
 /// The bridge registers the codeless schema itself (through `Plug.Registry`, never the process
 /// environment): USD's validators do not flag prims of unknown types, so the files written
 /// above would pass without it.
@@ -297,7 +394,10 @@ fn the_bridge_registers_the_schema_without_the_environment() {
         m.call_method0("schema_registered")?.extract::<bool>()
     })
     .expect("bridge");
-    assert!(registered, "ClothPanel is unknown to USD's schema registry");
+    assert!(
+        registered,
+        "ClothsrPanel is unknown to USD's schema registry"
+    );
     assert_eq!(std::env::var_os("PXR_PLUGINPATH_NAME"), before);
 }
 

@@ -24,12 +24,13 @@ except ImportError as exc:  # pragma: no cover - the message is the point
         "usd-core==26.11 and numpy)"
     ) from exc
 
+from .common import PANEL, SCHEMA_VERSION  # noqa: E402
 from .plot import plot_errors  # noqa: E402
 from .read import inspect_stage, read_stage  # noqa: E402
 from .validate import validate  # noqa: E402
 from .write import AnimationWriter, write_stage  # noqa: E402
 
-__all__ = ["plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "schema_registered"]
+__all__ = ["SCHEMA_VERSION", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "schema_registered"]
 
 
 def schema_registered() -> bool:
@@ -37,4 +38,4 @@ def schema_registered() -> bool:
     from pxr import Usd as _Usd
 
     reg = _Usd.SchemaRegistry()
-    return reg.FindConcretePrimDefinition("ClothPanel") is not None
+    return reg.FindConcretePrimDefinition(PANEL[0]) is not None

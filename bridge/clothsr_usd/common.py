@@ -8,6 +8,16 @@ from pxr import Tf, Usd, UsdGeom
 Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
+# clothsr's schema version (schemas/schema.usda), written as the layer's customLayerData.
+SCHEMA_VERSION = 1
+SCHEMA_VERSION_KEY = "clothsr:schemaVersion"
+# Type names, newest first: schema version 0 had them unprefixed; both are read.
+GARMENT_API = ("ClothsrGarmentAPI", "ClothGarmentAPI")
+PANEL = ("ClothsrPanel", "ClothPanel")
+SEAM = ("ClothsrSeam", "ClothSeam")
+SOLVER_API = ("ClothsrSolverAPI", "ClothSolverAPI")
+
+
 class BadInput(ValueError):
     """A file whose content clothsr cannot use; the message names the file and the element."""
 
@@ -24,6 +34,14 @@ def open_stage(path: str) -> Usd.Stage:
         raise BadInput(f"{path}: cannot open as USD: {msg[:300]}") from None
     if stage is None:
         raise BadInput(f"{path}: cannot open as USD")
+    version = stage.GetRootLayer().customLayerData.get(SCHEMA_VERSION_KEY, 0)
+    if not isinstance(version, int) or version < 0:
+        raise BadInput(f"{path}: customLayerData {SCHEMA_VERSION_KEY} = {version!r} is not a version")
+    if version > SCHEMA_VERSION:
+        raise BadInput(
+            f"{path}: written with clothsr schema version {version}; this clothsr reads versions "
+            f"up to {SCHEMA_VERSION} (update clothsr)"
+        )
     return stage
 
 

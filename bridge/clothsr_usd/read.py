@@ -3,14 +3,19 @@
 * UsdGeom meshes: topology, `primvars:st`, and points at every time sample (point caches), in
   world space (parent transforms applied at each time).
 * UsdSkel avatars: skinned by pxr itself (``UsdSkel.Cache`` + ``SkinningQuery``) at every time code.
-* clothsr garments (``ClothGarmentAPI``): fabric, panels (``ClothPanel``) and seams (``ClothSeam``).
+* clothsr garments (``ClothsrGarmentAPI``, or ``ClothGarmentAPI`` of schema version 0): fabric,
+  panels (``ClothsrPanel``) and seams (``ClothsrSeam``).
+* Fabric also from a physics material bound to the garment with OpenUSD's deformable-physics
+  names (``PhysicsSurfaceDeformableMaterialAPI``, as Newton reads them); a mesh with
+  ``PhysicsSurfaceDeformableSimAPI`` is cloth. clothsr's own attributes win where both are
+  authored; a disagreement is reported in the stage's ``warnings``.
 """
 import math
 
 import numpy as np
-from pxr import Gf, Usd, UsdGeom, UsdPhysics, UsdSkel, Vt
+from pxr import Gf, Usd, UsdGeom, UsdPhysics, UsdShade, UsdSkel, Vt
 
-from .common import BadInput, open_stage, stage_frame
+from .common import GARMENT_API, PANEL, SEAM, BadInput, open_stage, stage_frame
 
 FABRIC_ATTRS = {
     "name": "clothsr:fabric:name",
@@ -22,6 +27,21 @@ FABRIC_ATTRS = {
     "thickness_m": "clothsr:fabric:thickness",
     "damping_s": "clothsr:fabric:damping",
 }
+# The schema's fallbacks (cotton), for version-0 stages, where the type is not registered.
+FABRIC_FALLBACK = {
+    "name": "cotton",
+    "areal_density_kg_m2": 0.13,
+    "stretch_warp_n_m": 2500.0,
+    "stretch_weft_n_m": 1800.0,
+    "shear_n_m": 100.0,
+    "bending_n_m": 1e-05,
+    "thickness_m": 0.00035,
+    "damping_s": 0.0002,
+}
+# OpenUSD's deformable-physics proposal, as Newton reads it.
+SURFACE_SIM_API = "PhysicsSurfaceDeformableSimAPI"
+SURFACE_MATERIAL_API = "PhysicsSurfaceDeformableMaterialAPI"
+PHYSICS_PURPOSE = "physics"
 
 
 def _matrix(m: Gf.Matrix4d) -> np.ndarray:
@@ -34,8 +54,16 @@ def _to_world(points: np.ndarray, xf: np.ndarray, mpu: float, axes: np.ndarray) 
     return ((p * mpu) @ axes.T).astype(np.float32)
 
 
-def _has_api(prim: Usd.Prim, name: str) -> bool:
-    return name in prim.GetAppliedSchemas()
+def _has_api(prim: Usd.Prim, names) -> bool:
+    """Whether ``prim`` has one of the applied API schemas ``names`` (a name or a tuple)."""
+    names = (names,) if isinstance(names, str) else names
+    # USD lists only registered schemas as applied; the authored list op also holds others
+    # (version-0 names, the deformable-physics proposal's, which usd-core does not define).
+    applied = set(prim.GetAppliedSchemas())
+    op = prim.GetMetadata("apiSchemas")
+    if op:
+        applied.update(str(n) for n in op.ApplyOperations([]))
+    return any(n in applied for n in names)
 
 
 def _time_codes(stage: Usd.Stage):
@@ -110,14 +138,14 @@ def _skinned_prims(stage: Usd.Stage):
 
 
 def _mesh_role(prim: Usd.Prim, skinned: bool) -> str:
-    if _has_api(prim, "ClothGarmentAPI"):
+    if _has_api(prim, GARMENT_API + (SURFACE_SIM_API,)):
         return "cloth"
     if skinned or _has_api(prim, "PhysicsCollisionAPI"):
         return "collider"
     return "other"
 
 
-def _read_mesh(stage, prim, skin, path, mpu, axes, animation: bool):
+def _read_mesh(stage, prim, skin, path, mpu, axes, animation: bool, warnings: list):
     mesh = UsdGeom.Mesh(prim)
     counts, indices = _topology(mesh, path)
     points_attr = mesh.GetPointsAttr()
@@ -186,16 +214,115 @@ def _read_mesh(stage, prim, skin, path, mpu, axes, animation: bool):
     info["seam_pairs"] = (
         np.asarray(seams, dtype=np.int32).reshape(-1, 2) if seams is not None else None
     )
-    info["fabric"] = _fabric(prim) if info["role"] == "cloth" else None
+    info["fabric"] = _fabric(prim, path, mpu, warnings) if info["role"] == "cloth" else None
     return info
 
 
-def _fabric(prim: Usd.Prim) -> dict:
-    out = {}
+def _authored(prim: Usd.Prim, name: str):
+    attr = prim.GetAttribute(name)
+    return attr.Get() if attr and attr.HasAuthoredValue() else None
+
+
+def _physics_fabric(prim: Usd.Prim, path: str, mpu: float):
+    """The fabric as the bound physics material says it in OpenUSD's deformable-physics names
+    ({key: value} of what it authors, in SI), and the material's path; ({}, None) without one."""
+    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(PHYSICS_PURPOSE)
+    if not material or not _has_api(material.GetPrim(), SURFACE_MATERIAL_API):
+        return {}, None
+    mat = material.GetPrim()
+    stage = prim.GetStage()
+    kpu = float(UsdPhysics.GetStageKilogramsPerUnit(stage))
+
+    def get(name, scale):
+        value = _authored(mat, f"physics:{name}")
+        if value is None:
+            return None
+        value = float(value)
+        if not math.isfinite(value) or value < 0:
+            raise BadInput(f"{path}: physics material {mat.GetPath()}: physics:{name} = {value}")
+        return value * scale
+
+    # Stage units to SI: density kg/m³; stiffnesses per unit length (N/m = kg/s²) scale with
+    # mass only; bending (N·m) with mass and length squared; Young's modulus (Pa) with mass per
+    # length.
+    density = get("density", kpu / mpu**3)
+    youngs = get("youngsModulus", kpu / mpu)
+    poisson = get("poissonsRatio", 1.0)
+    stretch = get("surfaceStretchStiffness", kpu)
+    shear = get("surfaceShearStiffness", kpu)
+    bend = get("surfaceBendStiffness", kpu * mpu**2)
+    thickness = None
+    thick = _authored(prim, "physics:thicknesses")
+    if thick is not None and len(thick) > 0:
+        values = np.asarray(thick, dtype=np.float64)
+        if not (np.isfinite(values).all() and (values > 0).all()):
+            raise BadInput(f"{path}: {prim.GetPath()}: physics:thicknesses must be positive")
+        thickness = float(values.mean()) * mpu
+    out = {"name": mat.GetName()}
+    if thickness is not None:
+        out["thickness_m"] = thickness
+    t = thickness if thickness is not None else FABRIC_FALLBACK["thickness_m"]
+    if density is not None:
+        out["areal_density_kg_m2"] = density * t
+    nu = poisson if poisson is not None and poisson < 0.5 else 0.0
+    if stretch is None and youngs is not None:
+        stretch = youngs * t
+    if shear is None and youngs is not None:
+        shear = youngs * t / (2.0 * (1.0 + nu))
+    if bend is None and youngs is not None:
+        bend = youngs * t**3 / (12.0 * (1.0 - nu * nu))
+    if stretch is not None:
+        out["stretch_warp_n_m"] = out["stretch_weft_n_m"] = stretch
+    if shear is not None:
+        out["shear_n_m"] = shear
+    if bend is not None:
+        out["bending_n_m"] = bend
+    return out, mat.GetPath()
+
+
+def _fabric(prim: Usd.Prim, path: str, mpu: float, warnings: list) -> dict:
+    """clothsr's fabric attributes where authored, else the bound physics material's, else the
+    schema's fallbacks. Where both are authored and disagree, clothsr's win, with a warning."""
+    own = {}
     for key, attr_name in FABRIC_ATTRS.items():
-        attr = prim.GetAttribute(attr_name)
-        value = attr.Get() if attr else None
-        out[key] = value if key == "name" else float(value)
+        value = _authored(prim, attr_name)
+        if value is not None:
+            own[key] = str(value) if key == "name" else float(value)
+    physics, material = _physics_fabric(prim, path, mpu)
+    if own and physics:
+        compare = dict(physics)
+        compare.pop("name", None)
+        if "stretch_warp_n_m" in compare:
+            # One surface stretch stiffness stands for clothsr's mean of warp and weft.
+            stretch = compare.pop("stretch_warp_n_m")
+            compare.pop("stretch_weft_n_m")
+            if "stretch_warp_n_m" in own and "stretch_weft_n_m" in own:
+                mine = 0.5 * (own["stretch_warp_n_m"] + own["stretch_weft_n_m"])
+                compare["stretch (mean of warp and weft)"] = (stretch, mine)
+        for key, value in list(compare.items()):
+            if isinstance(value, tuple):
+                theirs, mine = value
+            elif key in own:
+                theirs, mine = value, own[key]
+            else:
+                continue
+            if abs(theirs - mine) > 1e-4 * max(abs(theirs), abs(mine)):
+                warnings.append(
+                    f"{path}: garment {prim.GetPath()}: its physics material {material} gives "
+                    f"{key} {theirs:.6g} but its clothsr:fabric attributes {mine:.6g}; clothsr's "
+                    "are used"
+                )
+    out = {}
+    for key in FABRIC_ATTRS:
+        if key in own:
+            out[key] = own[key]
+        elif key in physics:
+            out[key] = physics[key]
+        else:
+            attr = prim.GetAttribute(FABRIC_ATTRS[key])
+            value = attr.Get() if attr else None
+            value = FABRIC_FALLBACK[key] if value is None else value
+            out[key] = str(value) if key == "name" else float(value)
     edge = prim.GetAttribute("clothsr:edgeLength")
     out["edge_length_m"] = float(edge.Get()) if edge and edge.Get() is not None else 0.0
     return out
@@ -230,7 +357,9 @@ def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
         t = np.array(ops[0].Get(), dtype=np.float64)
         rot = np.array(ops[1].Get(), dtype=np.float64)
         return t.tolist(), rot.tolist()
-    world = _matrix(xformable.ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
+    # The local transform from the ops and the parent's: it holds for version-0 panels too,
+    # whose unregistered type USD does not know as Xformable.
+    world = _matrix(xformable.GetLocalTransformation(Usd.TimeCode.Default())) @ parent_world
     rot = axes @ world[:3, :3].T
     scale = np.linalg.norm(rot, axis=0)
     if not np.allclose(scale, 1.0, atol=1e-6):
@@ -239,10 +368,10 @@ def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
     return t.tolist(), _euler_xyz(rot)
 
 
-def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray) -> dict:
+def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray, warnings: list) -> dict:
     panels, panel_paths = [], []
     for child in prim.GetChildren():
-        if child.GetTypeName() != "ClothPanel":
+        if child.GetTypeName() not in PANEL:
             continue
         where = f"{path}: panel {child.GetPath()}"
 
@@ -284,7 +413,7 @@ def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray) -> di
         panel_paths.append(child.GetPath())
     seams = []
     for child in prim.GetChildren():
-        if child.GetTypeName() != "ClothSeam":
+        if child.GetTypeName() not in SEAM:
             continue
         where = f"{path}: seam {child.GetPath()}"
         side = []
@@ -292,7 +421,7 @@ def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray) -> di
             rel = child.GetRelationship(f"clothsr:panel{key}")
             targets = rel.GetTargets() if rel else []
             if len(targets) != 1 or targets[0] not in panel_paths:
-                raise BadInput(f"{where}: clothsr:panel{key} must target one ClothPanel of the garment")
+                raise BadInput(f"{where}: clothsr:panel{key} must target one panel of the garment")
             edge = child.GetAttribute(f"clothsr:edge{key}").Get()
             side.append((panel_paths.index(targets[0]), int(edge)))
         reversed_attr = child.GetAttribute("clothsr:reversed").Get()
@@ -308,7 +437,7 @@ def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray) -> di
     return {
         "path": str(prim.GetPath()),
         "name": prim.GetName(),
-        "fabric": _fabric(prim),
+        "fabric": _fabric(prim, path, mpu, warnings),
         "panels": panels,
         "seams": seams,
     }
@@ -335,14 +464,16 @@ def _walk(path: str, animation: bool) -> dict:
     stage = open_stage(path)
     mpu, axes = stage_frame(stage, path)
     skinned = _skinned_prims(stage)
-    meshes, garments = [], []
+    meshes, garments, warnings = [], [], []
     for prim in stage.Traverse():
         if prim.IsA(UsdGeom.Mesh):
             meshes.append(
-                _read_mesh(stage, prim, skinned.get(prim.GetPath()), path, mpu, axes, animation)
+                _read_mesh(
+                    stage, prim, skinned.get(prim.GetPath()), path, mpu, axes, animation, warnings
+                )
             )
-        elif _has_api(prim, "ClothGarmentAPI"):
-            garments.append(_read_garment(prim, path, mpu, axes))
+        elif _has_api(prim, GARMENT_API):
+            garments.append(_read_garment(prim, path, mpu, axes, warnings))
     return {
         "meters_per_unit": mpu,
         "up_axis": str(UsdGeom.GetStageUpAxis(stage)),
@@ -352,6 +483,7 @@ def _walk(path: str, animation: bool) -> dict:
         "meshes": meshes,
         "garments": garments,
         "solver": _solver(stage, mpu, axes),
+        "warnings": warnings,
     }
 
 

@@ -1,5 +1,7 @@
 """Writing clothsr scenes and meshes to USD: y up, metres, time-sampled points with extents,
-``primvars:st`` for material coordinates, clothsr's schema for garments.
+``primvars:st`` for material coordinates, clothsr's schema (version ``SCHEMA_VERSION``) for
+garments, and their fabric also as a physics material in OpenUSD's deformable-physics names
+(``PhysicsSurfaceDeformableMaterialAPI``, bound for purpose ``physics``), which Newton reads.
 
 Every write goes to a temporary file beside the target, is validated with all of usd-core's
 validators, and only then renamed over the target: a failed write leaves no partial file.
@@ -9,13 +11,23 @@ import pathlib
 import shutil
 
 import numpy as np
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
-from .common import BadInput, valid_name
-from .read import FABRIC_ATTRS
+from .common import (
+    GARMENT_API,
+    PANEL,
+    SCHEMA_VERSION,
+    SCHEMA_VERSION_KEY,
+    SEAM,
+    SOLVER_API,
+    BadInput,
+    valid_name,
+)
+from .read import FABRIC_ATTRS, PHYSICS_PURPOSE, SURFACE_MATERIAL_API, SURFACE_SIM_API
 from .validate import validate
 
 WORLD = "/World"
+MATERIALS = f"{WORLD}/PhysicsMaterials"
 
 
 def _temp_path(path: pathlib.Path) -> pathlib.Path:
@@ -57,7 +69,7 @@ def _extent(points: np.ndarray):
 
 
 def _set_fabric(prim: Usd.Prim, fabric: dict, edge_length: float):
-    prim.AddAppliedSchema("ClothGarmentAPI")
+    prim.AddAppliedSchema(GARMENT_API[0])
     for key, attr_name in FABRIC_ATTRS.items():
         ty = Sdf.ValueTypeNames.String if key == "name" else Sdf.ValueTypeNames.Double
         value = str(fabric[key]) if key == "name" else float(fabric[key])
@@ -65,6 +77,60 @@ def _set_fabric(prim: Usd.Prim, fabric: dict, edge_length: float):
     prim.CreateAttribute("clothsr:edgeLength", Sdf.ValueTypeNames.Double, custom=False).Set(
         float(edge_length)
     )
+    _physics_material(prim, fabric)
+
+
+def _physics_material(prim: Usd.Prim, fabric: dict):
+    """The fabric in OpenUSD's deformable-physics names: a material under ``MATERIALS`` bound
+    to the garment for purpose physics; a mesh also gets the surface-deformable simulation API
+    and its thickness. Stage units are metres and kilograms.
+
+    One surface stretch stiffness stands for the mean of warp and weft; Young's modulus is it
+    over the thickness; Poisson's ratio is 0, as the Baraff-Witkin stretch model has no
+    coupling between the two directions."""
+    stage = prim.GetStage()
+    UsdGeom.Scope.Define(stage, MATERIALS)
+    path = f"{MATERIALS}/{prim.GetName()}"
+    k = 1
+    while stage.GetPrimAtPath(path):
+        k += 1
+        path = f"{MATERIALS}/{prim.GetName()}_{k}"
+    material = UsdShade.Material.Define(stage, path)
+    mat = material.GetPrim()
+    UsdPhysics.MaterialAPI.Apply(mat)
+    mat.AddAppliedSchema(SURFACE_MATERIAL_API)
+    t = float(fabric["thickness_m"])
+    stretch = 0.5 * (float(fabric["stretch_warp_n_m"]) + float(fabric["stretch_weft_n_m"]))
+    values = {
+        "poissonsRatio": 0.0,
+        "surfaceStretchStiffness": stretch,
+        "surfaceShearStiffness": float(fabric["shear_n_m"]),
+        "surfaceBendStiffness": float(fabric["bending_n_m"]),
+    }
+    if t > 0:
+        values["density"] = float(fabric["areal_density_kg_m2"]) / t
+        values["youngsModulus"] = stretch / t
+    for name, value in values.items():
+        mat.CreateAttribute(f"physics:{name}", Sdf.ValueTypeNames.Float, custom=False).Set(value)
+    UsdShade.MaterialBindingAPI.Apply(prim).Bind(
+        material, UsdShade.Tokens.weakerThanDescendants, PHYSICS_PURPOSE
+    )
+    if prim.IsA(UsdGeom.Mesh) and t > 0:
+        prim.AddAppliedSchema("PhysicsDeformableBodyAPI")
+        prim.AddAppliedSchema(SURFACE_SIM_API)
+        # Cloth collides (with bodies, and itself); its rest shape is flat (the pattern).
+        UsdPhysics.CollisionAPI.Apply(prim)
+        prim.CreateAttribute(
+            "physics:restBendAnglesDefault", Sdf.ValueTypeNames.Token, custom=False,
+            variability=Sdf.VariabilityUniform,
+        ).Set("flat")
+        prim.CreateAttribute("physics:thicknesses", Sdf.ValueTypeNames.FloatArray, custom=False).Set(
+            Vt.FloatArray([t])
+        )
+        prim.CreateAttribute(
+            "physics:thicknesses:elementType", Sdf.ValueTypeNames.Token, custom=False,
+            variability=Sdf.VariabilityUniform,
+        ).Set("constant")
 
 
 def _define_garment(stage: Usd.Stage, parent: str, g: dict):
@@ -73,7 +139,7 @@ def _define_garment(stage: Usd.Stage, parent: str, g: dict):
     _set_fabric(prim, g["fabric"], 0.0)
     panel_paths = []
     for p in g["panels"]:
-        panel = stage.DefinePrim(f"{prim.GetPath()}/{valid_name(p['name'])}", "ClothPanel")
+        panel = stage.DefinePrim(f"{prim.GetPath()}/{valid_name(p['name'])}", PANEL[0])
         xf = UsdGeom.Xformable(panel)
         xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(
             Gf.Vec3d(*map(float, p["translation"]))
@@ -93,7 +159,7 @@ def _define_garment(stage: Usd.Stage, parent: str, g: dict):
         )
         panel_paths.append(panel.GetPath())
     for k, s in enumerate(g["seams"]):
-        seam = stage.DefinePrim(f"{prim.GetPath()}/seam_{k}", "ClothSeam")
+        seam = stage.DefinePrim(f"{prim.GetPath()}/seam_{k}", SEAM[0])
         seam.CreateRelationship("clothsr:panelA", custom=False).SetTargets([panel_paths[s["panel_a"]]])
         seam.CreateAttribute("clothsr:edgeA", Sdf.ValueTypeNames.Int, custom=False).Set(int(s["edge_a"]))
         seam.CreateRelationship("clothsr:panelB", custom=False).SetTargets([panel_paths[s["panel_b"]]])
@@ -124,6 +190,10 @@ def _define_mesh(stage: Usd.Stage, parent: str, m: dict):
             for t, pts in zip(times, frames):
                 layer.SetTimeSample(pa, float(t), Vt.Vec3fArray.FromNumpy(pts))
                 layer.SetTimeSample(ea, float(t), _extent(pts))
+        # The first frame also as the default value, for tools that read the mesh at the
+        # default time (Newton's importer does); every time code reads the samples.
+        points_attr.Set(Vt.Vec3fArray.FromNumpy(frames[0]))
+        extent_attr.Set(_extent(frames[0]))
     if m.get("st") is not None:
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
             "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
@@ -151,6 +221,9 @@ def _build(stage: Usd.Stage, spec: dict) -> dict:
     """Defines everything of ``spec`` on an empty stage; returns {mesh name: prim path}."""
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+    layer = stage.GetRootLayer()
+    layer.customLayerData = {**layer.customLayerData, SCHEMA_VERSION_KEY: SCHEMA_VERSION}
     stage.SetTimeCodesPerSecond(float(spec.get("fps", 30.0)))
     stage.SetFramesPerSecond(float(spec.get("fps", 30.0)))
     stage.SetStartTimeCode(float(spec.get("start", 0.0)))
@@ -182,7 +255,7 @@ def _build(stage: Usd.Stage, spec: dict) -> dict:
         scene.CreateGravityDirectionAttr(Gf.Vec3f(*map(float, direction)))
         scene.CreateGravityMagnitudeAttr(mag)
         prim = scene.GetPrim()
-        prim.AddAppliedSchema("ClothSolverAPI")
+        prim.AddAppliedSchema(SOLVER_API[0])
         prim.CreateAttribute("clothsr:timeStep", Sdf.ValueTypeNames.Double, custom=False).Set(
             float(solver["dt"])
         )

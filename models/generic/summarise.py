@@ -50,7 +50,7 @@ def ratio(a, b):
 
 def main():
     data, out = Path(sys.argv[1]), Path(sys.argv[2])
-    frames = int(sys.argv[3]) if len(sys.argv) > 3 else 40
+    frames = int(sys.argv[3]) if len(sys.argv) > 3 else 30
     ev = data / "eval"
     shots = [Path(l.strip()).stem for l in open(data / "held_out.txt") if l.strip()]
     rows = {}

@@ -41,7 +41,7 @@ impl Animation {
         if cloth.is_empty() {
             return Err(Error::bad_input(
                 path,
-                "no cloth mesh (a mesh with clothsr's ClothGarmentAPI) in this stage",
+                "no cloth mesh (a mesh with clothsr's ClothsrGarmentAPI) in this stage",
             ));
         }
         let time_codes = cloth[0].time_codes.clone();

@@ -506,7 +506,7 @@ mod tests {
         }
         let usda = format!(
             "#usda 1.0\n(\n metersPerUnit = 0.01\n upAxis = \"Y\"\n)\n\
-             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {{\n\
+             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothsrGarmentAPI\"]) {{\n\
              int[] faceVertexCounts = [{}]\n int[] faceVertexIndices = [{}]\n\
              point3f[] points = [{}]\n}}\n",
             vec!["4"; nx * ny].join(", "),
@@ -565,7 +565,7 @@ mod tests {
         std::fs::write(
             &path,
             "#usda 1.0\n(\n metersPerUnit = 1\n upAxis = \"Y\"\n)\n\
-             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothGarmentAPI\"]) {\n\
+             def Mesh \"Cloth\" (prepend apiSchemas = [\"ClothsrGarmentAPI\"]) {\n\
              int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n\
              point3f[] points = [(0,0,0), (1,0,0), (2,0,0)]\n}\n",
         )

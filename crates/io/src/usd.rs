@@ -16,7 +16,8 @@ use crate::garment::{Curve, EdgeRef, Fabric, Garment, Panel, PanelEdge, Placemen
 /// What a mesh in a USD stage is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MeshRole {
-    /// A garment meshed with material coordinates (`ClothGarmentAPI`).
+    /// A garment meshed with material coordinates (`ClothsrGarmentAPI`, or a surface
+    /// deformable of OpenUSD's physics proposal).
     Cloth,
     /// A collision body (skinned avatar or `PhysicsCollisionAPI`).
     Collider,
@@ -123,6 +124,9 @@ pub struct UsdStage<M> {
     pub garments: Vec<Garment>,
     /// PhysicsScene settings, if any.
     pub solver: Option<SolverSettings>,
+    /// What the reader noticed but could go on from (a garment whose physics material
+    /// disagrees with its clothsr fabric), each naming the file and the prim.
+    pub warnings: Vec<String>,
 }
 
 fn array<'py, T: numpy::Element + Copy>(obj: &Bound<'py, PyAny>) -> PyResult<(Vec<T>, Vec<usize>)> {
@@ -340,6 +344,13 @@ fn stage_common<M>(
         }
         _ => None,
     };
+    let warnings: Vec<String> = match d.get_item("warnings")? {
+        Some(w) if !w.is_none() => w.extract()?,
+        _ => Vec::new(),
+    };
+    for w in &warnings {
+        tracing::warn!("{w}");
+    }
     Ok(Ok(UsdStage {
         fps: item(d, "fps")?.extract()?,
         start: item(d, "start")?.extract()?,
@@ -349,6 +360,7 @@ fn stage_common<M>(
         meshes,
         garments,
         solver,
+        warnings,
     }))
 }
 
