@@ -31,7 +31,7 @@ BIN=${CLOTHSR:-clothsr}
 DATA=${DATA:-data/generic}
 OUT=${OUT:-models/generic}
 JOBS=${JOBS:-1}
-TRAIN_FRAMES=${TRAIN_FRAMES:-40}
+TRAIN_FRAMES=${TRAIN_FRAMES:-30}
 HELD_FRAMES=${HELD_FRAMES:-30}
 STAGE=${1:-all}
 COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
@@ -48,7 +48,9 @@ mkdir -p "$DATA/scenes" "$DATA/held_out_scenes"
 dataset() { # SCENE OUT FRAMES [variation flags…]
   local scene=$1 out=$2 frames=$3
   shift 3
-  if [ -f "$out/manifest.json" ] && grep -q "\"frames_done\": $frames," "$out/manifest.json"; then
+  # Done when it holds at least the frames asked for (training reads frames 1..=N only).
+  if [ -f "$out/manifest.json" ] && [ "$(sed -n 's/.*"frames_done": \([0-9]*\),.*/\1/p' \
+    "$out/manifest.json")" -ge "$frames" ] 2>/dev/null; then
     return 0
   fi
   # shellcheck disable=SC2068
@@ -100,12 +102,13 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
   pids=()
   if ! trained "$OUT/isr"; then
     "$BIN" lab train isr "${train_data[@]}" -o "$OUT/isr" --steps 12000 --no-init \
+      --frames "$TRAIN_FRAMES" \
       --unshuffle 4 --depths 2,2,2 --condition > "$DATA/isr.log" 2>&1 &
     pids+=($!)
   fi
   if [ ! -f "$OUT/coarse.json" ]; then
     "$BIN" lab calibrate "${train_data[@]}" -o "$OUT/coarse.json" \
-      --csv "$DATA/calibration.csv" --frames 30 --compression 1,0.1,0.01 --friction scene,2.5 \
+      --csv "$DATA/calibration.csv" --frames "$TRAIN_FRAMES" --compression 1,0.1,0.01 --friction scene,2.5 \
       --wrinkle-bending 0,1 > "$DATA/calibration.log" 2>&1 &
     pids+=($!)
   fi
@@ -153,6 +156,7 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
     done
     if ! { [ -f "$DATA/isr_blind/model.bpk" ] && [ ! -d "$DATA/isr_blind/checkpoint" ]; }; then
       "$BIN" lab train isr "${train_data[@]}" -o "$DATA/isr_blind" --steps 12000 --no-init \
+        --frames "$TRAIN_FRAMES" \
         --unshuffle 4 --depths 2,2,2 > "$DATA/isr_blind.log" 2>&1
       rm -rf "$DATA/isr_blind/checkpoint"
     fi
