@@ -122,32 +122,43 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
   # The simulator's own coarse model with the same ISR: a folder without coarse.json.
   mkdir -p "$EV/paper_model"
   ln -sfn "$(cd "$OUT" && pwd)/isr" "$EV/paper_model/isr"
+  evaluate_start() { # SCENE NAME K
+    local scene=$1 name=$2 k=$3
+    local h=$DATA/held_out/${name}_s$k e=$EV/${name}_s$k
+    # shellcheck disable=SC2086
+    "$BIN" lab sr --model "$OUT/isr" --data "$h" --csv "$e.sr.csv" > "$e.sr.txt"
+    # shellcheck disable=SC2086
+    "$BIN" lab run "$scene" --models "$OUT" --frames "$HELD_FRAMES" ${STARTS[$k]} \
+      -o "$e.generic.usdc" --upsampled-out "$e.calibrated_up.usdc" --restart > "$e.run.log" 2>&1
+    # shellcheck disable=SC2086
+    "$BIN" lab run "$scene" --models "$EV/paper_model" --frames "$HELD_FRAMES" ${STARTS[$k]} \
+      -o "$e.paper.usdc" --upsampled-out "$e.paper_up.usdc" --restart > "$e.paper.log" 2>&1
+    local floor=()
+    if [ "$k" = 0 ] && [ "${FLOOR:-1}" = 1 ]; then
+      "$BIN" lab fork "$h" --frame 1 -o "$EV/${name}_s0_fork" > "$e.fork.log" 2>&1
+      floor=(--floor "$EV/${name}_s0_fork")
+    fi
+    "$BIN" eval --gt "$h" --pred "$e.generic.usdc" \
+      --baseline "paper_upsampled=$e.paper_up.usdc" \
+      --baseline "calibrated_upsampled=$e.calibrated_up.usdc" \
+      --baseline "paper_with_isr=$e.paper.usdc" "${floor[@]}" \
+      --csv "$e.eval.csv" > "$e.eval.txt"
+  }
+  # JOBS starts at once.
+  running=0
   while read -r scene; do
     name=$(basename "$scene" .usda)
     for k in 0 1 2; do
-      h=$DATA/held_out/${name}_s$k
-      e=$EV/${name}_s$k
-      [ -f "$e.eval.csv" ] && continue
-      # shellcheck disable=SC2086
-      "$BIN" lab sr --model "$OUT/isr" --data "$h" --csv "$e.sr.csv" > "$e.sr.txt"
-      # shellcheck disable=SC2086
-      "$BIN" lab run "$scene" --models "$OUT" --frames "$HELD_FRAMES" ${STARTS[$k]} -o "$e.generic.usdc" \
-        --upsampled-out "$e.calibrated_up.usdc" --restart > "$e.run.log" 2>&1
-      # shellcheck disable=SC2086
-      "$BIN" lab run "$scene" --models "$EV/paper_model" --frames "$HELD_FRAMES" ${STARTS[$k]} \
-        -o "$e.paper.usdc" --upsampled-out "$e.paper_up.usdc" --restart > "$e.paper.log" 2>&1
-      floor=()
-      if [ "$k" = 0 ] && [ "${FLOOR:-1}" = 1 ]; then
-        "$BIN" lab fork "$h" --frame 1 -o "$EV/${name}_s0_fork" > "$e.fork.log" 2>&1
-        floor=(--floor "$EV/${name}_s0_fork")
+      [ -f "$EV/${name}_s$k.eval.csv" ] && continue
+      evaluate_start "$scene" "$name" "$k" &
+      running=$((running + 1))
+      if [ "$running" -ge "$JOBS" ]; then
+        wait -n
+        running=$((running - 1))
       fi
-      "$BIN" eval --gt "$h" --pred "$e.generic.usdc" \
-        --baseline "paper_upsampled=$e.paper_up.usdc" \
-        --baseline "calibrated_upsampled=$e.calibrated_up.usdc" \
-        --baseline "paper_with_isr=$e.paper.usdc" "${floor[@]}" \
-        --csv "$e.eval.csv" > "$e.eval.txt"
     done
   done < "$DATA/held_out.txt"
+  wait
   # The same network blind to the fabric, for the comparison in held_out.md (not shipped).
   if [ "${BLIND:-1}" = 1 ]; then
     train_data=()
