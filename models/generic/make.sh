@@ -182,9 +182,12 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
     done < "$DATA/held_out.txt"
   fi
   python3 models/generic/summarise.py "$DATA" "$OUT" "$HELD_FRAMES"
-  # What the models came from and were measured on, relative to the repository.
+  # What the models came from and were measured on: paths relative to the repository, or to
+  # the data folder.
   mkdir -p "$OUT/data"
+  data_abs=$(cd "$DATA" && pwd)
   for d in "$DATA"/train/*/ "$DATA"/held_out/*/; do
-    sed "s|$(pwd)/||g" "${d%/}/manifest.json" > "$OUT/data/$(basename "$d").manifest.json"
+    sed "s|$(pwd)/||g; s|$data_abs/||g" "${d%/}/manifest.json" \
+      > "$OUT/data/$(basename "$d").manifest.json"
   done
 fi
