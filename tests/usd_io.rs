@@ -204,6 +204,40 @@ def Xform "Root"
     assert_eq!(s.meshes[0].role, MeshRole::Collider);
 }
 
+/// Several garments on one avatar: `convert` takes them all; a repeated name gets a suffix.
+#[test]
+fn convert_puts_several_garments_on_one_avatar() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("outfit.usda");
+    let skirt = fixture("patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_clothsr"))
+        .arg("convert")
+        .arg(&skirt)
+        .arg(fixture("patterns/mh_tshirt/mh_tshirt_specification.json"))
+        .arg(&skirt)
+        .arg("--avatar")
+        .arg(fixture("avatars/mh_walk_train.usda"))
+        .arg("-o")
+        .arg(&out)
+        .status()
+        .expect("run clothsr");
+    assert!(status.success());
+    assert_valid(&out);
+    let s = read_usd(&out).expect("read");
+    let names: Vec<&str> = s.garments.iter().map(|g| g.name.as_str()).collect();
+    assert_eq!(names.len(), 3, "{names:?}");
+    assert_ne!(names[0], names[2], "{names:?}");
+    assert!(names[2].starts_with(names[0]), "{names:?}");
+    assert_eq!(
+        s.meshes
+            .iter()
+            .filter(|m| m.role == MeshRole::Collider)
+            .count(),
+        1,
+        "one avatar"
+    );
+}
+
 #[test]
 fn convert_writes_a_valid_scene_with_an_animated_avatar() {
     let dir = tempfile::tempdir().expect("tempdir");

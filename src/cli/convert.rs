@@ -1,5 +1,6 @@
-//! `clothsr convert IN -o OUT.usda [--collider F]... [--avatar F]`: a USD scene with clothsr's
-//! schema from a GarmentCode pattern or an OBJ cloth mesh plus colliders.
+//! `clothsr convert IN... -o OUT.usda [--collider F]... [--avatar F]`: a USD scene with
+//! clothsr's schema from GarmentCode patterns, OBJ or USD garments (several garments on one
+//! avatar) plus colliders.
 
 use std::path::PathBuf;
 
@@ -9,8 +10,11 @@ use clothsr::scene::Scene;
 /// Arguments of `convert`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A GarmentCode JSON, an OBJ cloth mesh with vt, or a USD scene.
-    input: PathBuf,
+    /// GarmentCode JSON, OBJ cloth meshes or USD scenes: their garments go into one scene
+    /// (several garments on one avatar; a repeated name gets a suffix). The first sets the
+    /// frame rate and range.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
     /// Output USD file (.usda, .usd or .usdc).
     #[arg(short, long)]
     output: PathBuf,
@@ -36,8 +40,15 @@ pub struct Args {
 
 /// Runs `convert`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let output = super::check_output(&args.input, &args.output)?;
-    let mut scene = Scene::load(&args.input, &super::fabric(&args.fabric)?)?;
+    let fabric = super::fabric(&args.fabric)?;
+    for input in &args.inputs {
+        super::check_output(input, &args.output)?;
+    }
+    let output = args.output.clone();
+    let mut scene = Scene::load(&args.inputs[0], &fabric)?;
+    for input in &args.inputs[1..] {
+        scene.merge(Scene::load(input, &fabric)?);
+    }
     if let Some(fps) = args.fps {
         anyhow::ensure!(fps.is_finite() && fps > 0.0, "--fps must be positive");
         scene.fps = fps;

@@ -565,7 +565,7 @@ fn run_held_out(
         coarse,
         push_out: true,
     };
-    let mut run = super::Pipeline::new(&scene, isr, None, opts(cal.clone()))?;
+    let mut run = super::Pipeline::new(&scene, isr, None, opts(*cal))?;
     let mut paper = super::Pipeline::new(&scene, isr, None, opts(CoarseCalibration::default()))?;
     if run.fine.num_vertices() != gt.num_vertices() {
         return Err(Error::bad_input(

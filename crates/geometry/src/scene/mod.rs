@@ -203,6 +203,50 @@ pub struct Scene {
     pub frame_end: i64,
 }
 
+impl Scene {
+    /// Adds `other`'s garments, cloth meshes and colliders to this scene (several garments on
+    /// one avatar), keeping this scene's timing and gravity. A name already taken gets a
+    /// suffix (`skirt_2`), so that every garment has its own prim in USD.
+    pub fn merge(&mut self, other: Scene) {
+        let mut taken: std::collections::HashSet<String> = self
+            .garments
+            .iter()
+            .map(|g| g.name.clone())
+            .chain(self.cloths.iter().map(|c| c.name.clone()))
+            .collect();
+        let mut unique = |name: &str| {
+            let mut candidate = name.to_string();
+            let mut k = 1;
+            while taken.contains(&candidate) {
+                k += 1;
+                candidate = format!("{name}_{k}");
+            }
+            taken.insert(candidate.clone());
+            candidate
+        };
+        for mut g in other.garments {
+            g.name = unique(&g.name);
+            self.garments.push(g);
+        }
+        for mut c in other.cloths {
+            c.name = unique(&c.name);
+            self.cloths.push(c);
+        }
+        let mut bodies: std::collections::HashSet<String> =
+            self.colliders.iter().map(|c| c.name.clone()).collect();
+        for mut c in other.colliders {
+            let name = c.name.clone();
+            let mut k = 1;
+            while bodies.contains(&c.name) {
+                k += 1;
+                c.name = format!("{name}_{k}");
+            }
+            bodies.insert(c.name.clone());
+            self.colliders.push(c);
+        }
+    }
+}
+
 impl Default for Scene {
     fn default() -> Self {
         Scene {
@@ -215,5 +259,28 @@ impl Default for Scene {
             frame_start: 0,
             frame_end: 0,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merged_scenes_keep_every_garment_and_body_under_its_own_name() {
+        let shot = |name| catalogue::scene(name, 10).expect("a catalogue shot");
+        let mut scene = shot("square-silk-sphere-still");
+        scene.fps = 24.0;
+        scene.merge(shot("strip-denim-sphere-still"));
+        scene.merge(shot("square-cotton-cube-still"));
+        assert_eq!(scene.garments.len(), 3);
+        assert_eq!(scene.fps, 24.0, "the first scene's timing stays");
+        let names: std::collections::HashSet<_> =
+            scene.garments.iter().map(|g| g.name.as_str()).collect();
+        assert_eq!(names.len(), 3, "garment names must differ: {names:?}");
+        let bodies: std::collections::HashSet<_> =
+            scene.colliders.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(bodies.len(), scene.colliders.len(), "{bodies:?}");
+        assert_eq!(scene.colliders.len(), 6);
     }
 }
