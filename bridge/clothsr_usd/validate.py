@@ -1,5 +1,11 @@
-"""Runs every validator registered with usd-core (``UsdValidation``) on a file."""
-from pxr import Usd, UsdValidation
+"""Runs every validator registered with usd-core (``UsdValidation``) on a file; where the host's
+USD predates ``UsdValidation`` (before 24.11), the older ``UsdUtils.ComplianceChecker``."""
+from pxr import Usd
+
+try:
+    from pxr import UsdValidation
+except ImportError:  # USD before 24.11
+    UsdValidation = None
 
 
 def validate(path: str) -> list:
@@ -7,6 +13,8 @@ def validate(path: str) -> list:
 
     ``severity`` is ``"error"``, ``"warning"`` or ``"info"``.
     """
+    if UsdValidation is None:
+        return _compliance(path)
     stage = Usd.Stage.Open(path)
     registry = UsdValidation.ValidationRegistry()
     ctx = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
@@ -22,4 +30,16 @@ def validate(path: str) -> list:
         validator = err.GetValidator()
         ident = str(validator.GetMetadata().name) if validator else str(err.GetName())
         out.append((sev, ident, err.GetErrorAsString()))
+    return out
+
+
+def _compliance(path: str) -> list:
+    from pxr import UsdUtils
+
+    checker = UsdUtils.ComplianceChecker()
+    checker.CheckCompliance(str(path))
+    ident = "UsdUtils.ComplianceChecker"
+    out = [("error", ident, str(m)) for m in checker.GetErrors()]
+    out += [("error", ident, str(m)) for m in checker.GetFailedChecks()]
+    out += [("warning", ident, str(m)) for m in checker.GetWarnings()]
     return out
