@@ -108,7 +108,7 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
   fi
   if [ ! -f "$OUT/coarse.json" ]; then
     "$BIN" lab calibrate "${train_data[@]}" -o "$OUT/coarse.json" \
-      --csv "$DATA/calibration.csv" --frames "$TRAIN_FRAMES" --compression 1,0.1,0.01 --friction scene,2.5 \
+      --csv "$DATA/calibration.csv" --frames "$((TRAIN_FRAMES - 1))" --compression 1,0.1,0.01 --friction scene,2.5 \
       --wrinkle-bending 0,1 > "$DATA/calibration.log" 2>&1 &
     pids+=($!)
   fi
