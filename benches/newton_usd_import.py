@@ -5,8 +5,8 @@ its bending stiffness. Exits 1 on a mismatch.
 
     bash benches/setup-newton.sh
     benches/.venv-newton/bin/pip install 'newton[importers]==1.8.*'
-    clothsr mesh samples/sheet_sphere.usda --edge-mm 20 -o /tmp/sheet.usda
-    benches/.venv-newton/bin/python benches/newton_usd_import.py /tmp/sheet.usda
+    clothsr mesh samples/sheet_sphere.usda --edge-mm 20 -o out/sheet.usda
+    benches/.venv-newton/bin/python benches/newton_usd_import.py out/sheet.usda
 """
 import sys
 import warnings
