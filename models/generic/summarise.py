@@ -44,6 +44,16 @@ def spread(values):
     return f"{statistics.mean(values):.2f} ({min(values):.2f}–{max(values):.2f})"
 
 
+def shot_rows(rows, keys, floor_key):
+    """A table row per shot: each key's spread over the starts, then start 0's floor."""
+    out = []
+    for shot, rs in rows.items():
+        fl = rs[0][floor_key]
+        cells = [spread([r[k] for r in rs]) for k in keys]
+        out.append(f"| {shot} | {' | '.join(cells)} | {'' if fl is None else f'{fl:.2f}'} |")
+    return out
+
+
 def ratio(a, b):
     return "not run" if a is None or b is None else f"{a / b:.2f}"
 
@@ -100,13 +110,7 @@ def main():
         "upsampled | paper's coarse model + ISR | floor (start 0) |",
         "|---|---|---|---|---|---|",
     ]
-    for shot, rs in rows.items():
-        fl = rs[0]["floor"]
-        md.append(
-            f"| {shot} | {spread([r['pipeline'] for r in rs])} | "
-            f"{spread([r['paper_up'] for r in rs])} | {spread([r['calibrated_up'] for r in rs])} | "
-            f"{spread([r['paper_isr'] for r in rs])} | {'' if fl is None else f'{fl:.2f}'} |"
-        )
+    md += shot_rows(rows, ["pipeline", "paper_up", "calibrated_up", "paper_isr"], "floor")
     md.append(
         f"| **all** | **{mean('pipeline'):.2f}** | {mean('paper_up'):.2f} | "
         f"{mean('calibrated_up'):.2f} | {mean('paper_isr'):.2f} | |"
@@ -142,14 +146,11 @@ def main():
         "| blind | M_int upsampled | floor (start 0) |",
         "|---|---|---|---|---|---|---|",
     ]
-    for shot, rs in rows.items():
-        fl = rs[0]["bend_floor"]
-        md.append(
-            f"| {shot} | {spread([r['bend_pipeline'] for r in rs])} | "
-            f"{spread([r['bend_paper_up'] for r in rs])} | {spread([r['bend_isr'] for r in rs])} | "
-            f"{spread([r['bend_blind'] for r in rs])} | {spread([r['bend_int_up'] for r in rs])} | "
-            f"{'' if fl is None else f'{fl:.2f}'} |"
-        )
+    md += shot_rows(
+        rows,
+        ["bend_pipeline", "bend_paper_up", "bend_isr", "bend_blind", "bend_int_up"],
+        "bend_floor",
+    )
     md.append("")
     (out / "held_out.md").write_text("\n".join(md))
 
