@@ -1,4 +1,4 @@
-"""Regenerates schemas/generatedSchema.usda and schemas/plugInfo.json from schemas/schema.usda.
+"""Regenerates clothsr_usd/schemas/generatedSchema.usda and plugInfo.json from schema.usda there.
 
 Run with the project venv (needs jinja2): `.venv/bin/python bridge/gen_schema.py [OUT_DIR]`.
 usd-core ships usdGenSchema.py inside the wheel; with skipCodeGeneration it writes only the
@@ -12,7 +12,7 @@ import sys
 import pxr
 
 HERE = pathlib.Path(__file__).resolve().parent
-SCHEMAS = HERE.parent / "schemas"
+SCHEMAS = HERE / "clothsr_usd" / "schemas"
 
 
 def main() -> int:

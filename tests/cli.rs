@@ -991,7 +991,7 @@ fn help_lists_the_users_commands_and_the_lab_holds_the_research_tools() {
         .lines()
         .filter(|l| l.trim_start().starts_with('-'))
         .count();
-    assert!(flags <= 16, "{flags} flags: {run}");
+    assert!(flags <= 17, "{flags} flags: {run}");
     for heading in ["Input:", "Output:", "Models:", "Preview:"] {
         assert!(run.contains(heading), "{heading} {run}");
     }

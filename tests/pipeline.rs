@@ -59,6 +59,7 @@ fn outputs(dir: &Path, name: &str) -> Outputs {
         resume: true,
         fingerprint: "tiny".into(),
         publish_every_s: 0.0,
+        layer: None,
     }
 }
 

@@ -74,6 +74,7 @@ fn meshed_garment_writes_time_codes_and_st_and_reads_back() {
         let mut m = MeshOut::cloth(&g.name, &mesh, &g.fabric, 0.02);
         m.time_codes = Some(vec![0.0]);
         let stage = StageOut {
+            over: None,
             fps: 30.0,
             start: 0.0,
             end: 0.0,

@@ -1,16 +1,15 @@
-"""clothsr's USD bridge: reads and writes USD stages for the clothsr binary (and DCC scripts).
+"""clothsr's USD bridge: reads and writes USD stages for the clothsr library (the binary, and
+the ``clothsr`` Python package in a DCC's own Python, with its ``pxr``).
 
 Arrays cross as whole numpy buffers; no pxr object leaves this package. Importing it registers
-clothsr's codeless schema (``schemas/``, or ``CLOTHSR_SCHEMAS``) with ``Plug.Registry`` before
+clothsr's codeless schema (``schemas/`` beside this file, or ``CLOTHSR_SCHEMAS``) with ``Plug.Registry`` before
 ``Usd`` loads. The process environment is never written: a ``setenv`` while another thread of the
 host spawns a process can hand that process a freed environment (seen as EFAULT from exec).
 """
 import os
 import pathlib
 
-_SCHEMAS = os.environ.get("CLOTHSR_SCHEMAS") or str(
-    pathlib.Path(__file__).resolve().parent.parent.parent / "schemas"
-)
+_SCHEMAS = os.environ.get("CLOTHSR_SCHEMAS") or str(pathlib.Path(__file__).resolve().parent / "schemas")
 
 try:
     from pxr import Plug
@@ -29,8 +28,9 @@ from .plot import plot_errors  # noqa: E402
 from .read import inspect_stage, read_stage  # noqa: E402
 from .validate import validate  # noqa: E402
 from .write import AnimationWriter, write_stage  # noqa: E402
+from .layer import LayerWriter  # noqa: E402
 
-__all__ = ["SCHEMA_VERSION", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "schema_registered"]
+__all__ = ["SCHEMA_VERSION", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "LayerWriter", "schema_registered"]
 
 
 def schema_registered() -> bool:

@@ -8,9 +8,11 @@ from pxr import Tf, Usd, UsdGeom
 Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
-# clothsr's schema version (schemas/schema.usda), written as the layer's customLayerData.
+# clothsr's schema version (clothsr_usd/schemas/schema.usda), written as the layer's customLayerData.
 SCHEMA_VERSION = 1
 SCHEMA_VERSION_KEY = "clothsr:schemaVersion"
+# An override layer's customLayerData: the shot it is for, relative to the layer's folder.
+LAYER_FOR_KEY = "clothsr:layerFor"
 # Type names, newest first: schema version 0 had them unprefixed; both are read.
 GARMENT_API = ("ClothsrGarmentAPI", "ClothGarmentAPI")
 PANEL = ("ClothsrPanel", "ClothPanel")
@@ -22,7 +24,40 @@ class BadInput(ValueError):
     """A file whose content clothsr cannot use; the message names the file and the element."""
 
 
+def compose(layer_path, shot_path, root=None) -> "Sdf.Layer":
+    """A root layer (``root``, else an anonymous one) holding the override layer at
+    ``layer_path`` sublayered over the shot at ``shot_path``, with the layer's stage metadata."""
+    from pxr import Sdf
+
+    over = Sdf.Layer.FindOrOpen(str(layer_path))
+    if root is None:
+        root = Sdf.Layer.CreateAnonymous("composed.usda")
+    root.subLayerPaths.append(str(layer_path))
+    root.subLayerPaths.append(str(shot_path))
+    for key in ("metersPerUnit", "upAxis", "timeCodesPerSecond", "framesPerSecond", "startTimeCode", "endTimeCode"):
+        if over.pseudoRoot.HasInfo(key):
+            root.pseudoRoot.SetInfo(key, over.pseudoRoot.GetInfo(key))
+    root.customLayerData = dict(over.customLayerData)
+    if over.defaultPrim:
+        root.defaultPrim = over.defaultPrim
+    return root
+
+
 def open_stage(path: str) -> Usd.Stage:
+    """The stage at ``path``; an override layer clothsr wrote, composed over its shot."""
+    stage = _open(path)
+    shot = stage.GetRootLayer().customLayerData.get(LAYER_FOR_KEY)
+    if shot:
+        import pathlib
+
+        shot_path = (pathlib.Path(stage.GetRootLayer().realPath).parent / shot).resolve()
+        if not shot_path.exists():
+            raise BadInput(f"{path}: an override layer for {shot_path}, which is missing")
+        stage = Usd.Stage.Open(compose(stage.GetRootLayer().realPath, shot_path))
+    return stage
+
+
+def _open(path: str) -> Usd.Stage:
     try:
         stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # Tf.ErrorException carries the parser's message

@@ -208,7 +208,9 @@ def _define_mesh(stage: Usd.Stage, parent: str, m: dict):
         _set_fabric(prim, m["fabric"], m.get("edge_length", 0.0))
         pairs = m.get("seam_pairs")
         if pairs is not None:
-            prim.GetAttribute("clothsr:seamPairs").Set(
+            # Created with its type: in a host whose USD loaded before clothsr's schema was
+            # registered, the schema does not define it.
+            prim.CreateAttribute("clothsr:seamPairs", Sdf.ValueTypeNames.Int2Array, custom=False).Set(
                 Vt.Vec2iArray.FromNumpy(np.ascontiguousarray(pairs, dtype=np.int32).reshape(-1, 2))
             )
     if m.get("collider"):

@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
+use clothsr::io::scene_files::{convert, Convert};
 use clothsr::io::SceneFiles;
-use clothsr::scene::Scene;
 
 /// Arguments of `convert`.
 #[derive(Debug, clap::Args)]
@@ -45,21 +45,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         super::check_output(input, &args.output)?;
     }
     let output = args.output.clone();
-    let mut scene = Scene::load(&args.inputs[0], &fabric)?;
-    for input in &args.inputs[1..] {
-        scene.merge(Scene::load(input, &fabric)?);
-    }
-    if let Some(fps) = args.fps {
-        anyhow::ensure!(fps.is_finite() && fps > 0.0, "--fps must be positive");
-        scene.fps = fps;
-    }
-    for c in args.collider.iter().chain(args.avatar.iter()) {
-        scene.add_collider_file(c)?;
-    }
-    if let Some(n) = args.frames {
-        anyhow::ensure!(n >= 0, "--frames must be >= 0");
-        scene.frame_end = scene.frame_start + n;
-    }
+    let scene = convert(&Convert {
+        inputs: args.inputs.clone(),
+        colliders: args.collider.iter().chain(&args.avatar).cloned().collect(),
+        fabric,
+        fps: args.fps,
+        frames: args.frames,
+    })?;
     for w in scene.write_usd(&output, args.ascii)? {
         tracing::warn!("{}: {w}", output.display());
     }

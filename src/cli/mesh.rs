@@ -69,6 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         meshes.push(out);
     }
     let stage = StageOut {
+        over: None,
         fps: scene.fps,
         start: 0.0,
         end: 0.0,

@@ -132,6 +132,16 @@ pub(crate) struct SceneInputs {
 }
 
 impl SceneInputs {
+    /// The shot `path` with these inputs.
+    pub(crate) fn source(&self, path: &Path) -> clothsr::data::SceneSource {
+        clothsr::data::SceneSource {
+            scene: path.to_path_buf(),
+            colliders: self.collider.clone(),
+            avatar: self.avatar.clone(),
+            fabric: self.fabric.clone(),
+        }
+    }
+
     /// The scene file `path` with this fabric for what has none, these colliders and this
     /// avatar.
     pub(crate) fn load(&self, path: &Path) -> anyhow::Result<clothsr::scene::Scene> {

@@ -8,14 +8,10 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use clothsr::data::Variation;
-use clothsr::eval::Animation;
-use clothsr::msr::Isr;
-use clothsr::pipeline::{
-    choose_path, options_for_run, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath,
-    Options, Outputs, Pipeline, Preview, Progress, Report,
+use clothsr::pipeline::shot::{
+    run_shot, OutputKind, RunModels, RunSettings, ShotFiles, DEFAULT_CLIP_FRAMES,
 };
-use clothsr::viz::Recorder;
+use clothsr::pipeline::{CoarseCalibration, CorrectorChoice, Progress, Report};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// Arguments of `run`: what a user needs.
@@ -40,6 +36,24 @@ pub struct Args {
     /// Write text USD even for a .usd file.
     #[arg(long, help_heading = "Output")]
     ascii: bool,
+    /// `on`: an override layer for the USD shot: sublayered over the shot, it replaces each
+    /// garment with its fine animated mesh at the garment's own prim, in the shot's units, up
+    /// axis and time codes, copying nothing else. `off`: a standalone stage, the fine garments
+    /// under /World/Garments and the colliders, in metres with y up. `auto`: on for USD input.
+    #[arg(
+        long,
+        value_name = "auto|on|off",
+        default_value = "auto",
+        num_args = 0..=1,
+        default_missing_value = "on",
+        value_parser = layer_choice,
+        help_heading = "Output"
+    )]
+    layer: OutputKind,
+    /// Frames per value clip of a layered output: a longer shot goes to one file per clip in
+    /// <output>.clips/, stitched by the output layer (0: every frame in one file).
+    #[arg(long, default_value_t = DEFAULT_CLIP_FRAMES, help_heading = "Output")]
+    clip_frames: usize,
     /// Start over even when an interrupted run with the same settings left a resume point.
     #[arg(long, help_heading = "Output")]
     restart: bool,
@@ -49,9 +63,6 @@ pub struct Args {
     /// executable or in the source tree it was built from).
     #[arg(long, help_heading = "Models")]
     models: Option<PathBuf>,
-    /// The models folder in use: `--models`, or the generic models found.
-    #[arg(skip)]
-    models_dir: PathBuf,
     /// Whether the corrector runs: `auto` takes the path the folder's models.json validated
     /// as better (the corrector where a folder without one has it), `on` or `off` forces it.
     #[arg(
@@ -212,6 +223,15 @@ fn jobs(args: &Args, knobs: &Knobs) -> anyhow::Result<Vec<Job>> {
     }
 }
 
+fn layer_choice(s: &str) -> Result<OutputKind, String> {
+    match s {
+        "auto" => Ok(OutputKind::Auto),
+        "on" => Ok(OutputKind::Layer),
+        "off" => Ok(OutputKind::Standalone),
+        _ => Err(format!("'{s}': expected auto, on or off")),
+    }
+}
+
 /// Runs `run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     run_with(args, Knobs::default())
@@ -222,60 +242,41 @@ pub fn run_lab(args: LabArgs) -> anyhow::Result<()> {
     run_with(args.user, args.knobs)
 }
 
-fn run_with(mut args: Args, knobs: Knobs) -> anyhow::Result<()> {
-    args.models_dir = match &args.models {
+impl Knobs {
+    /// The library's run settings these flags give.
+    fn settings(&self) -> anyhow::Result<RunSettings> {
+        Ok(RunSettings {
+            coarse_edge_m: self.coarse_mm * 1e-3,
+            variation: self.variation.variation()?,
+            dress: !self.no_dress,
+            converged: self.converged,
+            self_collision: self.self_collision,
+            coarse: self.coarse,
+            push_out: !self.no_push_out,
+            heat_max_m: self.heat_max_mm * 1e-3,
+        })
+    }
+}
+
+fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
+    let models_dir = match &args.models {
         Some(m) => m.clone(),
         None => clothsr::pipeline::models::find_generic_models().map_err(anyhow::Error::msg)?,
     };
-    anyhow::ensure!(
-        knobs.coarse_mm.is_finite() && knobs.coarse_mm > 0.0,
-        "--coarse-mm must be positive"
-    );
-    anyhow::ensure!(
-        knobs.heat_max_mm.is_finite() && knobs.heat_max_mm > 0.0,
-        "--heat-max-mm must be positive"
-    );
-    knobs.coarse.check_flags().map_err(anyhow::Error::msg)?;
+    let settings = knobs.settings()?;
+    settings.check()?;
     anyhow::ensure!(
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
     );
-    let variation = knobs.variation.variation()?;
     let jobs = jobs(&args, &knobs)?;
-    for extra in [&knobs.coarse_out, &knobs.upsampled_out]
-        .into_iter()
-        .flatten()
-    {
-        clothsr::io::usd::check_extension(extra)?;
-    }
-    let isr_dir = args.models_dir.join("isr");
-    anyhow::ensure!(
-        isr_dir.join("config.json").exists(),
-        "{}: no ISR model here (expected {}/config.json; train one with 'clothsr lab train isr')",
-        args.models_dir.display(),
-        isr_dir.display()
-    );
-    let isr = Isr::load(&isr_dir)?;
-    let corrector_dir = args.models_dir.join("corrector");
-    let (path, why) = choose_path(&args.models_dir, args.corrector)?;
-    tracing::info!("path: {path} ({why})");
-    let corrector = (path == ModelPath::Corrector).then_some(corrector_dir.as_path());
-    let given = Options {
-        coarse_edge_m: knobs.coarse_mm * 1e-3,
-        fast: !knobs.converged,
-        self_collision: knobs.self_collision,
-        match_contact_thickness: true,
-        dress: !knobs.no_dress,
-        coarse: knobs.coarse,
-        push_out: !knobs.no_push_out,
-    };
-    // Without a corrector, the models folder's own coarse calibration, under the options.
-    let (opts, cal) = options_for_run(&args.models_dir, corrector, given)?;
-    if cal.is_some() {
+    let models = RunModels::load(&models_dir, args.corrector, &settings)?;
+    tracing::info!("path: {}", models.why);
+    if models.calibration.is_some() {
         tracing::info!(
             "coarse model: {} ({} under the options given)",
-            opts.coarse,
-            args.models_dir.join(CoarseCalibration::FILE).display()
+            models.opts.coarse,
+            models_dir.join(CoarseCalibration::FILE).display()
         );
     }
     let multi = MultiProgress::new();
@@ -291,7 +292,7 @@ fn run_with(mut args: Args, knobs: Knobs) -> anyhow::Result<()> {
         if let Some(o) = &overall {
             o.set_message(job.scene.display().to_string());
         }
-        run_one(&args, &knobs, job, &isr, corrector, variation, opts, &multi)
+        run_one(&args, &knobs, job, &models, &settings, &multi)
             .with_context(|| format!("{}", job.scene.display()))?;
         if let Some(o) = &overall {
             o.inc(1);
@@ -303,60 +304,38 @@ fn run_with(mut args: Args, knobs: Knobs) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)]
 fn run_one(
     args: &Args,
     knobs: &Knobs,
     job: &Job,
-    isr: &Isr,
-    corrector: Option<&Path>,
-    variation: Variation,
-    opts: Options,
+    models: &RunModels,
+    settings: &RunSettings,
     multi: &MultiProgress,
 ) -> anyhow::Result<()> {
-    let mut scene = args.inputs.load(&job.scene)?;
-    variation.apply(&mut scene);
-    let frames = args
-        .frames
-        .unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
-    anyhow::ensure!(
-        frames > 0,
-        "nothing to run: give --frames N (the scene's frame range is empty)"
-    );
-    let t_setup = std::time::Instant::now();
-    let mut p = Pipeline::new(&scene, isr, corrector, opts).context("setting up the pipeline")?;
-    tracing::info!(
-        "{}: coarse {} vertices, fine {} vertices ({} mm pixels), corrector {}; set up in {:.1} s",
-        job.scene.display(),
-        p.coarse.sim.model.num_vertices(),
-        p.fine.num_vertices(),
-        isr.cfg.pixel_m * 1e3,
-        if p.has_corrector() { "on" } else { "off" },
-        t_setup.elapsed().as_secs_f64()
-    );
-    let rec = match (&job.rrd, args.spawn) {
-        (Some(path), _) => Some(Recorder::save("clothsr", path)?),
-        (None, true) => Some(Recorder::spawn("clothsr")?),
-        (None, false) => None,
+    let source = args.inputs.source(&job.scene);
+    let files = ShotFiles {
+        output: job.output.clone(),
+        coarse: knobs.coarse_out.clone(),
+        upsampled: knobs.upsampled_out.clone(),
+        rrd: job.rrd.clone(),
+        spawn: args.spawn,
+        ground_truth: args.gt.clone(),
+        ascii: args.ascii,
+        restart: args.restart,
+        kind: args.layer,
+        clip_frames: args.clip_frames,
     };
-    let gt = ground_truth(args, scene.frame_start as f64, &p, isr)?;
-    let preview = rec.as_ref().map(|r| Preview {
-        recorder: r,
-        ground_truth: gt.as_ref(),
-        heat_max_m: knobs.heat_max_mm * 1e-3,
-    });
-    let outputs = outputs(args, knobs, job, p.has_corrector(), frames, opts, variation)?;
-    let bar = multi.add(ProgressBar::new(frames as u64));
+    let bar = multi.add(ProgressBar::new(0));
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} frames {per_sec} eta {eta} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let report = run_to_files(
-        &mut p,
-        &scene,
-        frames,
-        &outputs,
-        preview.as_ref(),
+    let report = run_shot(
+        models,
+        &source,
+        settings,
+        &files,
+        args.frames,
         |g: &Progress| show_progress(&bar, g),
     );
     let report = match report {
@@ -372,84 +351,15 @@ fn run_one(
         }
     };
     bar.finish();
-    if let Some(r) = rec {
-        if let Some(path) = r.finish()? {
-            tracing::info!("wrote {}", path.display());
-        }
-    }
-    log_report(&job.output, &report);
+    log_report(&job.output, &report.run);
     Ok(())
-}
-
-/// The `--gt` fine simulation (a USD file, or a data set's fine frames from time code
-/// `start`), checked to be the fine mesh of this run.
-fn ground_truth(
-    args: &Args,
-    start: f64,
-    p: &Pipeline<'_>,
-    isr: &Isr,
-) -> anyhow::Result<Option<Animation>> {
-    let gt = match &args.gt {
-        Some(g) if g.is_dir() => Some(Animation::read_dataset(g, start)?),
-        Some(g) => Some(Animation::read_usd(g)?),
-        None => None,
-    };
-    if let Some(g) = &gt {
-        anyhow::ensure!(
-            g.num_vertices() == p.fine.num_vertices() && g.triangles == p.fine.triangles,
-            "{}: not the fine mesh of this run ({} vertices against {}): simulate it at the ISR \
-             model's pixel size ({} mm)",
-            args.gt.as_deref().unwrap_or(Path::new("")).display(),
-            g.num_vertices(),
-            p.fine.num_vertices(),
-            isr.cfg.pixel_m * 1e3
-        );
-    }
-    Ok(gt)
-}
-
-/// The files one scene's run writes, and the fingerprint of its settings.
-fn outputs(
-    args: &Args,
-    knobs: &Knobs,
-    job: &Job,
-    has_corrector: bool,
-    frames: usize,
-    opts: Options,
-    variation: Variation,
-) -> anyhow::Result<Outputs> {
-    // Everything that shapes the output: a resume point made with other settings is ignored.
-    let fingerprint = format!(
-        "scene={} models={} corrector={} frames={frames} opts={opts:?} variation={variation:?} \
-         colliders={:?} avatar={:?} fabric={}",
-        super::absolute(&job.scene)?.display(),
-        super::absolute(&args.models_dir)?.display(),
-        has_corrector,
-        args.inputs.collider,
-        args.inputs.avatar,
-        args.inputs.fabric
-    );
-    Ok(Outputs {
-        fine: job.output.clone(),
-        coarse: knobs.coarse_out.clone(),
-        upsampled: knobs.upsampled_out.clone(),
-        ascii: args.ascii,
-        doc: format!(
-            "clothsr run {} with models {} (corrector {})",
-            job.scene.display(),
-            args.models_dir.display(),
-            if has_corrector { "on" } else { "off" }
-        ),
-        resume: !args.restart,
-        fingerprint,
-        publish_every_s: 10.0,
-    })
 }
 
 /// Moves the progress bar to frame `g` with its stage times (logged instead without a
 /// terminal).
 fn show_progress(bar: &ProgressBar, g: &Progress) -> ControlFlow<()> {
     if g.frame == 0 || Some(g.frame) == g.resumed_after {
+        bar.set_length(g.frames as u64);
         bar.set_position(g.frame as u64);
         bar.reset_eta();
         return ControlFlow::Continue(());

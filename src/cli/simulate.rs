@@ -228,6 +228,7 @@ fn stage(args: &Args, scene: &Scene, sim: &Simulation, frames: usize) -> StageOu
         meshes.push(MeshOut::collider(c, scene.fps));
     }
     StageOut {
+        over: None,
         fps: scene.fps,
         start,
         end: start + frames as f64,

@@ -26,6 +26,7 @@ pub mod calibrate;
 pub mod fit;
 pub mod models;
 mod run;
+pub mod shot;
 pub use crate::sim::coarse::{crease_label, CoarseCalibration};
 use crate::transfer::Transfer;
 pub use models::{choose_path, CorrectorChoice, ModelPath, ModelsManifest};

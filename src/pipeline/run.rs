@@ -19,7 +19,7 @@ use crate::data::{flat64, unflat};
 use crate::error::{Error, Result};
 use crate::eval::{vertex_errors, Animation};
 use crate::io::tensors::{TensorReader, TensorWriter};
-use crate::io::usd::{AnimationWriter, MeshOut, SolverSettings, StageOut};
+use crate::io::usd::{AnimationWriter, MeshOut, OverLayer, SolverSettings, StageOut};
 use crate::mesh::ClothMesh;
 use crate::msr::inference::InitMaps;
 use crate::scene::Scene;
@@ -47,6 +47,9 @@ pub struct Outputs {
     pub fingerprint: String,
     /// Seconds between publishing the files and the resume point while running.
     pub publish_every_s: f64,
+    /// Write the fine garments as an override layer for the USD shot they were read from
+    /// ([`OverLayer`]) instead of a standalone stage: frames per value clip (0: one file).
+    pub layer: Option<usize>,
 }
 
 /// How far a run is.
@@ -237,6 +240,7 @@ impl Writers {
                     gravity_m_s2: scene.gravity_m_s2,
                     dt_s: p.coarse.sim.params.dt_s,
                 }),
+                over: None,
             }
         };
         let open = |path: &Path, st: &StageOut<'_>| -> Result<AnimationWriter> {
@@ -245,10 +249,15 @@ impl Writers {
                 None => AnimationWriter::create(path, st),
             }
         };
-        let fine_stage = stage(
+        let mut fine_stage = stage(
             part_meshes(&p.fine_part_meshes, fine_edge),
             "fine garments M_f",
         );
+        if let Some(clip_frames) = out.layer {
+            fine_stage.over = Some(over_layer(scene, &fine_stage.meshes, clip_frames)?);
+            fine_stage.meshes.retain(|m| m.animated);
+            fine_stage.solver = None;
+        }
         let mut writers = Writers {
             fine: (out.fine.clone(), open(&out.fine, &fine_stage)?),
             coarse: None,
@@ -403,6 +412,39 @@ impl FrameLog<'_> {
         }
         Ok(())
     }
+}
+
+/// The override layer for the shot `scene` was read from, replacing `meshes` (the animated
+/// ones: the garments), each at its prim.
+fn over_layer(scene: &Scene, meshes: &[MeshOut], clip_frames: usize) -> Result<OverLayer> {
+    let mut input: Option<&Path> = None;
+    let mut prims = std::collections::BTreeMap::new();
+    for m in meshes.iter().filter(|m| m.animated) {
+        let source = scene.sources.get(&m.name).ok_or_else(|| {
+            Error::Invalid(format!(
+                "garment '{}' was not read from a USD shot: a layered output overrides the \
+                 shot's own prims (write a standalone stage instead)",
+                m.name
+            ))
+        })?;
+        match input {
+            Some(file) if file != source.file => {
+                return Err(Error::Invalid(format!(
+                    "garments come from {} and {}: a layered output overrides one shot",
+                    file.display(),
+                    source.file.display()
+                )))
+            }
+            _ => input = Some(&source.file),
+        }
+        prims.insert(m.name.clone(), source.prim.clone());
+    }
+    let input = input.ok_or_else(|| Error::Invalid("no garment to write".into()))?;
+    Ok(OverLayer {
+        input: input.to_path_buf(),
+        prims,
+        clip_frames,
+    })
 }
 
 fn part_meshes(parts: &[(String, ClothMesh, crate::garment::Fabric)], edge_m: f64) -> Vec<MeshOut> {

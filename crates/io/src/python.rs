@@ -1,12 +1,18 @@
-//! The embedded Python interpreter (pyo3) that runs clothsr's USD bridge (`bridge/clothsr_usd`).
+//! The Python interpreter (pyo3) that runs clothsr's USD bridge (`bridge/clothsr_usd`).
 //!
-//! On first use it adds the project venv's site-packages (where usd-core and numpy live), puts
-//! `bridge/` on `sys.path` and imports it (the bridge registers `schemas/` beside it). Locations default to
-//! the repository the binary was built from, so nothing has to be exported:
-//! - `CLOTHSR_ROOT`: the directory holding `bridge/` and `schemas/`;
-//! - `CLOTHSR_VENV` (else `VIRTUAL_ENV`, else `<root>/.venv`): the Python environment.
+//! Two cases:
+//! - **Embedded** (the `clothsr` command, the tests): on first use it starts an interpreter, adds
+//!   the project venv's site-packages (where usd-core and numpy live), puts `bridge/` on
+//!   `sys.path` and imports it (the bridge registers its `schemas/`). Locations default to the
+//!   repository the binary was built from, so nothing has to be exported:
+//!   - `CLOTHSR_ROOT`: the directory holding `bridge/`;
+//!   - `CLOTHSR_VENV` (else `VIRTUAL_ENV`, else `<root>/.venv`): the Python environment.
+//! - **Host** (the `clothsr` Python package, in a venv or a DCC's own Python, after
+//!   [`use_host_interpreter`]): the interpreter that loaded the package, with its own `pxr`,
+//!   imports the bridge installed beside the package; nothing is added to its paths.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 
 use pyo3::exceptions::PyImportError;
@@ -18,7 +24,7 @@ use crate::error::{Error, Result};
 /// Name of the bridge package.
 const BRIDGE: &str = "clothsr_usd";
 
-/// The directory holding `bridge/` and `schemas/`.
+/// The directory holding `bridge/`.
 pub fn repo_root() -> PathBuf {
     std::env::var_os("CLOTHSR_ROOT")
         .map(PathBuf::from)
@@ -49,7 +55,32 @@ fn setup_hint() -> String {
     )
 }
 
+/// Set when a host interpreter loaded clothsr (see [`use_host_interpreter`]).
+static HOST: AtomicBool = AtomicBool::new(false);
+
+/// Runs the bridge in the Python interpreter that loaded clothsr as an extension module (the
+/// `clothsr` package), with that interpreter's own `pxr` and the `clothsr_usd` package
+/// installed beside it; no environment or path is added. Call it before the first USD call.
+pub fn use_host_interpreter() {
+    HOST.store(true, Ordering::SeqCst);
+}
+
+/// Imports the bridge in a host interpreter.
+fn init_host(py: Python<'_>) -> std::result::Result<(), String> {
+    match py.import(BRIDGE) {
+        Ok(_) => Ok(()),
+        Err(e) if e.is_instance_of::<PyImportError>(py) => Err(format!(
+            "cannot import clothsr's USD bridge in this Python: {e}. The host needs USD's Python \
+             modules (`pxr`): a DCC's own, or `pip install usd-core`"
+        )),
+        Err(e) => Err(format!("cannot start the USD bridge: {e}")),
+    }
+}
+
 fn init(py: Python<'_>) -> std::result::Result<(), String> {
+    if HOST.load(Ordering::SeqCst) {
+        return init_host(py);
+    }
     let fail = |e: PyErr| e.to_string();
     let sys = py.import("sys").map_err(fail)?;
     let (major, minor): (u32, u32) = {

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::garment::{garmentcode, Fabric};
 use crate::mesh::{cloth_from_corners, flatten, ClothMesh, FlattenOptions, Flattening};
 use crate::obj;
-use crate::scene::{ClothPiece, Collider, Scene};
+use crate::scene::{ClothPiece, Collider, PrimSource, Scene};
 use crate::usd::{self, write_usd, MeshOut, SolverSettings, StageOut};
 
 /// Reading a [`Scene`] from files and writing it to USD.
@@ -274,6 +274,13 @@ impl SceneFiles for Scene {
                     scene.gravity_m_s2 = s.gravity_m_s2;
                     scene.dt_s = s.dt_s;
                 }
+                let source = |prim: &str| PrimSource {
+                    file: path.to_path_buf(),
+                    prim: prim.to_string(),
+                };
+                for (g, prim) in stage.garments.iter().zip(&stage.garment_paths) {
+                    scene.sources.insert(g.name.clone(), source(prim));
+                }
                 scene.garments = stage.garments;
                 for m in &stage.meshes {
                     match m.role {
@@ -282,7 +289,9 @@ impl SceneFiles for Scene {
                                 .fabric
                                 .as_ref()
                                 .map_or_else(|| fabric.clone(), |(f, _)| f.clone());
-                            scene.cloths.push(cloth_from_usd_mesh(path, m, f)?);
+                            let cloth = cloth_from_usd_mesh(path, m, f)?;
+                            scene.sources.insert(cloth.name.clone(), source(&m.path));
+                            scene.cloths.push(cloth);
                         }
                         _ => scene.colliders.push(collider_from_usd_mesh(m, stage.fps)),
                     }
@@ -335,6 +344,7 @@ impl SceneFiles for Scene {
                 .map(|c| MeshOut::collider(c, self.fps)),
         );
         let out = StageOut {
+            over: None,
             fps: self.fps,
             start: self.frame_start as f64,
             end: self.frame_end as f64,
@@ -577,4 +587,52 @@ mod tests {
             assert!(err.contains(part), "{part}: {err}");
         }
     }
+}
+
+/// What [`convert`] makes a scene of.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Convert {
+    /// GarmentCode JSON, OBJ cloth meshes or USD scenes: their garments go into one scene (a
+    /// repeated name gets a suffix); the first sets the frame rate and range.
+    pub inputs: Vec<std::path::PathBuf>,
+    /// Colliders (OBJ, OBJ sequence, USD) and then the avatar.
+    pub colliders: Vec<std::path::PathBuf>,
+    /// Fabric for patterns and meshes without one.
+    pub fabric: Fabric,
+    /// Frames per second of the scene (OBJ sequences are read at this rate).
+    pub fps: Option<f64>,
+    /// Frames to simulate from the first (default: to the end of the colliders' animation).
+    pub frames: Option<i64>,
+}
+
+/// The scene `c` describes.
+pub fn convert(c: &Convert) -> Result<Scene> {
+    let (first, rest) = c
+        .inputs
+        .split_first()
+        .ok_or_else(|| Error::Invalid("nothing to convert: give at least one input".into()))?;
+    let mut scene = Scene::load(first, &c.fabric)?;
+    for input in rest {
+        scene.merge(Scene::load(input, &c.fabric)?);
+    }
+    if let Some(fps) = c.fps {
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(Error::Invalid(format!(
+                "frames per second must be positive, got {fps}"
+            )));
+        }
+        scene.fps = fps;
+    }
+    for path in &c.colliders {
+        scene.add_collider_file(path)?;
+    }
+    if let Some(n) = c.frames {
+        if n < 0 {
+            return Err(Error::Invalid(format!(
+                "the number of frames must be >= 0, got {n}"
+            )));
+        }
+        scene.frame_end = scene.frame_start + n;
+    }
+    Ok(scene)
 }

@@ -2,7 +2,7 @@
 //! Python side (`bridge/clothsr_usd`) does all `pxr` work and hands back plain arrays in metres,
 //! y up, world space.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use nalgebra::{Vector2, Vector3};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -122,6 +122,8 @@ pub struct UsdStage<M> {
     pub meshes: Vec<M>,
     /// Garments given as sewing patterns.
     pub garments: Vec<Garment>,
+    /// Each garment's prim path.
+    pub garment_paths: Vec<String>,
     /// PhysicsScene settings, if any.
     pub solver: Option<SolverSettings>,
     /// What the reader noticed but could go on from (a garment whose physics material
@@ -327,8 +329,11 @@ fn stage_common<M>(
     meshes: Vec<M>,
 ) -> PyResult<std::result::Result<UsdStage<M>, Error>> {
     let mut garments = Vec::new();
+    let mut garment_paths = Vec::new();
     for g in item(d, "garments")?.cast_into::<PyList>()?.iter() {
-        match garment_from(&g.cast_into::<PyDict>()?, path)? {
+        let g = g.cast_into::<PyDict>()?;
+        garment_paths.push(item(&g, "path")?.extract()?);
+        match garment_from(&g, path)? {
             Ok(g) => garments.push(g),
             Err(e) => return Ok(Err(e)),
         }
@@ -359,6 +364,7 @@ fn stage_common<M>(
         up_axis: item(d, "up_axis")?.extract()?,
         meshes,
         garments,
+        garment_paths,
         solver,
         warnings,
     }))
@@ -510,6 +516,24 @@ pub struct StageOut<'a> {
     pub meshes: Vec<MeshOut>,
     /// Solver settings.
     pub solver: Option<SolverSettings>,
+    /// Write an override layer for the stage the garments were read from instead of a
+    /// standalone stage.
+    pub over: Option<OverLayer>,
+}
+
+/// An override layer for a USD shot (`clothsr run --layer`): sublayered over the shot, it
+/// replaces each garment with its animated mesh at the garment's own prim path, in the
+/// shot's units, up axis and time codes; nothing else of the shot is copied.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct OverLayer {
+    /// The shot.
+    pub input: PathBuf,
+    /// Each animated mesh's prim in the shot, by mesh name.
+    pub prims: std::collections::BTreeMap<String, String>,
+    /// Frames per value clip: longer animations go to one file per clip of this many frames
+    /// (beside the layer, in `<name>.clips/`), stitched by the layer; 0 keeps every frame in
+    /// the layer.
+    pub clip_frames: usize,
 }
 
 /// Checks that `path` names a USD file clothsr can write (.usd, .usda, .usdc).
@@ -583,6 +607,17 @@ fn stage_spec<'py>(py: Python<'py>, out: &StageOut<'_>) -> PyResult<Bound<'py, P
         meshes.append(md)?;
     }
     spec.set_item("meshes", meshes)?;
+    if let Some(o) = &out.over {
+        let od = PyDict::new(py);
+        od.set_item("input", o.input.to_string_lossy().as_ref())?;
+        let prims = PyDict::new(py);
+        for (name, prim) in &o.prims {
+            prims.set_item(name, prim)?;
+        }
+        od.set_item("prims", prims)?;
+        od.set_item("clip_frames", o.clip_frames)?;
+        spec.set_item("over", od)?;
+    }
     if let Some(s) = &out.solver {
         let sd = PyDict::new(py);
         sd.set_item("gravity", s.gravity_m_s2.as_slice().to_vec())?;
@@ -695,8 +730,13 @@ impl AnimationWriter {
             .collect();
         let writer = with_bridge(|py, module| {
             let spec = stage_spec(py, out)?;
+            let class = if out.over.is_some() {
+                "LayerWriter"
+            } else {
+                "AnimationWriter"
+            };
             Ok(module
-                .getattr("AnimationWriter")?
+                .getattr(class)?
                 .call1((p.as_str(), spec, until))?
                 .unbind())
         })?;

@@ -201,6 +201,18 @@ pub struct Scene {
     pub frame_start: i64,
     /// Last output frame.
     pub frame_end: i64,
+    /// Where the garments and cloth meshes read from a USD stage are in it, by name: a
+    /// layered output writes each fine mesh back at its prim.
+    pub sources: std::collections::BTreeMap<String, PrimSource>,
+}
+
+/// A garment's prim in the USD file it was read from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PrimSource {
+    /// The file (the stage's root layer).
+    pub file: std::path::PathBuf,
+    /// The prim's path.
+    pub prim: String,
 }
 
 impl Scene {
@@ -224,12 +236,20 @@ impl Scene {
             taken.insert(candidate.clone());
             candidate
         };
+        let mut sources = other.sources;
+        let mut renamed = |name: &mut String| {
+            let new = unique(name);
+            if let Some(s) = sources.remove(name.as_str()) {
+                self.sources.insert(new.clone(), s);
+            }
+            *name = new;
+        };
         for mut g in other.garments {
-            g.name = unique(&g.name);
+            renamed(&mut g.name);
             self.garments.push(g);
         }
         for mut c in other.cloths {
-            c.name = unique(&c.name);
+            renamed(&mut c.name);
             self.cloths.push(c);
         }
         let mut bodies: std::collections::HashSet<String> =
@@ -258,6 +278,7 @@ impl Default for Scene {
             fps: DEFAULT_FPS,
             frame_start: 0,
             frame_end: 0,
+            sources: Default::default(),
         }
     }
 }

@@ -1,0 +1,386 @@
+//! `clothsr._clothsr`: the clothsr library loaded in-process into a Python interpreter (a venv's,
+//! or a DCC's own with its `pxr`). It only wires the library: each function turns its arguments
+//! into a library call, runs it with the GIL released, and returns plain Python values. The
+//! `clothsr` package (`python/clothsr/__init__.py`) wraps these for users: `Usd.Stage` inputs,
+//! default models, the output layer.
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use clothsr::data::SceneSource;
+use clothsr::garment::{Fabric, PRESET_NAMES};
+use clothsr::io::scene_files::{convert as convert_scene, Convert};
+use clothsr::io::SceneFiles;
+use clothsr::pipeline::shot::{run_shot, RunModels, RunSettings, ShotFiles};
+use clothsr::pipeline::CorrectorChoice;
+use clothsr::scene::Scene;
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+
+create_exception!(
+    _clothsr,
+    ClothsrError,
+    PyException,
+    "A clothsr failure: bad input (naming the file and element), a failed simulation, I/O."
+);
+create_exception!(
+    _clothsr,
+    Cancelled,
+    ClothsrError,
+    "The progress callback stopped the work (it returned False). A run's output keeps the \
+     frames so far and a resume point: the same call again continues from there."
+);
+
+fn error(e: clothsr::Error) -> PyErr {
+    ClothsrError::new_err(e.to_string())
+}
+
+fn fabric(name: &str) -> PyResult<Fabric> {
+    Fabric::preset(name).ok_or_else(|| {
+        ClothsrError::new_err(format!(
+            "unknown fabric '{name}' (known: {})",
+            PRESET_NAMES.join(", ")
+        ))
+    })
+}
+
+/// A progress callback shared with the worker: it is called with the GIL taken; returning
+/// `False` stops the work, raising stops it and the exception is re-raised to the caller.
+/// Ctrl-C (when the call came from the main thread) stops it too.
+struct Callback {
+    callback: Option<Py<PyAny>>,
+    failure: Mutex<Option<PyErr>>,
+    cancelled: Mutex<bool>,
+}
+
+impl Callback {
+    fn new(callback: Option<Py<PyAny>>) -> Callback {
+        Callback {
+            callback,
+            failure: Mutex::new(None),
+            cancelled: Mutex::new(false),
+        }
+    }
+
+    /// Calls the callback with the arguments `args` makes; `Break` asks the work to stop.
+    fn call(
+        &self,
+        args: impl for<'py> FnOnce(Python<'py>) -> PyResult<Bound<'py, PyTuple>>,
+    ) -> ControlFlow<()> {
+        Python::attach(|py| {
+            let outcome = py.check_signals().and_then(|()| match &self.callback {
+                Some(cb) => cb.call1(py, args(py)?).map(Some),
+                None => Ok(None),
+            });
+            match outcome {
+                Ok(Some(r)) if r.bind(py).is(&pyo3::types::PyBool::new(py, false)) => {
+                    if let Ok(mut c) = self.cancelled.lock() {
+                        *c = true;
+                    }
+                    ControlFlow::Break(())
+                }
+                Ok(_) => ControlFlow::Continue(()),
+                Err(e) => {
+                    if let Ok(mut f) = self.failure.lock() {
+                        *f = Some(e);
+                    }
+                    ControlFlow::Break(())
+                }
+            }
+        })
+    }
+
+    /// The exception to raise when the work stopped early: the callback's own, else
+    /// [`Cancelled`].
+    fn stopped(&self, what: &str) -> PyErr {
+        if let Some(e) = self.failure.lock().ok().and_then(|mut f| f.take()) {
+            return e;
+        }
+        Cancelled::new_err(format!("{what} cancelled by the progress callback"))
+    }
+
+    fn was_stopped(&self) -> bool {
+        self.cancelled.lock().map(|c| *c).unwrap_or(false)
+            || self.failure.lock().map(|f| f.is_some()).unwrap_or(false)
+    }
+}
+
+/// Runs the whole pipeline on one shot into `output` (see `clothsr.run`).
+#[pyfunction]
+#[pyo3(signature = (scene, output, models, *, frames=None, fabric="cotton", avatar=None,
+    colliders=Vec::new(), corrector="auto", restart=false, ascii=false, rrd=None,
+    output_kind="auto", clip_frames=clothsr::pipeline::shot::DEFAULT_CLIP_FRAMES, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn run<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    models: PathBuf,
+    frames: Option<usize>,
+    fabric: &str,
+    avatar: Option<PathBuf>,
+    colliders: Vec<PathBuf>,
+    corrector: &str,
+    restart: bool,
+    ascii: bool,
+    rrd: Option<PathBuf>,
+    output_kind: &str,
+    clip_frames: usize,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    self::fabric(fabric)?;
+    let choice: CorrectorChoice = corrector
+        .parse()
+        .map_err(|e: String| ClothsrError::new_err(e))?;
+    let source = SceneSource {
+        scene,
+        colliders,
+        avatar,
+        fabric: fabric.to_string(),
+    };
+    let files = ShotFiles {
+        output,
+        rrd,
+        ascii,
+        restart,
+        kind: output_kind
+            .parse()
+            .map_err(|e: String| ClothsrError::new_err(e))?,
+        clip_frames,
+        ..ShotFiles::default()
+    };
+    let callback = Callback::new(progress);
+    let report = py.detach(|| {
+        let settings = RunSettings::default();
+        let models = RunModels::load(&models, choice, &settings)?;
+        run_shot(&models, &source, &settings, &files, frames, |g| {
+            callback.call(|py| (g.frame, g.frames).into_pyobject(py))
+        })
+    });
+    let report = report.map_err(error)?;
+    if report.run.stopped || callback.was_stopped() {
+        return Err(callback.stopped("the run"));
+    }
+    let out = PyDict::new(py);
+    out.set_item("frames_computed", report.run.frames_computed)?;
+    out.set_item("resumed_after", report.run.resumed_after)?;
+    out.set_item("wall_s", report.run.wall_s)?;
+    out.set_item("simulator_s", report.run.totals.simulator_s)?;
+    out.set_item("corrector_s", report.run.totals.corrector_s)?;
+    out.set_item("msr_s", report.run.totals.msr_s)?;
+    out.set_item("coarse_vertices", report.coarse_vertices)?;
+    out.set_item("fine_vertices", report.fine_vertices)?;
+    Ok(out)
+}
+
+/// A USD scene with clothsr's schema from garments and colliders (see `clothsr.convert`);
+/// returns the writer's warnings.
+#[pyfunction]
+#[pyo3(signature = (inputs, output, *, colliders=Vec::new(), avatar=None, fabric="cotton",
+    fps=None, frames=None, ascii=false))]
+#[allow(clippy::too_many_arguments)]
+fn convert(
+    py: Python<'_>,
+    inputs: Vec<PathBuf>,
+    output: PathBuf,
+    colliders: Vec<PathBuf>,
+    avatar: Option<PathBuf>,
+    fabric: &str,
+    fps: Option<f64>,
+    frames: Option<i64>,
+    ascii: bool,
+) -> PyResult<Vec<String>> {
+    let c = Convert {
+        inputs,
+        colliders: colliders.into_iter().chain(avatar).collect(),
+        fabric: self::fabric(fabric)?,
+        fps,
+        frames,
+    };
+    py.detach(|| {
+        clothsr::io::usd::check_extension(&output)?;
+        convert_scene(&c)?.write_usd(&output, ascii)
+    })
+    .map_err(error)
+}
+
+/// What a garment, mesh or scene file holds (see `clothsr.inspect`).
+#[pyfunction]
+#[pyo3(signature = (path, *, fabric="cotton"))]
+fn inspect<'py>(py: Python<'py>, path: PathBuf, fabric: &str) -> PyResult<Bound<'py, PyDict>> {
+    let fabric = self::fabric(fabric)?;
+    let scene = py.detach(|| Scene::load(&path, &fabric)).map_err(error)?;
+    let out = PyDict::new(py);
+    let garments = PyList::empty(py);
+    for g in &scene.garments {
+        let d = PyDict::new(py);
+        d.set_item("name", &g.name)?;
+        d.set_item(
+            "panels",
+            g.panels.iter().map(|p| p.name.clone()).collect::<Vec<_>>(),
+        )?;
+        d.set_item("seams", g.seams.len())?;
+        d.set_item("area_m2", g.area())?;
+        d.set_item("fabric", &g.fabric.name)?;
+        garments.append(d)?;
+    }
+    let cloths = PyList::empty(py);
+    for c in &scene.cloths {
+        let d = PyDict::new(py);
+        d.set_item("name", &c.name)?;
+        d.set_item("vertices", c.mesh.num_vertices())?;
+        d.set_item("triangles", c.mesh.triangles.len())?;
+        d.set_item("fabric", &c.fabric.name)?;
+        cloths.append(d)?;
+    }
+    let colliders = PyList::empty(py);
+    for c in &scene.colliders {
+        let d = PyDict::new(py);
+        d.set_item("name", &c.name)?;
+        d.set_item("vertices", c.frames.first().map_or(0, Vec::len))?;
+        d.set_item("triangles", c.triangles.len())?;
+        d.set_item("frames", c.frames.len())?;
+        colliders.append(d)?;
+    }
+    out.set_item("garments", garments)?;
+    out.set_item("cloths", cloths)?;
+    out.set_item("colliders", colliders)?;
+    out.set_item("fps", scene.fps)?;
+    out.set_item("frame_start", scene.frame_start)?;
+    out.set_item("frame_end", scene.frame_end)?;
+    Ok(out)
+}
+
+/// Per-frame errors of `prediction` (and baselines) against a fine simulation (see
+/// `clothsr.eval`).
+#[pyfunction]
+#[pyo3(signature = (prediction, ground_truth, *, baselines=Vec::new()))]
+fn eval<'py>(
+    py: Python<'py>,
+    prediction: PathBuf,
+    ground_truth: PathBuf,
+    baselines: Vec<(String, PathBuf)>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use clothsr::eval::{compare, summarise, Animation};
+    let read = |path: &std::path::Path, start: f64| {
+        if path.is_dir() {
+            Animation::read_dataset(path, start)
+        } else {
+            Animation::read_usd(path)
+        }
+    };
+    let series = py
+        .detach(|| -> clothsr::Result<_> {
+            let pred = Animation::read_usd(&prediction)?;
+            let start = pred.time_codes.first().copied().unwrap_or(0.0);
+            let gt = read(&ground_truth, start)?;
+            let mut series = vec![("prediction".to_string(), compare(&gt, &pred, &prediction)?)];
+            for (name, path) in &baselines {
+                let mut m = compare(&gt, &read(path, start)?, path)?;
+                let pred_frames = &series[0].1;
+                m.retain(|f| {
+                    pred_frames
+                        .iter()
+                        .any(|p| (p.time_code - f.time_code).abs() < 1e-6)
+                });
+                series.push((name.clone(), m));
+            }
+            Ok(series)
+        })
+        .map_err(error)?;
+    let out = PyDict::new(py);
+    for (name, frames) in &series {
+        let s = summarise(frames);
+        let d = PyDict::new(py);
+        d.set_item("frames", s.frames)?;
+        d.set_item("mean_mm", s.mean_mm)?;
+        d.set_item("max_mm", s.max_mm)?;
+        d.set_item("std_mm", s.std_mm)?;
+        d.set_item("normal_deg", s.normal_deg)?;
+        d.set_item("jitter_mm", s.jitter_mm)?;
+        d.set_item(
+            "per_frame_mean_mm",
+            frames
+                .iter()
+                .map(|f| (f.time_code, f.mean_mm))
+                .collect::<Vec<_>>(),
+        )?;
+        out.set_item(name, d)?;
+    }
+    Ok(out)
+}
+
+/// The best models for one shot (see `clothsr.fit`).
+#[pyfunction]
+#[pyo3(signature = (shot, output, *, generic_isr=None, quality="preview", fabric="cotton",
+    avatar=None, colliders=Vec::new(), frames=None, isr_steps=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn fit(
+    py: Python<'_>,
+    shot: PathBuf,
+    output: PathBuf,
+    generic_isr: Option<PathBuf>,
+    quality: &str,
+    fabric: &str,
+    avatar: Option<PathBuf>,
+    colliders: Vec<PathBuf>,
+    frames: Option<usize>,
+    isr_steps: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<()> {
+    use clothsr::pipeline::fit::{self, FitOptions, Plan, Quality};
+    self::fabric(fabric)?;
+    let quality: Quality = quality
+        .parse()
+        .map_err(|e: String| ClothsrError::new_err(e))?;
+    let absolute = |p: &PathBuf| {
+        std::path::absolute(p).map_err(|e| ClothsrError::new_err(format!("{}: {e}", p.display())))
+    };
+    let source = SceneSource {
+        scene: absolute(&shot)?,
+        colliders: colliders.iter().map(absolute).collect::<PyResult<_>>()?,
+        avatar: avatar.as_ref().map(absolute).transpose()?,
+        fabric: fabric.to_string(),
+    };
+    let opts = FitOptions {
+        quality,
+        coarse_edge_m: clothsr::mesh::COARSE_EDGE_M,
+        fine_edge_m: clothsr::mesh::FINE_EDGE_M,
+        frames,
+        isr_steps,
+        generic_isr,
+    };
+    let callback = Callback::new(progress);
+    let done = py
+        .detach(|| -> clothsr::Result<bool> {
+            let scene = source.load()?;
+            let plan = Plan::new(source.clone(), &scene, &opts)?;
+            fit::run(&plan, &output, |p| {
+                callback.call(|py| (p.done, p.total, p.message.as_str()).into_pyobject(py))
+            })
+        })
+        .map_err(error)?;
+    if !done || callback.was_stopped() {
+        return Err(callback.stopped("the fit"));
+    }
+    Ok(())
+}
+
+/// The clothsr library, in-process.
+#[pymodule]
+fn _clothsr(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // USD through this interpreter's own `pxr` and the bridge installed beside this module.
+    clothsr::io::python::use_host_interpreter();
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("ClothsrError", m.py().get_type::<ClothsrError>())?;
+    m.add("Cancelled", m.py().get_type::<Cancelled>())?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(convert, m)?)?;
+    m.add_function(wrap_pyfunction!(inspect, m)?)?;
+    m.add_function(wrap_pyfunction!(eval, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    Ok(())
+}

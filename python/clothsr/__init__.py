@@ -1,0 +1,257 @@
+"""clothsr: super-resolution cloth animation, in-process.
+
+The clothsr library (Rust) loaded into this Python: a coarse cloth simulation lifted to a fine,
+wrinkled mesh by learned networks (Yu & Wang, SIGGRAPH 2024), written as time-sampled USD.
+USD goes through this interpreter's own ``pxr`` (a DCC's, or ``pip install clothsr[usd]``).
+The GIL is free while clothsr works, so a host's other threads keep running.
+
+    import clothsr
+    layer = clothsr.run("shot.usda", "shot_fine.usdc", progress=lambda done, total: print(done, total))
+
+Every function takes file paths; ``run``, ``inspect`` and ``fit`` also take an open
+``Usd.Stage`` (its composed state, unsaved edits included). Errors raise ``ClothsrError``
+naming the file and element at fault; a progress callback returning ``False`` raises
+``Cancelled``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pathlib
+import tempfile
+from typing import Any, Callable, Dict, Iterator, Optional, Sequence, Tuple, Union
+
+from . import _clothsr
+from ._clothsr import Cancelled, ClothsrError, __version__
+
+try:
+    # Registers clothsr's USD schema now, before this process opens a stage if it has not
+    # yet (the bridge also reads and writes without it: a DCC has USD loaded long before).
+    import clothsr_usd as _bridge  # noqa: F401
+except ImportError:  # no `pxr` here: the USD calls say so when they are made
+    pass
+
+__all__ = [
+    "Cancelled",
+    "ClothsrError",
+    "__version__",
+    "convert",
+    "eval",
+    "fit",
+    "generic_models",
+    "inspect",
+    "run",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+#: ``progress(done, total)``; returning ``False`` stops the work.
+Progress = Callable[[int, int], Optional[bool]]
+
+
+def generic_models() -> pathlib.Path:
+    """The models ``run`` uses by default: ``$CLOTHSR_MODELS``, else the generic models shipped
+    in this package (trained on procedural shots, validated on held-out garments, colliders,
+    motions and fabrics; see their ``README.md``)."""
+    env = os.environ.get("CLOTHSR_MODELS")
+    if env:
+        return pathlib.Path(env)
+    return pathlib.Path(__file__).resolve().parent / "models" / "generic"
+
+
+def _is_stage(x: Any) -> bool:
+    return type(x).__name__ == "Stage" and hasattr(x, "GetRootLayer")
+
+
+@contextlib.contextmanager
+def _scene_path(scene: Any) -> Iterator[pathlib.Path]:
+    """A file for ``scene``: a path as given; a ``Usd.Stage`` read from its root layer's file
+    when that is saved and unedited, else exported (flattened) to a temporary file."""
+    if not _is_stage(scene):
+        yield pathlib.Path(os.fspath(scene))
+        return
+    root = scene.GetRootLayer()
+    edited = any(layer.dirty for layer in scene.GetUsedLayers())
+    if not root.anonymous and not edited and root.realPath:
+        yield pathlib.Path(root.realPath)
+        return
+    with tempfile.TemporaryDirectory(prefix="clothsr-") as tmp:
+        path = pathlib.Path(tmp) / "stage.usdc"
+        if not scene.Export(str(path)):
+            raise ClothsrError(f"cannot export the stage {root.identifier} to {path}")
+        yield path
+
+
+def _open_layer(path: pathlib.Path, keep: bool):
+    """The USD layer at ``path``: reloaded where this interpreter has it open already; when
+    the file is temporary (``keep`` False), an anonymous copy."""
+    from pxr import Sdf
+
+    if not keep:
+        layer = Sdf.Layer.CreateAnonymous(path.suffix)
+        layer.TransferContent(Sdf.Layer.OpenAsAnonymous(str(path)))
+        return layer
+    layer = Sdf.Layer.Find(str(path))
+    if layer is not None:
+        layer.Reload(True)
+        return layer
+    return Sdf.Layer.FindOrOpen(str(path))
+
+
+@contextlib.contextmanager
+def _output(output: Optional[PathLike]) -> Iterator[Tuple[pathlib.Path, bool]]:
+    if output is not None:
+        yield pathlib.Path(os.fspath(output)), True
+        return
+    with tempfile.TemporaryDirectory(prefix="clothsr-") as tmp:
+        yield pathlib.Path(tmp) / "out.usdc", False
+
+
+def _paths(xs: Sequence[PathLike]) -> list:
+    return [os.fspath(x) for x in xs]
+
+
+def run(
+    scene: Any,
+    output: Optional[PathLike] = None,
+    *,
+    models: Optional[PathLike] = None,
+    frames: Optional[int] = None,
+    fabric: str = "cotton",
+    avatar: Optional[PathLike] = None,
+    colliders: Sequence[PathLike] = (),
+    corrector: str = "auto",
+    restart: bool = False,
+    ascii: bool = False,
+    rrd: Optional[PathLike] = None,
+    layer: Optional[bool] = None,
+    clip_frames: int = 100,
+    progress: Optional[Progress] = None,
+):
+    """Runs the whole pipeline on a shot and returns the output layer (``Sdf.Layer``).
+
+    ``scene``: a USD, GarmentCode JSON or OBJ file, or an open ``Usd.Stage``. ``output``: the
+    USD file to write (fine garments as time-sampled points); ``None`` writes an anonymous
+    layer. ``models``: a models folder (default :func:`generic_models`). ``frames``: how many
+    (default: the scene's range). ``fabric``: the preset for garments without one;
+    ``avatar``/``colliders``: extra collider files. ``corrector``: ``auto``, ``on`` or
+    ``off``. An interrupted run of the same settings resumes from its last published frame
+    unless ``restart``. ``rrd``: also save a Rerun recording. ``layer``: ``True`` writes an
+    override layer for the USD shot (the default for USD input; sublayer it over the shot:
+    each garment becomes its fine animated mesh at its own prim, in the shot's units, axis and
+    time codes), ``False`` a standalone stage (garments under ``/World/Garments``, colliders,
+    metres, y up); a layered shot longer than ``clip_frames`` frames goes to value clips. ``progress(done, total)`` is
+    called after every frame, with the GIL taken; returning ``False`` stops the run (raising
+    :class:`Cancelled`; the file keeps the frames so far and the next call resumes), and an
+    exception it raises stops the run and propagates.
+    """
+    with _scene_path(scene) as path, _output(output) as (out, keep):
+        _clothsr.run(
+            os.fspath(path),
+            os.fspath(out),
+            os.fspath(models) if models is not None else os.fspath(generic_models()),
+            frames=frames,
+            fabric=fabric,
+            avatar=os.fspath(avatar) if avatar is not None else None,
+            colliders=_paths(colliders),
+            corrector=corrector,
+            restart=restart,
+            ascii=ascii,
+            rrd=os.fspath(rrd) if rrd is not None else None,
+            output_kind={None: "auto", True: "layer", False: "standalone"}[layer],
+            clip_frames=clip_frames,
+            progress=progress,
+        )
+        return _open_layer(out, keep)
+
+
+def convert(
+    inputs: Union[PathLike, Sequence[PathLike]],
+    output: Optional[PathLike] = None,
+    *,
+    avatar: Optional[PathLike] = None,
+    colliders: Sequence[PathLike] = (),
+    fabric: str = "cotton",
+    fps: Optional[float] = None,
+    frames: Optional[int] = None,
+    ascii: bool = False,
+):
+    """Makes a USD scene with clothsr's schema from garments (GarmentCode JSON, OBJ, USD;
+    several go onto one avatar) and colliders; returns its layer (``Sdf.Layer``). ``output``
+    ``None`` returns an anonymous layer."""
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    with _output(output) as (out, keep):
+        if not keep:
+            out = out.with_suffix(".usda")
+        _clothsr.convert(
+            _paths(inputs),
+            os.fspath(out),
+            colliders=_paths(colliders),
+            avatar=os.fspath(avatar) if avatar is not None else None,
+            fabric=fabric,
+            fps=fps,
+            frames=frames,
+            ascii=ascii,
+        )
+        return _open_layer(out, keep)
+
+
+def inspect(scene: Any, *, fabric: str = "cotton") -> Dict[str, Any]:
+    """What a garment, mesh or scene file (or an open ``Usd.Stage``) holds: garments (panels,
+    seams, area, fabric), cloth meshes (vertices, triangles), colliders (frames), frame rate
+    and range, as a dict."""
+    with _scene_path(scene) as path:
+        return _clothsr.inspect(os.fspath(path), fabric=fabric)
+
+
+def eval(
+    prediction: PathLike,
+    ground_truth: PathLike,
+    *,
+    baselines: Optional[Dict[str, PathLike]] = None,
+) -> Dict[str, Dict[str, Any]]:
+    """Errors of a run's fine meshes (and of ``baselines``, by name) against a fine simulation
+    of the same shot (USD, or a ``clothsr lab dataset`` folder), per series: ``frames``,
+    ``mean_mm``, ``max_mm``, ``std_mm``, ``normal_deg``, ``jitter_mm`` and
+    ``per_frame_mean_mm`` as (time code, mm) pairs."""
+    return _clothsr.eval(
+        os.fspath(prediction),
+        os.fspath(ground_truth),
+        baselines=[(k, os.fspath(v)) for k, v in (baselines or {}).items()],
+    )
+
+
+def fit(
+    shot: Any,
+    output: PathLike,
+    *,
+    quality: str = "preview",
+    fabric: str = "cotton",
+    avatar: Optional[PathLike] = None,
+    colliders: Sequence[PathLike] = (),
+    frames: Optional[int] = None,
+    isr_steps: Optional[int] = None,
+    from_scratch: bool = False,
+    progress: Optional[Callable[[int, int, str], Optional[bool]]] = None,
+) -> pathlib.Path:
+    """Makes the best models for one shot in the folder ``output`` (variations simulated, the
+    coarse model calibrated, the ISR network fine-tuned from the generic one unless
+    ``from_scratch``, a held-out report); a fit stopped there resumes. ``quality``:
+    ``preview`` or ``final``. ``progress(done, total, message)`` sees each task. Returns the
+    folder, for ``run(..., models=...)``."""
+    generic_isr = None if from_scratch else os.fspath(generic_models() / "isr")
+    with _scene_path(shot) as path:
+        _clothsr.fit(
+            os.fspath(path),
+            os.fspath(output),
+            generic_isr=generic_isr,
+            quality=quality,
+            fabric=fabric,
+            avatar=os.fspath(avatar) if avatar is not None else None,
+            colliders=_paths(colliders),
+            frames=frames,
+            isr_steps=isr_steps,
+            progress=progress,
+        )
+    return pathlib.Path(os.fspath(output))

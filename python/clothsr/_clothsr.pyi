@@ -1,0 +1,57 @@
+"""The clothsr library's extension module; use the wrappers in ``clothsr``."""
+
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+__version__: str
+
+class ClothsrError(Exception):
+    """A clothsr failure: bad input (naming the file and element), a failed simulation, I/O."""
+
+class Cancelled(ClothsrError):
+    """The progress callback stopped the work (it returned False)."""
+
+def run(
+    scene: str,
+    output: str,
+    models: str,
+    *,
+    frames: Optional[int] = ...,
+    fabric: str = ...,
+    avatar: Optional[str] = ...,
+    colliders: Sequence[str] = ...,
+    corrector: str = ...,
+    restart: bool = ...,
+    ascii: bool = ...,
+    rrd: Optional[str] = ...,
+    output_kind: str = ...,
+    clip_frames: int = ...,
+    progress: Optional[Callable[[int, int], Optional[bool]]] = ...,
+) -> Dict[str, Any]: ...
+def convert(
+    inputs: Sequence[str],
+    output: str,
+    *,
+    colliders: Sequence[str] = ...,
+    avatar: Optional[str] = ...,
+    fabric: str = ...,
+    fps: Optional[float] = ...,
+    frames: Optional[int] = ...,
+    ascii: bool = ...,
+) -> List[str]: ...
+def inspect(path: str, *, fabric: str = ...) -> Dict[str, Any]: ...
+def eval(
+    prediction: str, ground_truth: str, *, baselines: Sequence[Tuple[str, str]] = ...
+) -> Dict[str, Dict[str, Any]]: ...
+def fit(
+    shot: str,
+    output: str,
+    *,
+    generic_isr: Optional[str] = ...,
+    quality: str = ...,
+    fabric: str = ...,
+    avatar: Optional[str] = ...,
+    colliders: Sequence[str] = ...,
+    frames: Optional[int] = ...,
+    isr_steps: Optional[int] = ...,
+    progress: Optional[Callable[[int, int, str], Optional[bool]]] = ...,
+) -> None: ...

@@ -1,0 +1,344 @@
+//! One shot through the whole pipeline into files: what `clothsr run` and the Python package's
+//! `clothsr.run` do. [`RunModels`] loads a models folder once (several shots can share it);
+//! [`run_shot`] loads a shot, sets the pipeline up and runs it into its [`ShotFiles`].
+
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+
+use super::{
+    choose_path, options_for_run, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath,
+    Options, Outputs, Pipeline, Preview, Progress, Report,
+};
+use crate::data::{SceneSource, Variation};
+use crate::error::{Error, Result};
+use crate::eval::Animation;
+use crate::msr::Isr;
+use crate::viz::Recorder;
+
+/// The pipeline's research settings (`clothsr lab run`); [`RunSettings::default`] is what a
+/// user's run takes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunSettings {
+    /// Coarse edge length, m.
+    pub coarse_edge_m: f64,
+    /// The shot's variation (as `clothsr lab dataset` makes training sequences).
+    pub variation: Variation,
+    /// Sew and settle garments with seams before the first frame.
+    pub dress: bool,
+    /// Iterate Newton to convergence every coarse step instead of the fast one-step solver.
+    pub converged: bool,
+    /// Cloth self-collision in the coarse simulation.
+    pub self_collision: bool,
+    /// The coarse model (unset: the corrector's, else the models folder's `coarse.json`'s,
+    /// else the simulator's).
+    pub coarse: CoarseCalibration,
+    /// Push fine vertices out of the colliders ([`Options::push_out`]).
+    pub push_out: bool,
+    /// Distance shown red in the ground-truth heat map of the Rerun preview, m.
+    pub heat_max_m: f64,
+}
+
+impl Default for RunSettings {
+    fn default() -> Self {
+        RunSettings {
+            coarse_edge_m: 0.02,
+            variation: Variation::default(),
+            dress: true,
+            converged: false,
+            self_collision: false,
+            coarse: CoarseCalibration::default(),
+            push_out: true,
+            heat_max_m: 5e-3,
+        }
+    }
+}
+
+impl RunSettings {
+    /// Checks the settings before any work.
+    pub fn check(&self) -> Result<()> {
+        if !(self.coarse_edge_m.is_finite() && self.coarse_edge_m > 0.0) {
+            return Err(Error::Invalid(
+                "the coarse edge length must be positive".into(),
+            ));
+        }
+        if !(self.heat_max_m.is_finite() && self.heat_max_m > 0.0) {
+            return Err(Error::Invalid(
+                "the heat map's maximum distance must be positive".into(),
+            ));
+        }
+        self.coarse.check_flags().map_err(Error::Invalid)
+    }
+}
+
+/// A models folder loaded for runs: the ISR network, the path taken through the folder and the
+/// pipeline options it gives.
+pub struct RunModels {
+    /// The folder.
+    pub dir: PathBuf,
+    /// The MSR module's network.
+    pub isr: Isr,
+    /// The corrector's folder, when the path taken has one.
+    pub corrector: Option<PathBuf>,
+    /// The pipeline's options under the settings given.
+    pub opts: Options,
+    /// Why this path (with the held-out figures it was validated with), in words.
+    pub why: String,
+    /// The folder's coarse calibration, when the options took it.
+    pub calibration: Option<CoarseCalibration>,
+}
+
+impl RunModels {
+    /// Loads the folder `dir` (`isr/` required; `corrector/`, `coarse.json` and
+    /// `models.json` optional) for runs under `settings`, taking the path `choice` asks for.
+    pub fn load(dir: &Path, choice: CorrectorChoice, settings: &RunSettings) -> Result<RunModels> {
+        settings.check()?;
+        let isr_dir = dir.join("isr");
+        if !isr_dir.join("config.json").exists() {
+            return Err(Error::bad_input(
+                dir,
+                format!(
+                    "no ISR model here (expected {}; train one with 'clothsr lab train isr')",
+                    isr_dir.join("config.json").display()
+                ),
+            ));
+        }
+        let isr = Isr::load(&isr_dir)?;
+        let (path, why) = choose_path(dir, choice)?;
+        let corrector = (path == ModelPath::Corrector).then(|| dir.join("corrector"));
+        let given = Options {
+            coarse_edge_m: settings.coarse_edge_m,
+            fast: !settings.converged,
+            self_collision: settings.self_collision,
+            match_contact_thickness: true,
+            dress: settings.dress,
+            coarse: settings.coarse,
+            push_out: settings.push_out,
+        };
+        let (opts, calibration) = options_for_run(dir, corrector.as_deref(), given)?;
+        Ok(RunModels {
+            dir: dir.to_path_buf(),
+            isr,
+            corrector,
+            opts,
+            why: format!("{path} ({why})"),
+            calibration,
+        })
+    }
+}
+
+/// How a run writes the fine garments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OutputKind {
+    /// An override layer for a USD shot, a standalone stage for other inputs.
+    #[default]
+    Auto,
+    /// An override layer for the USD shot ([`crate::io::usd::OverLayer`]): sublayered over
+    /// the shot, it replaces each garment with its fine animated mesh at the garment's prim.
+    Layer,
+    /// A standalone stage: the fine garments under `/World/Garments`, the colliders under
+    /// `/World/Colliders`, in metres with y up.
+    Standalone,
+}
+
+impl std::str::FromStr for OutputKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(OutputKind::Auto),
+            "layer" => Ok(OutputKind::Layer),
+            "standalone" => Ok(OutputKind::Standalone),
+            _ => Err(format!(
+                "output kind '{s}': expected auto, layer or standalone"
+            )),
+        }
+    }
+}
+
+/// Frames per value clip of a layered output unless asked otherwise.
+pub const DEFAULT_CLIP_FRAMES: usize = 100;
+
+/// Where one shot's run writes, and what it shows.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ShotFiles {
+    /// The fine garments, one time sample per frame (USD).
+    pub output: PathBuf,
+    /// Also the coarse mesh the MSR module saw (M_int, or M_c without corrector).
+    pub coarse: Option<PathBuf>,
+    /// Also the coarse mesh upsampled to the fine one (the baseline without learned detail).
+    pub upsampled: Option<PathBuf>,
+    /// A Rerun recording to save.
+    pub rrd: Option<PathBuf>,
+    /// Stream live to a Rerun viewer instead.
+    pub spawn: bool,
+    /// A fine simulation of the same shot (USD, or a `clothsr lab dataset` directory) that the
+    /// Rerun preview colours the fine mesh against.
+    pub ground_truth: Option<PathBuf>,
+    /// Text USD even for a `.usd` file.
+    pub ascii: bool,
+    /// Start over even when an interrupted run with the same settings left a resume point.
+    pub restart: bool,
+    /// An override layer or a standalone stage.
+    pub kind: OutputKind,
+    /// A layered output's frames per value clip (0: every frame in the layer).
+    pub clip_frames: usize,
+}
+
+/// What [`run_shot`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShotReport {
+    /// The frame loop's report.
+    pub run: Report,
+    /// Coarse and fine vertex counts.
+    pub coarse_vertices: usize,
+    /// Fine vertices.
+    pub fine_vertices: usize,
+}
+
+/// An absolute path (recorded in the resume fingerprint).
+fn absolute(p: &Path) -> Result<PathBuf> {
+    std::path::absolute(p).map_err(|e| Error::io(p, e))
+}
+
+/// Runs `frames` frames (default: the shot's range) of the shot `source` with `models` under
+/// `settings` into `files`, calling `progress` after every frame (`Break` stops after
+/// publishing the frames so far and a resume point). An interrupted run with the same settings
+/// resumes from its last published frame unless `files.restart`.
+pub fn run_shot(
+    models: &RunModels,
+    source: &SceneSource,
+    settings: &RunSettings,
+    files: &ShotFiles,
+    frames: Option<usize>,
+    progress: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<ShotReport> {
+    for extra in [&files.coarse, &files.upsampled].into_iter().flatten() {
+        crate::io::usd::check_extension(extra)?;
+    }
+    crate::io::usd::check_extension(&files.output)?;
+    if files.ground_truth.is_some() && files.rrd.is_none() && !files.spawn {
+        return Err(Error::Invalid(
+            "a ground truth colours the Rerun preview: save or stream one with it".into(),
+        ));
+    }
+    let mut scene = source.load()?;
+    settings.variation.apply(&mut scene);
+    let frames = frames.unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
+    if frames == 0 {
+        return Err(Error::bad_input(
+            &source.scene,
+            "nothing to run: the scene's frame range is empty (give a number of frames)",
+        ));
+    }
+    let t_setup = std::time::Instant::now();
+    let mut p = Pipeline::new(
+        &scene,
+        &models.isr,
+        models.corrector.as_deref(),
+        models.opts,
+    )?;
+    tracing::info!(
+        "{}: coarse {} vertices, fine {} vertices ({} mm pixels), corrector {}; set up in {:.1} s",
+        source.scene.display(),
+        p.coarse.sim.model.num_vertices(),
+        p.fine.num_vertices(),
+        models.isr.cfg.pixel_m * 1e3,
+        if p.has_corrector() { "on" } else { "off" },
+        t_setup.elapsed().as_secs_f64()
+    );
+    let rec = match (&files.rrd, files.spawn) {
+        (Some(path), _) => Some(Recorder::save("clothsr", path)?),
+        (None, true) => Some(Recorder::spawn("clothsr")?),
+        (None, false) => None,
+    };
+    let gt = ground_truth(
+        files.ground_truth.as_deref(),
+        scene.frame_start as f64,
+        &p,
+        &models.isr,
+    )?;
+    let preview = rec.as_ref().map(|r| Preview {
+        recorder: r,
+        ground_truth: gt.as_ref(),
+        heat_max_m: settings.heat_max_m,
+    });
+    let layer = match files.kind {
+        OutputKind::Standalone => false,
+        OutputKind::Layer => true,
+        OutputKind::Auto => {
+            crate::io::FileKind::of(&source.scene)? == crate::io::FileKind::Usd
+                && !scene.sources.is_empty()
+        }
+    };
+    // Everything that shapes the output: a resume point made with other settings is ignored.
+    let fingerprint = format!(
+        "scene={} models={} corrector={} frames={frames} opts={:?} variation={:?} \
+         colliders={:?} avatar={:?} fabric={} layer={:?}",
+        absolute(&source.scene)?.display(),
+        absolute(&models.dir)?.display(),
+        p.has_corrector(),
+        models.opts,
+        settings.variation,
+        source.colliders,
+        source.avatar,
+        source.fabric,
+        layer.then_some(files.clip_frames)
+    );
+    let outputs = Outputs {
+        fine: files.output.clone(),
+        coarse: files.coarse.clone(),
+        upsampled: files.upsampled.clone(),
+        ascii: files.ascii,
+        doc: format!(
+            "clothsr run {} with models {} (corrector {})",
+            source.scene.display(),
+            models.dir.display(),
+            if p.has_corrector() { "on" } else { "off" }
+        ),
+        resume: !files.restart,
+        fingerprint,
+        publish_every_s: 10.0,
+        layer: layer.then_some(files.clip_frames),
+    };
+    let report = run_to_files(&mut p, &scene, frames, &outputs, preview.as_ref(), progress)?;
+    if let Some(r) = rec {
+        if let Some(path) = r.finish()? {
+            tracing::info!("wrote {}", path.display());
+        }
+    }
+    Ok(ShotReport {
+        run: report,
+        coarse_vertices: p.coarse.sim.model.num_vertices(),
+        fine_vertices: p.fine.num_vertices(),
+    })
+}
+
+/// The ground truth `path` (a USD file, or a data set's fine frames from time code `start`),
+/// checked to be the fine mesh of this run.
+fn ground_truth(
+    path: Option<&Path>,
+    start: f64,
+    p: &Pipeline<'_>,
+    isr: &Isr,
+) -> Result<Option<Animation>> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let gt = if path.is_dir() {
+        Animation::read_dataset(path, start)?
+    } else {
+        Animation::read_usd(path)?
+    };
+    if gt.num_vertices() != p.fine.num_vertices() || gt.triangles != p.fine.triangles {
+        return Err(Error::bad_input(
+            path,
+            format!(
+                "not the fine mesh of this run ({} vertices against {}): simulate it at the ISR \
+                 model's pixel size ({} mm)",
+                gt.num_vertices(),
+                p.fine.num_vertices(),
+                isr.cfg.pixel_m * 1e3
+            ),
+        ));
+    }
+    Ok(Some(gt))
+}
