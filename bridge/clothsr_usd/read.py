@@ -261,7 +261,15 @@ def _physics_fabric(prim: Usd.Prim, path: str, mpu: float):
     out = {"name": mat.GetName()}
     if thickness is not None:
         out["thickness_m"] = thickness
-    t = thickness if thickness is not None else FABRIC_FALLBACK["thickness_m"]
+    # The thickness that turns density into areal density: the physics one, else clothsr's own
+    # (a pattern garment has no mesh to carry physics:thicknesses), else the fallback.
+    own = _authored(prim, FABRIC_ATTRS["thickness_m"])
+    if thickness is not None:
+        t = thickness
+    elif own is not None and math.isfinite(float(own)) and float(own) > 0:
+        t = float(own)  # clothsr's fabric attributes are SI
+    else:
+        t = FABRIC_FALLBACK["thickness_m"]
     if density is not None:
         out["areal_density_kg_m2"] = density * t
     nu = poisson if poisson is not None and poisson < 0.5 else 0.0

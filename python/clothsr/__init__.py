@@ -63,6 +63,24 @@ def _is_stage(x: Any) -> bool:
     return type(x).__name__ == "Stage" and hasattr(x, "GetRootLayer")
 
 
+def _name_the_shot(layer, scene: Any) -> None:
+    """An override layer made from an exported ``Usd.Stage`` names the stage's own root layer
+    as its shot (none for an in-memory stage), not the temporary export."""
+    key = "clothsr:layerFor"
+    if not _is_stage(scene) or key not in layer.customLayerData:
+        return
+    root = scene.GetRootLayer()
+    data = dict(layer.customLayerData)
+    if root.anonymous or not root.realPath:
+        del data[key]
+    else:
+        base = pathlib.Path(layer.realPath).parent if layer.realPath else pathlib.Path.cwd()
+        data[key] = os.path.relpath(root.realPath, base)
+    layer.customLayerData = data
+    if not layer.anonymous:
+        layer.Save()
+
+
 @contextlib.contextmanager
 def _scene_path(scene: Any) -> Iterator[pathlib.Path]:
     """A file for ``scene``: a path as given; a ``Usd.Stage`` read from its root layer's file
@@ -162,7 +180,9 @@ def run(
             clip_frames=clip_frames,
             progress=progress,
         )
-        return _open_layer(out, keep)
+        result = _open_layer(out, keep)
+        _name_the_shot(result, scene)
+        return result
 
 
 def convert(

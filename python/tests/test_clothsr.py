@@ -68,14 +68,18 @@ def test_an_open_in_memory_stage_runs_as_its_file(tmp_path):
 
 
 def test_an_edited_stage_runs_with_its_edits(tmp_path):
-    plain = points(clothsr.run(SAMPLE, tmp_path / "plain.usdc", frames=1))
+    # Standalone: world coordinates (a layer holds the garment in its prim's own space).
+    plain = points(clothsr.run(SAMPLE, tmp_path / "plain.usdc", frames=1, layer=False))
     stage = Usd.Stage.Open(str(SAMPLE))
     try:
         # Unsaved: the sheet moved 10 cm along x.
         UsdGeom.Xformable(stage.GetPrimAtPath(GARMENT)).AddTranslateOp(opSuffix="edit").Set(
             (0.1, 0.0, 0.0)
         )
-        edited = points(clothsr.run(stage, tmp_path / "edited.usdc", frames=1))
+        edited = points(clothsr.run(stage, tmp_path / "edited.usdc", frames=1, layer=False))
+        # A layer for the edited stage names the stage's file as its shot, not the export.
+        layer = clothsr.run(stage, tmp_path / "edited_layer.usda", frames=1)
+        assert layer.customLayerData["clothsr:layerFor"] == os.path.relpath(SAMPLE, tmp_path)
     finally:
         # The layer is this process's: every later open of the sample would see the edit.
         stage.GetRootLayer().Reload(True)
@@ -171,3 +175,28 @@ print(len(stage.GetPrimAtPath({GARMENT!r}).GetAttribute("points").GetTimeSamples
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "2"
+
+
+def test_usd_shots_get_an_override_layer_and_standalone_on_request(tmp_path):
+    layer = clothsr.run(SAMPLE, tmp_path / "layer.usda", frames=1)
+    assert "clothsr:layerFor" in layer.customLayerData
+    specs = []
+    layer.Traverse("/", lambda p: specs.append(str(p)) if p.IsPrimPath() else None)
+    assert "/World/Colliders/sphere" not in specs and GARMENT in specs
+    # Sublayered over the shot, as a TD does: the garment is the fine mesh, the sphere is there.
+    stage = Usd.Stage.Open(str(SAMPLE))
+    stage.GetSessionLayer().subLayerPaths.append(layer.identifier)
+    assert stage.GetPrimAtPath(GARMENT).GetTypeName() == "Mesh"
+    assert stage.GetPrimAtPath("/World/Colliders/sphere").IsValid()
+    standalone = clothsr.run(SAMPLE, tmp_path / "standalone.usdc", frames=1, layer=False)
+    assert Usd.Stage.Open(standalone).GetPrimAtPath("/World/Colliders/sphere").IsValid()
+
+
+def test_a_cancelled_run_into_value_clips_resumes_to_the_same_frames(tmp_path):
+    out = tmp_path / "clips.usda"
+    with pytest.raises(clothsr.Cancelled):
+        clothsr.run(SAMPLE, out, frames=5, clip_frames=2, progress=lambda d, t: d < 3)
+    clothsr.run(SAMPLE, out, frames=5, clip_frames=2)
+    assert (tmp_path / "clips.clips" / "clips.0002.usdc").exists()
+    straight = clothsr.run(SAMPLE, tmp_path / "straight.usda", frames=5, clip_frames=0)
+    assert same(points(str(out)), points(straight))
