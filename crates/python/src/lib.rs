@@ -76,7 +76,7 @@ impl Callback {
                 None => Ok(None),
             });
             match outcome {
-                Ok(Some(r)) if r.bind(py).is(&pyo3::types::PyBool::new(py, false)) => {
+                Ok(Some(r)) if r.bind(py).is(pyo3::types::PyBool::new(py, false)) => {
                     if let Ok(mut c) = self.cancelled.lock() {
                         *c = true;
                     }
