@@ -21,7 +21,9 @@ pub mod eval;
 pub mod pipeline;
 pub mod viz;
 
-pub use clothsr_geometry::{error, garment, mesh, metrics, scene, transfer, Error, Result};
+pub use clothsr_geometry::{
+    error, garment, mesh, metrics, scene, transfer, Error, ErrorKind, Result,
+};
 pub use clothsr_io as io;
 pub use clothsr_io::data;
 pub use clothsr_nn as nn;

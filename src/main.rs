@@ -5,13 +5,7 @@ mod cli;
 use std::io::Write;
 
 fn main() {
-    let code = match cli::run() {
-        Ok(code) => code,
-        Err(err) => {
-            eprintln!("error: {err:#}");
-            2
-        }
-    };
+    let code = cli::run();
     let _ = std::io::stdout().flush();
     let _ = std::io::stderr().flush();
     exit_now(code)

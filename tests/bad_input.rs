@@ -58,9 +58,10 @@ fn run_case(dir: &Path, case: &Case, command: &[&str]) {
     let out = cmd.output().expect("run clothsr");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "{}: should fail", case.name);
+    // 3: bad input (2 is bad usage, 4 a failure while running).
     assert_eq!(
         out.status.code(),
-        Some(2),
+        Some(3),
         "{}: exit code (stderr: {stderr})",
         case.name
     );

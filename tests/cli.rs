@@ -124,7 +124,8 @@ fn a_missing_python_environment_says_what_to_run() {
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/skirt.usda"))
         .output()
         .expect("run");
-    assert_eq!(out.status.code(), Some(2));
+    // A broken installation is a failure while running (4), not the input's fault.
+    assert_eq!(out.status.code(), Some(4));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("bash .ci/setup") && err.contains("/nonexistent/venv"),
@@ -853,7 +854,8 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         (out.status.code(), err)
     };
     let (code, err) = run_refused(&["--coarse-mm", "80", "--frames", "1", "--corrector", "off"]);
-    assert_eq!(code, Some(2), "{err}");
+    // The models folder's file is bad input (3).
+    assert_eq!(code, Some(3), "{err}");
     assert!(
         err.contains("coarse.json") && err.contains("compression must be in (0, 1], got 2"),
         "{err}"
@@ -870,10 +872,10 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         .arg(dir.path().join("fine.usdc").with_file_name("missing.usdc"))
         .output()
         .expect("run");
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.usdc"));
 
-    // A directory that is not a model: exit code 2 and the directory named.
+    // A directory that is not a model: bad input (3), the directory named.
     let out = clothsr()
         .args(["lab", "rollout", "--model"])
         .arg(&data)
@@ -881,7 +883,7 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         .arg(&data)
         .output()
         .expect("run");
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(3));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("not a corrector model directory"), "{err}");
 }
@@ -991,7 +993,7 @@ fn help_lists_the_users_commands_and_the_lab_holds_the_research_tools() {
         .lines()
         .filter(|l| l.trim_start().starts_with('-'))
         .count();
-    assert!(flags <= 17, "{flags} flags: {run}");
+    assert!(flags <= 18, "{flags} flags: {run}");
     for heading in ["Input:", "Output:", "Models:", "Preview:"] {
         assert!(run.contains(heading), "{heading} {run}");
     }
@@ -1000,4 +1002,52 @@ fn help_lists_the_users_commands_and_the_lab_holds_the_research_tools() {
     // The research tools are not user commands any more.
     let out = clothsr().args(["train", "--help"]).output().expect("run");
     assert!(!out.status.success());
+}
+
+/// A batch goes on past a failing shot, exits with the failure's code (3: bad input) and says
+/// what each shot did in the `--json` summary.
+#[test]
+fn a_batch_goes_on_past_a_bad_shot_and_summarises_it_in_json() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bad = dir.path().join("broken.usda");
+    std::fs::write(&bad, "#usda 1.0\ndef Mesh \"cloth\" {\n").expect("write");
+    let good = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
+    let out = clothsr()
+        .arg("run")
+        .arg(&bad)
+        .arg(&good)
+        .args(["--frames", "1", "--json", "--out-dir"])
+        .arg(dir.path())
+        .output()
+        .expect("run");
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: clothsr::pipeline::shot::RunSummary =
+        serde_json::from_slice(&out.stdout).expect("one JSON summary on stdout");
+    assert_eq!((summary.status.as_str(), summary.exit_code), ("failed", 3));
+    assert_eq!(summary.shots.len(), 2);
+    let (first, second) = (&summary.shots[0], &summary.shots[1]);
+    assert_eq!(first.status, "failed");
+    let error = first.error.as_ref().expect("the first shot's error");
+    assert_eq!(error.kind, "input");
+    assert!(error.message.contains("broken.usda"), "{}", error.message);
+    assert!(!dir.path().join("broken.usdc").exists());
+    assert_eq!((second.status.as_str(), second.frames_computed), ("ok", 1));
+    assert!(dir.path().join("sheet_sphere.usdc").exists());
+    // Bad usage before any shot: exit code 2, and the summary says so.
+    let out = clothsr()
+        .arg("run")
+        .arg(&good)
+        .args(["--json", "--frames", "1", "-o"])
+        .arg(dir.path().join("out.txt"))
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let summary: clothsr::pipeline::shot::RunSummary =
+        serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(summary.error.expect("an error").kind, "usage");
 }

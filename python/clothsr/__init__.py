@@ -9,8 +9,9 @@ The GIL is free while clothsr works, so a host's other threads keep running.
     layer = clothsr.run("shot.usda", "shot_fine.usdc", progress=lambda done, total: print(done, total))
 
 Every function takes file paths; ``run``, ``inspect`` and ``fit`` also take an open
-``Usd.Stage`` (its composed state, unsaved edits included). Errors raise ``ClothsrError``
-naming the file and element at fault; a progress callback returning ``False`` raises
+``Usd.Stage`` (its composed state, unsaved edits included). Errors raise a ``ClothsrError``
+of their kind: ``UsageError`` (the call), ``BadInputError`` (a file, named with the element at
+fault), ``RunError`` (a failure while running); a progress callback returning ``False`` raises
 ``Cancelled``.
 """
 
@@ -23,7 +24,7 @@ import tempfile
 from typing import Any, Callable, Dict, Iterator, Optional, Sequence, Tuple, Union
 
 from . import _clothsr
-from ._clothsr import Cancelled, ClothsrError, __version__
+from ._clothsr import BadInputError, Cancelled, ClothsrError, RunError, UsageError, __version__
 
 try:
     # Registers clothsr's USD schema now, before this process opens a stage if it has not
@@ -33,8 +34,11 @@ except ImportError:  # no `pxr` here: the USD calls say so when they are made
     pass
 
 __all__ = [
+    "BadInputError",
     "Cancelled",
     "ClothsrError",
+    "RunError",
+    "UsageError",
     "__version__",
     "convert",
     "eval",

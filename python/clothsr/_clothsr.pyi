@@ -7,6 +7,15 @@ __version__: str
 class ClothsrError(Exception):
     """A clothsr failure: bad input (naming the file and element), a failed simulation, I/O."""
 
+class UsageError(ClothsrError):
+    """The call asks for something that cannot be done (the command exits with 2)."""
+
+class BadInputError(ClothsrError):
+    """An input file is wrong; the message names the file and the element (exit code 3)."""
+
+class RunError(ClothsrError):
+    """The work failed while running (exit code 4)."""
+
 class Cancelled(ClothsrError):
     """The progress callback stopped the work (it returned False)."""
 

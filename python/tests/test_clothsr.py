@@ -134,10 +134,13 @@ def test_another_thread_runs_while_clothsr_works(tmp_path):
 def test_bad_input_raises_naming_the_file(tmp_path):
     bad = tmp_path / "broken.usda"
     bad.write_text("#usda 1.0\ndef Mesh \"cloth\" {\n")
-    with pytest.raises(clothsr.ClothsrError, match="broken.usda"):
+    with pytest.raises(clothsr.BadInputError, match="broken.usda"):
         clothsr.run(bad, tmp_path / "out.usdc", frames=1)
-    with pytest.raises(clothsr.ClothsrError, match="unknown fabric"):
+    with pytest.raises(clothsr.UsageError, match="unknown fabric"):
         clothsr.run(SAMPLE, tmp_path / "out.usdc", fabric="tweed")
+    with pytest.raises(clothsr.UsageError, match="must end in"):
+        clothsr.run(SAMPLE, tmp_path / "out.txt", frames=1)
+    assert issubclass(clothsr.BadInputError, clothsr.ClothsrError)
     assert not (tmp_path / "out.usdc").exists()
 
 

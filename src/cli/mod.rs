@@ -15,16 +15,30 @@ use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
 use clothsr::garment::{Fabric, PRESET_NAMES};
 use clothsr::io::SceneFiles;
+use clothsr::pipeline::shot::RunSummary;
+use clothsr::ErrorKind;
 
 /// Super-resolution cloth animation: coarse simulation, learned correction, fine wrinkles.
 #[derive(Debug, Parser)]
-#[command(name = "clothsr", version, about)]
+#[command(
+    name = "clothsr",
+    version,
+    about,
+    after_help = "Exit status: 0 done; 2 bad usage (the command line); 3 bad input (a file's \
+                  content, named with the element at fault); 4 failure while running (a \
+                  simulation that cannot go on, a full disk). A batch goes on past a failing \
+                  shot and exits with the most severe of its failures."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
     /// Log more (-v: debug, -vv: trace); RUST_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
     verbose: u8,
+    /// Print a JSON summary on stdout at the end: status, exit code, each shot of a run with
+    /// its frames or its error (kind `usage`, `input` or `failure`, and message).
+    #[arg(long, global = true)]
+    json: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -51,9 +65,9 @@ enum Command {
     Lab(Box<lab::Command>),
 }
 
-/// Runs the command line and returns the exit code; errors are printed by `main` with their
-/// causes.
-pub fn run() -> anyhow::Result<i32> {
+/// Runs the command line and returns the exit code, printing errors with their causes (and
+/// the `--json` summary).
+pub fn run() -> i32 {
     let cli = Cli::parse();
     let default = match cli.verbose {
         0 => "info",
@@ -67,17 +81,49 @@ pub fn run() -> anyhow::Result<i32> {
         .with_writer(std::io::stderr)
         .with_target(false)
         .init();
-    match cli.command {
+    let outcome = match cli.command {
         Command::Run(a) => run::run(a),
-        Command::Fit(a) => fit::run(a),
-        Command::Eval(a) => eval::run(a),
-        Command::Inspect(a) => inspect::run(a),
-        Command::Convert(a) => convert::run(a),
-        Command::Mesh(a) => mesh::run(a),
-        Command::Simulate(a) => simulate::run(a),
-        Command::Lab(c) => lab::run(*c),
-    }?;
-    Ok(0)
+        Command::Fit(a) => fit::run(a).map(|()| none_run()),
+        Command::Eval(a) => eval::run(a).map(|()| none_run()),
+        Command::Inspect(a) => inspect::run(a).map(|()| none_run()),
+        Command::Convert(a) => convert::run(a).map(|()| none_run()),
+        Command::Mesh(a) => mesh::run(a).map(|()| none_run()),
+        Command::Simulate(a) => simulate::run(a).map(|()| none_run()),
+        Command::Lab(c) => lab::run(*c).map(|()| none_run()),
+    };
+    let summary = match outcome {
+        Ok(summary) => summary,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            RunSummary::of(Vec::new(), Some((error_kind(&err), format!("{err:#}"))))
+        }
+    };
+    if cli.json {
+        match serde_json::to_string(&summary) {
+            Ok(text) => println!("{text}"),
+            Err(e) => eprintln!("error: cannot write the JSON summary: {e}"),
+        }
+    }
+    summary.exit_code
+}
+
+/// The summary of a command that runs no shots and succeeded.
+fn none_run() -> RunSummary {
+    RunSummary::of(Vec::new(), None)
+}
+
+/// What kind of failure `err` is: the library's kind where it comes from the library, an I/O
+/// failure as such, else the command line's own checks (bad usage).
+pub(crate) fn error_kind(err: &anyhow::Error) -> ErrorKind {
+    for cause in err.chain() {
+        if let Some(e) = cause.downcast_ref::<clothsr::Error>() {
+            return e.kind();
+        }
+        if cause.downcast_ref::<std::io::Error>().is_some() {
+            return ErrorKind::Failure;
+        }
+    }
+    ErrorKind::Usage
 }
 
 pub(crate) use clothsr::sim::coarse::on_off;

@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::pipeline::shot::{
-    run_shot, OutputKind, RunModels, RunSettings, ShotFiles, DEFAULT_CLIP_FRAMES,
+    run_shot, ErrorSummary, OutputKind, RunModels, RunSettings, RunSummary, ShotFiles, ShotSummary,
+    DEFAULT_CLIP_FRAMES,
 };
 use clothsr::pipeline::{CoarseCalibration, CorrectorChoice, Progress, Report};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -232,14 +233,18 @@ fn layer_choice(s: &str) -> Result<OutputKind, String> {
     }
 }
 
-/// Runs `run`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+/// Runs `run`: every shot, going on past a failing one; the summary says what each did.
+pub fn run(args: Args) -> anyhow::Result<RunSummary> {
     run_with(args, Knobs::default())
 }
 
 /// Runs `lab run`.
 pub fn run_lab(args: LabArgs) -> anyhow::Result<()> {
-    run_with(args.user, args.knobs)
+    let summary = run_with(args.user, args.knobs)?;
+    match summary.shots.iter().find_map(|s| s.error.as_ref()) {
+        Some(e) => anyhow::bail!("{}", e.message),
+        None => Ok(()),
+    }
 }
 
 impl Knobs {
@@ -258,7 +263,7 @@ impl Knobs {
     }
 }
 
-fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
+fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
     let models_dir = match &args.models {
         Some(m) => m.clone(),
         None => clothsr::pipeline::models::find_generic_models().map_err(anyhow::Error::msg)?,
@@ -288,12 +293,36 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
         );
         b
     });
+    let mut shots = Vec::new();
     for job in &jobs {
         if let Some(o) = &overall {
             o.set_message(job.scene.display().to_string());
         }
-        run_one(&args, &knobs, job, &models, &settings, &multi)
-            .with_context(|| format!("{}", job.scene.display()))?;
+        let t0 = std::time::Instant::now();
+        let outcome = run_one(&args, &knobs, job, &models, &settings, &multi)
+            .with_context(|| format!("{}", job.scene.display()));
+        let (status, report, error) = match outcome {
+            Ok(r) => ("ok", Some(r), None),
+            Err(err) => {
+                // A batch goes on: the error is reported here and in the summary.
+                eprintln!("error: {err:#}");
+                let kind = super::error_kind(&err);
+                let error = ErrorSummary {
+                    kind: kind.name().into(),
+                    message: format!("{err:#}"),
+                };
+                ("failed", None, Some(error))
+            }
+        };
+        shots.push(ShotSummary {
+            scene: job.scene.clone(),
+            output: job.output.clone(),
+            status: status.into(),
+            frames_computed: report.map_or(0, |r| r.frames_computed),
+            resumed_after: report.and_then(|r| r.resumed_after),
+            wall_s: t0.elapsed().as_secs_f64(),
+            error,
+        });
         if let Some(o) = &overall {
             o.inc(1);
         }
@@ -301,7 +330,11 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<()> {
     if let Some(o) = overall {
         o.finish();
     }
-    Ok(())
+    let failed = shots.iter().filter(|s| s.error.is_some()).count();
+    if failed > 0 && shots.len() > 1 {
+        tracing::error!("{failed} of {} shots failed", shots.len());
+    }
+    Ok(RunSummary::of(shots, None))
 }
 
 fn run_one(
@@ -311,7 +344,7 @@ fn run_one(
     models: &RunModels,
     settings: &RunSettings,
     multi: &MultiProgress,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Report> {
     let source = args.inputs.source(&job.scene);
     let files = ShotFiles {
         output: job.output.clone(),
@@ -352,7 +385,7 @@ fn run_one(
     };
     bar.finish();
     log_report(&job.output, &report.run);
-    Ok(())
+    Ok(report.run)
 }
 
 /// Moves the progress bar to frame `g` with its stage times (logged instead without a

@@ -421,7 +421,7 @@ fn over_layer(scene: &Scene, meshes: &[MeshOut], clip_frames: usize) -> Result<O
     let mut prims = std::collections::BTreeMap::new();
     for m in meshes.iter().filter(|m| m.animated) {
         let source = scene.sources.get(&m.name).ok_or_else(|| {
-            Error::Invalid(format!(
+            Error::Usage(format!(
                 "garment '{}' was not read from a USD shot: a layered output overrides the \
                  shot's own prims (write a standalone stage instead)",
                 m.name
@@ -429,7 +429,7 @@ fn over_layer(scene: &Scene, meshes: &[MeshOut], clip_frames: usize) -> Result<O
         })?;
         match input {
             Some(file) if file != source.file => {
-                return Err(Error::Invalid(format!(
+                return Err(Error::Usage(format!(
                     "garments come from {} and {}: a layered output overrides one shot",
                     file.display(),
                     source.file.display()

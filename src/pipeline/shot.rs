@@ -62,11 +62,11 @@ impl RunSettings {
             ));
         }
         if !(self.heat_max_m.is_finite() && self.heat_max_m > 0.0) {
-            return Err(Error::Invalid(
+            return Err(Error::Usage(
                 "the heat map's maximum distance must be positive".into(),
             ));
         }
-        self.coarse.check_flags().map_err(Error::Invalid)
+        self.coarse.check_flags().map_err(Error::Usage)
     }
 }
 
@@ -216,7 +216,7 @@ pub fn run_shot(
     }
     crate::io::usd::check_extension(&files.output)?;
     if files.ground_truth.is_some() && files.rrd.is_none() && !files.spawn {
-        return Err(Error::Invalid(
+        return Err(Error::Usage(
             "a ground truth colours the Rerun preview: save or stream one with it".into(),
         ));
     }
@@ -341,4 +341,73 @@ fn ground_truth(
         ));
     }
     Ok(Some(gt))
+}
+
+/// What happened to one shot of a run or a batch, as `clothsr run --json` reports it (and the
+/// Ray batch, one line per shot).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ShotSummary {
+    /// The shot.
+    pub scene: PathBuf,
+    /// Its output.
+    pub output: PathBuf,
+    /// `ok` or `failed`.
+    pub status: String,
+    /// Frames computed in this call.
+    pub frames_computed: usize,
+    /// The frame a resumed run started after.
+    pub resumed_after: Option<usize>,
+    /// Wall time of the shot, s.
+    pub wall_s: f64,
+    /// Why it failed.
+    pub error: Option<ErrorSummary>,
+}
+
+/// An error in a summary: its kind (`usage`, `input`, `failure`) and its message.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ErrorSummary {
+    /// `usage`, `input` or `failure` ([`crate::ErrorKind::name`]).
+    pub kind: String,
+    /// The message, with its causes.
+    pub message: String,
+}
+
+/// What a run or a batch did, as `clothsr run --json` prints it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RunSummary {
+    /// `ok`, or `failed` when any shot (or the run before any shot) failed.
+    pub status: String,
+    /// The exit code: 0, or the code of the most severe failure ([`crate::ErrorKind::exit_code`]).
+    pub exit_code: i32,
+    /// An error before any shot ran (bad usage, a models folder that does not load).
+    pub error: Option<ErrorSummary>,
+    /// Each shot, in order.
+    pub shots: Vec<ShotSummary>,
+}
+
+impl RunSummary {
+    /// The summary of `shots`, with `error` before any shot when there was one.
+    pub fn of(shots: Vec<ShotSummary>, error: Option<(crate::ErrorKind, String)>) -> RunSummary {
+        use crate::ErrorKind;
+        let kind_of = |name: &str| match name {
+            "usage" => ErrorKind::Usage,
+            "input" => ErrorKind::Input,
+            _ => ErrorKind::Failure,
+        };
+        let mut kinds: Vec<ErrorKind> = shots
+            .iter()
+            .filter_map(|s| s.error.as_ref().map(|e| kind_of(&e.kind)))
+            .collect();
+        kinds.extend(error.as_ref().map(|(k, _)| *k));
+        let exit_code = kinds.iter().map(|k| k.exit_code()).max().unwrap_or(0);
+        RunSummary {
+            status: if exit_code == 0 { "ok" } else { "failed" }.into(),
+            exit_code,
+            error: error.map(|(k, message)| ErrorSummary {
+                kind: k.name().into(),
+                message,
+            }),
+            shots,
+        }
+    }
 }

@@ -29,8 +29,50 @@ pub enum Error {
     #[error("simulation failed: {0}")]
     Simulation(String),
     /// The embedded Python / usd-core bridge failed.
+    #[error("{message}")]
+    Bridge {
+        /// What failed; the bridge's own errors name the file and the element.
+        message: String,
+        /// The bridge refused a file's content (as [`Error::BadInput`]), rather than failing.
+        input: bool,
+    },
+    /// The caller asked for something that cannot be done (an option out of range, a
+    /// combination that does not go together), whatever the files hold.
     #[error("{0}")]
-    Bridge(String),
+    Usage(String),
+}
+
+/// What kind of failure an [`Error`] is, for whoever acts on it: a farm reads it as the exit
+/// code of the `clothsr` command, the Python package as the exception type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// The request itself is wrong: fix the command line or the call.
+    Usage,
+    /// An input file (scene, garment, avatar, models folder) is wrong: fix the file.
+    Input,
+    /// The work failed while running (a simulation that cannot go on, a full disk, the USD
+    /// library): retrying elsewhere, or reporting it, are the options.
+    Failure,
+}
+
+impl ErrorKind {
+    /// The `clothsr` command's exit code: 2 usage (as clap's own), 3 input, 4 failure.
+    pub fn exit_code(self) -> i32 {
+        match self {
+            ErrorKind::Usage => 2,
+            ErrorKind::Input => 3,
+            ErrorKind::Failure => 4,
+        }
+    }
+
+    /// A name for machine-readable reports: `usage`, `input` or `failure`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorKind::Usage => "usage",
+            ErrorKind::Input => "input",
+            ErrorKind::Failure => "failure",
+        }
+    }
 }
 
 impl Error {
@@ -47,6 +89,19 @@ impl Error {
         Error::Io {
             path: path.as_ref().to_path_buf(),
             error,
+        }
+    }
+
+    /// What kind of failure this is.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Error::Usage(_) => ErrorKind::Usage,
+            Error::BadInput { .. } | Error::Invalid(_) => ErrorKind::Input,
+            Error::Bridge { input: true, .. } => ErrorKind::Input,
+            Error::Io { error, .. } if error.kind() == std::io::ErrorKind::NotFound => {
+                ErrorKind::Input
+            }
+            Error::Io { .. } | Error::Simulation(_) | Error::Bridge { .. } => ErrorKind::Failure,
         }
     }
 

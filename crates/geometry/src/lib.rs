@@ -19,4 +19,4 @@ pub mod metrics;
 pub mod scene;
 pub mod transfer;
 
-pub use error::{Error, Result};
+pub use error::{Error, ErrorKind, Result};

@@ -141,9 +141,15 @@ fn to_error(py: Python<'_>, e: PyErr) -> Error {
         .unwrap_or_default();
     let msg = e.value(py).to_string();
     if ty == "BadInput" || ty == "ValueError" {
-        Error::Bridge(msg)
+        Error::Bridge {
+            message: msg,
+            input: ty == "BadInput",
+        }
     } else {
-        Error::Bridge(format!("{ty}: {msg}"))
+        Error::Bridge {
+            message: format!("{ty}: {msg}"),
+            input: false,
+        }
     }
 }
 
@@ -178,7 +184,10 @@ pub fn with_bridge<T>(
         Python::attach(init)
     })
     .clone()
-    .map_err(Error::Bridge)?;
+    .map_err(|message| Error::Bridge {
+        message,
+        input: false,
+    })?;
     Python::attach(|py| {
         let module = py.import(BRIDGE).map_err(|e| to_error(py, e))?;
         f(py, &module).map_err(|e| to_error(py, e))

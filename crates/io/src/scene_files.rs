@@ -610,14 +610,14 @@ pub fn convert(c: &Convert) -> Result<Scene> {
     let (first, rest) = c
         .inputs
         .split_first()
-        .ok_or_else(|| Error::Invalid("nothing to convert: give at least one input".into()))?;
+        .ok_or_else(|| Error::Usage("nothing to convert: give at least one input".into()))?;
     let mut scene = Scene::load(first, &c.fabric)?;
     for input in rest {
         scene.merge(Scene::load(input, &c.fabric)?);
     }
     if let Some(fps) = c.fps {
         if !(fps.is_finite() && fps > 0.0) {
-            return Err(Error::Invalid(format!(
+            return Err(Error::Usage(format!(
                 "frames per second must be positive, got {fps}"
             )));
         }
@@ -628,7 +628,7 @@ pub fn convert(c: &Convert) -> Result<Scene> {
     }
     if let Some(n) = c.frames {
         if n < 0 {
-            return Err(Error::Invalid(format!(
+            return Err(Error::Usage(format!(
                 "the number of frames must be >= 0, got {n}"
             )));
         }

@@ -540,10 +540,10 @@ pub struct OverLayer {
 pub fn check_extension(path: &Path) -> Result<()> {
     match path.extension().and_then(|e| e.to_str()) {
         Some("usd" | "usda" | "usdc") => Ok(()),
-        _ => Err(Error::bad_input(
-            path,
-            "the output must end in .usd, .usda or .usdc",
-        )),
+        _ => Err(Error::Usage(format!(
+            "{}: the output must end in .usd, .usda or .usdc",
+            path.display()
+        ))),
     }
 }
 

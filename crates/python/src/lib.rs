@@ -15,6 +15,7 @@ use clothsr::io::SceneFiles;
 use clothsr::pipeline::shot::{run_shot, RunModels, RunSettings, ShotFiles};
 use clothsr::pipeline::CorrectorChoice;
 use clothsr::scene::Scene;
+use clothsr::ErrorKind;
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
@@ -28,19 +29,50 @@ create_exception!(
 );
 create_exception!(
     _clothsr,
+    UsageError,
+    ClothsrError,
+    "The call asks for something that cannot be done (an option out of range, an unknown \
+     fabric); the `clothsr` command exits with 2."
+);
+create_exception!(
+    _clothsr,
+    BadInputError,
+    ClothsrError,
+    "An input file (scene, garment, avatar, models folder) is wrong; the message names the \
+     file and the element. The `clothsr` command exits with 3."
+);
+create_exception!(
+    _clothsr,
+    RunError,
+    ClothsrError,
+    "The work failed while running (a simulation that cannot go on, a full disk, the USD \
+     library); the `clothsr` command exits with 4."
+);
+create_exception!(
+    _clothsr,
     Cancelled,
     ClothsrError,
     "The progress callback stopped the work (it returned False). A run's output keeps the \
      frames so far and a resume point: the same call again continues from there."
 );
 
+/// The library's error as the exception of its kind.
 fn error(e: clothsr::Error) -> PyErr {
-    ClothsrError::new_err(e.to_string())
+    let message = e.to_string();
+    match e.kind() {
+        ErrorKind::Usage => UsageError::new_err(message),
+        ErrorKind::Input => BadInputError::new_err(message),
+        ErrorKind::Failure => RunError::new_err(message),
+    }
+}
+
+fn usage(message: String) -> PyErr {
+    UsageError::new_err(message)
 }
 
 fn fabric(name: &str) -> PyResult<Fabric> {
     Fabric::preset(name).ok_or_else(|| {
-        ClothsrError::new_err(format!(
+        UsageError::new_err(format!(
             "unknown fabric '{name}' (known: {})",
             PRESET_NAMES.join(", ")
         ))
@@ -132,9 +164,7 @@ fn run<'py>(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     self::fabric(fabric)?;
-    let choice: CorrectorChoice = corrector
-        .parse()
-        .map_err(|e: String| ClothsrError::new_err(e))?;
+    let choice: CorrectorChoice = corrector.parse().map_err(usage)?;
     let source = SceneSource {
         scene,
         colliders,
@@ -146,9 +176,7 @@ fn run<'py>(
         rrd,
         ascii,
         restart,
-        kind: output_kind
-            .parse()
-            .map_err(|e: String| ClothsrError::new_err(e))?,
+        kind: output_kind.parse().map_err(usage)?,
         clip_frames,
         ..ShotFiles::default()
     };
@@ -333,12 +361,9 @@ fn fit(
 ) -> PyResult<()> {
     use clothsr::pipeline::fit::{self, FitOptions, Plan, Quality};
     self::fabric(fabric)?;
-    let quality: Quality = quality
-        .parse()
-        .map_err(|e: String| ClothsrError::new_err(e))?;
-    let absolute = |p: &PathBuf| {
-        std::path::absolute(p).map_err(|e| ClothsrError::new_err(format!("{}: {e}", p.display())))
-    };
+    let quality: Quality = quality.parse().map_err(usage)?;
+    let absolute =
+        |p: &PathBuf| std::path::absolute(p).map_err(|e| usage(format!("{}: {e}", p.display())));
     let source = SceneSource {
         scene: absolute(&shot)?,
         colliders: colliders.iter().map(absolute).collect::<PyResult<_>>()?,
@@ -376,6 +401,9 @@ fn _clothsr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     clothsr::io::python::use_host_interpreter();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("ClothsrError", m.py().get_type::<ClothsrError>())?;
+    m.add("UsageError", m.py().get_type::<UsageError>())?;
+    m.add("BadInputError", m.py().get_type::<BadInputError>())?;
+    m.add("RunError", m.py().get_type::<RunError>())?;
     m.add("Cancelled", m.py().get_type::<Cancelled>())?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(convert, m)?)?;

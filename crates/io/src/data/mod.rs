@@ -243,7 +243,7 @@ impl SceneSource {
     /// Loads the scene as the data set saw it before its variation.
     pub fn load(&self) -> Result<Scene> {
         let fabric = crate::garment::Fabric::preset(&self.fabric)
-            .ok_or_else(|| Error::Invalid(format!("unknown fabric preset '{}'", self.fabric)))?;
+            .ok_or_else(|| Error::Usage(format!("unknown fabric preset '{}'", self.fabric)))?;
         let mut scene = Scene::load(&self.scene, &fabric)?;
         for c in self.colliders.iter().chain(&self.avatar) {
             scene.add_collider_file(c)?;
