@@ -6,6 +6,7 @@
 //! simulating a scene at both resolutions ([`data`]).
 
 pub mod data;
+pub mod models;
 pub mod obj;
 pub mod python;
 pub mod scene_files;

@@ -20,16 +20,26 @@ pub struct ObjMesh {
 
 /// Reads every object of an OBJ file into one mesh.
 pub fn read_obj(path: &Path) -> Result<ObjMesh> {
+    let file = std::fs::File::open(path)
+        .map_err(|e| Error::bad_input(path, format!("cannot open the file: {e}")))?;
+    parse_obj(std::io::BufReader::new(file), path)
+}
+
+/// Reads OBJ text from `reader` (errors name `path`); materials are ignored.
+pub fn parse_obj(mut reader: impl std::io::BufRead, path: &Path) -> Result<ObjMesh> {
     let opts = tobj::LoadOptions {
         single_index: true,
         triangulate: true,
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, _) = tobj::load_obj(path, &opts).map_err(|e| match e {
-        tobj::LoadError::OpenFileFailed => Error::bad_input(path, "cannot open the file"),
-        other => Error::bad_input(path, format!("malformed OBJ: {other}")),
-    })?;
+    let (models, _) =
+        tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed)).map_err(
+            |e| match e {
+                tobj::LoadError::OpenFileFailed => Error::bad_input(path, "cannot open the file"),
+                other => Error::bad_input(path, format!("malformed OBJ: {other}")),
+            },
+        )?;
     let mut mesh = ObjMesh {
         positions: Vec::new(),
         uv: Some(Vec::new()),

@@ -83,7 +83,15 @@ pub fn cloth_from_obj(path: &Path, fabric: Fabric) -> Result<ClothPiece> {
 /// As [`cloth_from_obj`], with the flattening it made (charts and distortion, for reports);
 /// `None` when the OBJ has `vt`.
 pub fn obj_cloth(path: &Path, fabric: Fabric) -> Result<(ClothPiece, Option<Flattening>)> {
-    let m = obj::read_obj(path)?;
+    cloth_of_obj_mesh(path, obj::read_obj(path)?, fabric)
+}
+
+/// The cloth piece of the OBJ mesh `m` read from `path`, as [`obj_cloth`] makes it.
+pub fn cloth_of_obj_mesh(
+    path: &Path,
+    m: obj::ObjMesh,
+    fabric: Fabric,
+) -> Result<(ClothPiece, Option<Flattening>)> {
     let (points, corner_point) = welded(&m);
     let piece = |mesh| ClothPiece {
         name: stem(path),
@@ -265,38 +273,7 @@ impl SceneFiles for Scene {
                 .garments
                 .push(garmentcode::read(path, fabric.clone())?),
             FileKind::Obj => scene.cloths.push(cloth_from_obj(path, fabric.clone())?),
-            FileKind::Usd => {
-                let stage = usd::read_usd(path)?;
-                scene.fps = stage.fps;
-                scene.frame_start = stage.start.floor() as i64;
-                scene.frame_end = stage.end.floor() as i64;
-                if let Some(s) = stage.solver {
-                    scene.gravity_m_s2 = s.gravity_m_s2;
-                    scene.dt_s = s.dt_s;
-                }
-                let source = |prim: &str| PrimSource {
-                    file: path.to_path_buf(),
-                    prim: prim.to_string(),
-                };
-                for (g, prim) in stage.garments.iter().zip(&stage.garment_paths) {
-                    scene.sources.insert(g.name.clone(), source(prim));
-                }
-                scene.garments = stage.garments;
-                for m in &stage.meshes {
-                    match m.role {
-                        usd::MeshRole::Cloth => {
-                            let f = m
-                                .fabric
-                                .as_ref()
-                                .map_or_else(|| fabric.clone(), |(f, _)| f.clone());
-                            let cloth = cloth_from_usd_mesh(path, m, f)?;
-                            scene.sources.insert(cloth.name.clone(), source(&m.path));
-                            scene.cloths.push(cloth);
-                        }
-                        _ => scene.colliders.push(collider_from_usd_mesh(m, stage.fps)),
-                    }
-                }
-            }
+            FileKind::Usd => scene = scene_of_usd(path, usd::read_usd(path)?, fabric)?,
         }
         Ok(scene)
     }
@@ -587,6 +564,50 @@ mod tests {
             assert!(err.contains(part), "{part}: {err}");
         }
     }
+}
+
+/// The scene of the stage read from `path` (as the bridge hands it over): its garments, cloth
+/// meshes (made of `fabric` where they name none) and colliders, frame range and solver.
+pub fn scene_of_usd(
+    path: &Path,
+    stage: usd::UsdStage<usd::UsdMesh>,
+    fabric: &Fabric,
+) -> Result<Scene> {
+    stage.check(path)?;
+    let mut scene = Scene {
+        fps: stage.fps,
+        frame_start: stage.start.floor() as i64,
+        frame_end: stage.end.floor() as i64,
+        ..Scene::default()
+    };
+    if let Some(s) = stage.solver {
+        scene.gravity_m_s2 = s.gravity_m_s2;
+        scene.dt_s = s.dt_s;
+    }
+    let source = |prim: &str| PrimSource {
+        file: path.to_path_buf(),
+        prim: prim.to_string(),
+    };
+    for (g, prim) in stage.garments.iter().zip(&stage.garment_paths) {
+        scene.sources.insert(g.name.clone(), source(prim));
+    }
+    scene.garments = stage.garments;
+    for m in &stage.meshes {
+        m.check(path)?;
+        match m.role {
+            usd::MeshRole::Cloth => {
+                let f = m
+                    .fabric
+                    .as_ref()
+                    .map_or_else(|| fabric.clone(), |(f, _)| f.clone());
+                let cloth = cloth_from_usd_mesh(path, m, f)?;
+                scene.sources.insert(cloth.name.clone(), source(&m.path));
+                scene.cloths.push(cloth);
+            }
+            _ => scene.colliders.push(collider_from_usd_mesh(m, stage.fps)),
+        }
+    }
+    Ok(scene)
 }
 
 /// What [`convert`] makes a scene of.

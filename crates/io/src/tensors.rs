@@ -102,6 +102,11 @@ impl TensorReader {
     /// Reads `path`, checking its header.
     pub fn open(path: &Path) -> Result<TensorReader> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        TensorReader::from_bytes(bytes, path)
+    }
+
+    /// The tensors file whose content is `bytes` (errors name `path`), its header checked.
+    pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<TensorReader> {
         SafeTensors::deserialize(&bytes)
             .map_err(|e| Error::bad_input(path, format!("not a safetensors file: {e}")))?;
         Ok(TensorReader {

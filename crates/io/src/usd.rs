@@ -64,18 +64,142 @@ pub struct UsdMesh {
 }
 
 impl UsdMesh {
-    /// Triangles by fan-splitting each polygon.
+    /// Triangles by fan-splitting each polygon ([`UsdMesh::check`] first: faces past the
+    /// indices, or of fewer than three points, are skipped).
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         let mut out = Vec::with_capacity(self.face_indices.len());
         let mut k = 0usize;
         for &c in &self.face_counts {
-            let f = &self.face_indices[k..k + c as usize];
-            for j in 1..f.len() - 1 {
+            let Some(f) = self.face_indices.get(k..k + c as usize) else {
+                break;
+            };
+            for j in 1..f.len().saturating_sub(1) {
                 out.push([f[0], f[j], f[j + 1]]);
             }
             k += c as usize;
         }
         out
+    }
+
+    /// Why this mesh, read from `file`, cannot be used, if it cannot: the topology, the frames
+    /// and the per-point and per-corner arrays must agree, the points be finite and the
+    /// frames' times be finite and increasing.
+    pub fn check(&self, file: &Path) -> Result<()> {
+        let bad = |what: String| {
+            Err(Error::bad_input(
+                file,
+                format!("mesh {}: {what}", self.path),
+            ))
+        };
+        let n = self.frames.first().map_or(0, Vec::len);
+        if n == 0 || self.face_counts.is_empty() {
+            return bad("no points or no faces".into());
+        }
+        if let Some(c) = self.face_counts.iter().position(|&c| c < 3) {
+            return bad(format!(
+                "face {c} has {} points (3 or more needed)",
+                self.face_counts[c]
+            ));
+        }
+        let corners: u64 = self.face_counts.iter().map(|&c| u64::from(c)).sum();
+        if corners != self.face_indices.len() as u64 {
+            return bad(format!(
+                "faceVertexCounts add up to {corners} corners but faceVertexIndices has {}",
+                self.face_indices.len()
+            ));
+        }
+        if let Some(i) = self.face_indices.iter().position(|&i| i as usize >= n) {
+            return bad(format!(
+                "faceVertexIndices[{i}] = {} is past its {n} points",
+                self.face_indices[i]
+            ));
+        }
+        if self.time_codes.len() != self.frames.len()
+            && !(self.time_codes.is_empty() && self.frames.len() == 1)
+        {
+            return bad(format!(
+                "{} frames of points for {} time codes",
+                self.frames.len(),
+                self.time_codes.len()
+            ));
+        }
+        if !self.time_codes.iter().all(|t| t.is_finite())
+            || self.time_codes.windows(2).any(|w| w[1] <= w[0])
+        {
+            return bad("time codes are not finite and increasing".into());
+        }
+        for (k, f) in self.frames.iter().enumerate() {
+            if f.len() != n {
+                return bad(format!(
+                    "frame {k} has {} points where the first has {n}: the topology changes over time",
+                    f.len()
+                ));
+            }
+            if let Some(i) = f.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+                return bad(format!("point {i} of frame {k} is not finite"));
+            }
+        }
+        match &self.uv {
+            Some(UvData::Vertex(uv)) if uv.len() != n => {
+                return bad(format!(
+                    "primvars:st has {} values for {n} points",
+                    uv.len()
+                ))
+            }
+            Some(UvData::Corner(uv)) if uv.len() != self.face_indices.len() => {
+                return bad(format!(
+                    "primvars:st has {} values for {} face corners",
+                    uv.len(),
+                    self.face_indices.len()
+                ))
+            }
+            Some(UvData::Vertex(uv) | UvData::Corner(uv))
+                if !uv.iter().all(|c| c.iter().all(|x| x.is_finite())) =>
+            {
+                return bad("primvars:st has values that are not finite".into())
+            }
+            _ => {}
+        }
+        if let Some(ids) = &self.panel_ids {
+            if ids.len() != n {
+                return bad(format!(
+                    "primvars:clothsr:panelId has {} values for {n} points",
+                    ids.len()
+                ));
+            }
+        }
+        if let Some(pairs) = &self.seam_pairs {
+            if let Some(p) = pairs.iter().find(|p| p.iter().any(|&i| i as usize >= n)) {
+                return bad(format!(
+                    "clothsr:seamPairs pair {p:?} is past its {n} points"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl UsdStage<UsdMesh> {
+    /// Why this stage, read from `file`, cannot be used, if it cannot: its timing, and each
+    /// mesh ([`UsdMesh::check`]).
+    pub fn check(&self, file: &Path) -> Result<()> {
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(Error::bad_input(
+                file,
+                format!("timeCodesPerSecond = {} is not a positive number", self.fps),
+            ));
+        }
+        let frame = |t: f64| t.is_finite() && t.abs() < 1e9;
+        if !(frame(self.start) && frame(self.end) && self.end >= self.start) {
+            return Err(Error::bad_input(
+                file,
+                format!(
+                    "time codes {}..{} are not a finite range",
+                    self.start, self.end
+                ),
+            ));
+        }
+        self.meshes.iter().try_for_each(|m| m.check(file))
     }
 }
 
@@ -405,7 +529,7 @@ pub fn inspect_usd(path: &Path) -> Result<UsdStage<UsdMeshInfo>> {
 /// solver settings, in metres with y up.
 pub fn read_usd(path: &Path) -> Result<UsdStage<UsdMesh>> {
     let p = path_str(path)?;
-    with_bridge(|_py, m| {
+    let stage = with_bridge(|_py, m| {
         let d = m
             .call_method1("read_stage", (p.as_str(),))?
             .cast_into::<PyDict>()?;
@@ -465,7 +589,9 @@ pub fn read_usd(path: &Path) -> Result<UsdStage<UsdMesh>> {
             });
         }
         stage_common(&d, path, meshes)
-    })?
+    })??;
+    stage.check(path)?;
+    Ok(stage)
 }
 
 /// A mesh to write: topology, frames (one frame = static points), optional cloth data.
@@ -778,5 +904,71 @@ impl AnimationWriter {
     pub fn finish(self) -> Result<Vec<String>> {
         let writer = &self.writer;
         with_bridge(|py, _| writer.call_method0(py, "close")?.extract(py))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> UsdMesh {
+        UsdMesh {
+            path: "/World/cloth".into(),
+            name: "cloth".into(),
+            role: MeshRole::Cloth,
+            skinned: false,
+            face_counts: vec![4],
+            face_indices: vec![0, 1, 2, 3],
+            time_codes: vec![0.0],
+            frames: vec![vec![
+                Vector3::new(0.0, 0.0, 0.0),
+                Vector3::new(1.0, 0.0, 0.0),
+                Vector3::new(1.0, 1.0, 0.0),
+                Vector3::new(0.0, 1.0, 0.0),
+            ]],
+            uv: None,
+            panel_ids: None,
+            seam_pairs: None,
+            fabric: None,
+        }
+    }
+
+    /// What the bridge hands over is checked on the Rust side too: each broken array is an
+    /// error naming the file and the prim, never a panic (fuzz/regressions/usd_arrays).
+    #[test]
+    fn broken_arrays_from_the_bridge_are_errors_not_panics() {
+        let file = Path::new("shot.usda");
+        assert!(quad().check(file).is_ok());
+        assert_eq!(quad().triangles(), vec![[0, 1, 2], [0, 2, 3]]);
+        type Edit = fn(&mut UsdMesh);
+        let cases: [(&str, Edit); 9] = [
+            ("3 or more", |m| m.face_counts = vec![0, 4]),
+            ("add up to", |m| m.face_counts = vec![5]),
+            ("past its 4 points", |m| m.face_indices[2] = 9),
+            ("topology changes", |m| {
+                m.frames.push(vec![Vector3::zeros(); 3]);
+                m.time_codes.push(1.0);
+            }),
+            ("not finite", |m| m.frames[0][1].x = f32::NAN),
+            ("time codes", |m| {
+                m.frames.push(m.frames[0].clone());
+                m.time_codes.push(f64::NAN);
+            }),
+            ("primvars:st", |m| {
+                m.uv = Some(UvData::Vertex(vec![Vector2::zeros(); 2]))
+            }),
+            ("panelId", |m| m.panel_ids = Some(vec![0; 3])),
+            ("seamPairs", |m| m.seam_pairs = Some(vec![[0, 7]])),
+        ];
+        for (words, edit) in cases {
+            let mut m = quad();
+            edit(&mut m);
+            let _ = m.triangles();
+            let err = m.check(file).expect_err(words).to_string();
+            assert!(
+                err.contains("shot.usda") && err.contains("/World/cloth") && err.contains(words),
+                "{words}: {err}"
+            );
+        }
     }
 }

@@ -80,10 +80,15 @@ impl CoarseCalibration {
             return Ok(None);
         }
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let cal: CoarseCalibration = serde_json::from_str(&text)
-            .map_err(|e| Error::bad_input(&path, format!("not a coarse calibration: {e}")))?;
-        cal.check().map_err(|m| Error::bad_input(&path, m))?;
-        Ok(Some(cal))
+        Self::parse(&text, &path).map(Some)
+    }
+
+    /// The settings in `coarse.json` text (errors name `path`), checked.
+    pub fn parse(text: &str, path: &std::path::Path) -> Result<CoarseCalibration> {
+        let cal: CoarseCalibration = serde_json::from_str(text)
+            .map_err(|e| Error::bad_input(path, format!("not a coarse calibration: {e}")))?;
+        cal.check().map_err(|m| Error::bad_input(path, m))?;
+        Ok(cal)
     }
 
     /// Why these settings are unusable, if they are, naming the setting as `coarse.json` does.

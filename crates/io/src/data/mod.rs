@@ -895,7 +895,25 @@ pub fn read_fine_mesh(dir: &Path, manifest: &Manifest) -> Result<ClothMesh> {
 
 fn read_mesh(dir: &Path, manifest: &Manifest, which: &str, expected: usize) -> Result<ClothMesh> {
     let path = dir.join("meshes.safetensors");
-    let r = TensorReader::open(&path)?;
+    mesh_of_tensors(
+        &TensorReader::open(&path)?,
+        &path,
+        manifest,
+        which,
+        expected,
+    )
+}
+
+/// The `which` (`coarse` or `fine`) mesh of a data set's `meshes.safetensors` read as `r` from
+/// `path`, checked to have `expected` vertices and to be a valid mesh.
+pub fn mesh_of_tensors(
+    r: &TensorReader,
+    path: &Path,
+    manifest: &Manifest,
+    which: &str,
+    expected: usize,
+) -> Result<ClothMesh> {
+    let path = path.to_path_buf();
     let (_, material) = r.f64(&format!("{which}_material"))?;
     let (_, triangles) = r.u32(&format!("{which}_triangles"))?;
     let (_, panel_of_vertex) = r.u32(&format!("{which}_panel"))?;
