@@ -24,6 +24,23 @@ class BadInput(ValueError):
     """A file whose content clothsr cannot use; the message names the file and the element."""
 
 
+def _check_dependencies(stage: Usd.Stage, path: str):
+    """A sublayer, reference or payload that cannot be found is an error naming it (USD itself
+    only warns and composes the stage without it)."""
+    if hasattr(stage, "GetCompositionErrors"):
+        missing = [
+            str(e) for e in stage.GetCompositionErrors()
+            if type(e).__name__ in ("ErrorInvalidAssetPath", "ErrorInvalidSublayerPath")
+        ]
+    else:  # USD before 24.11
+        from pxr import UsdUtils
+
+        missing = [f"cannot resolve @{p}@" for p in UsdUtils.ComputeAllDependencies(str(path))[2]]
+    if missing:
+        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+        raise BadInput(f"{path}: {missing[0]}{more}")
+
+
 def compose(layer_path, shot_path, root=None) -> "Sdf.Layer":
     """A root layer (``root``, else an anonymous one) holding the override layer at
     ``layer_path`` sublayered over the shot at ``shot_path``, with the layer's stage metadata."""
@@ -69,6 +86,7 @@ def _open(path: str) -> Usd.Stage:
         raise BadInput(f"{path}: cannot open as USD: {msg[:300]}") from None
     if stage is None:
         raise BadInput(f"{path}: cannot open as USD")
+    _check_dependencies(stage, path)
     version = stage.GetRootLayer().customLayerData.get(SCHEMA_VERSION_KEY, 0)
     if not isinstance(version, int) or version < 0:
         raise BadInput(f"{path}: customLayerData {SCHEMA_VERSION_KEY} = {version!r} is not a version")

@@ -137,6 +137,40 @@ def _skinned_prims(stage: Usd.Stage):
     return out
 
 
+def _skin_problem(target, skel_query) -> str:
+    """Why UsdSkel could not skin ``target``, in words, where it can be told."""
+    indices = target.GetJointIndicesPrimvar().Get() if target.GetJointIndicesPrimvar() else None
+    order = target.GetJointOrder() or skel_query.GetJointOrder()
+    if indices is not None and len(indices) and order is not None:
+        top = int(np.max(np.asarray(indices)))
+        if top >= len(order) or int(np.min(np.asarray(indices))) < 0:
+            return f": primvars:skel:jointIndices holds joint {top}, the skeleton has {len(order)} joints"
+    return ""
+
+
+def _unbound_skinned_meshes(stage: Usd.Stage, bound, path: str):
+    """A mesh with skinning weights whose ``skel:skeleton`` binding resolves to no Skeleton is
+    an error (USD only warns and leaves the body unskinned)."""
+    for prim in stage.Traverse():
+        if not prim.IsA(UsdGeom.Mesh) or prim.GetPath() in bound:
+            continue
+        binding = UsdSkel.BindingAPI(prim)
+        if not prim.HasAPI(UsdSkel.BindingAPI) or not binding.GetJointIndicesPrimvar().HasAuthoredValue():
+            continue
+        targets = []
+        for p in prim.GetPath().GetPrefixes()[::-1]:
+            rel = stage.GetPrimAtPath(p).GetRelationship("skel:skeleton")
+            if rel and rel.GetTargets():
+                targets = rel.GetTargets()
+                break
+        skel = stage.GetPrimAtPath(targets[0]) if targets else None
+        if not skel or not skel.IsA(UsdSkel.Skeleton):
+            raise BadInput(
+                f"{path}: mesh {prim.GetPath()} has skinning weights but its skel:skeleton "
+                f"({', '.join(str(t) for t in targets) or 'none'}) is not a Skeleton on the stage"
+            )
+
+
 def _mesh_role(prim: Usd.Prim, skinned: bool) -> str:
     if _has_api(prim, GARMENT_API + (SURFACE_SIM_API,)):
         return "cloth"
@@ -189,7 +223,7 @@ def _read_mesh(stage, prim, skin, path, mpu, axes, animation: bool, warnings: li
             pts = Vt.Vec3fArray(rest)
             xforms = skel_query.ComputeSkinningTransforms(tc)
             if not target.ComputeSkinnedPoints(xforms, pts, tc):
-                raise BadInput(f"{path}: cannot skin {prim.GetPath()} at time {t}")
+                raise BadInput(f"{path}: cannot skin {prim.GetPath()} at time {t}{_skin_problem(target, skel_query)}")
             xf = _matrix(xcache.GetLocalToWorldTransform(skel_prim))
         else:
             pts = points_attr.Get(tc)
@@ -348,7 +382,7 @@ def _euler_xyz(r: np.ndarray):
     return [math.degrees(a), math.degrees(b), math.degrees(c)]
 
 
-def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
+def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray, path: str):
     xformable = UsdGeom.Xformable(prim)
     ops = xformable.GetOrderedXformOps()
     parent_world = _matrix(
@@ -371,7 +405,7 @@ def _panel_placement(prim: Usd.Prim, mpu: float, axes: np.ndarray):
     rot = axes @ world[:3, :3].T
     scale = np.linalg.norm(rot, axis=0)
     if not np.allclose(scale, 1.0, atol=1e-6):
-        raise BadInput(f"panel {prim.GetPath()} is scaled (scale {scale}); panels must be rigidly placed")
+        raise BadInput(f"{path}: panel {prim.GetPath()} is scaled (scale {scale}); panels must be rigidly placed")
     t = axes @ (world[3, :3] * mpu)
     return t.tolist(), _euler_xyz(rot)
 
@@ -406,7 +440,7 @@ def _read_garment(prim: Usd.Prim, path: str, mpu: float, axes: np.ndarray, warni
                 params[k] *= mpu
             elif ty == "circle":
                 params[k, 0] *= mpu
-        translation, rotation = _panel_placement(child, mpu, axes)
+        translation, rotation = _panel_placement(child, mpu, axes, path)
         panels.append(
             {
                 "name": child.GetName(),
@@ -472,6 +506,7 @@ def _walk(path: str, animation: bool) -> dict:
     stage = open_stage(path)
     mpu, axes = stage_frame(stage, path)
     skinned = _skinned_prims(stage)
+    _unbound_skinned_meshes(stage, skinned, path)
     meshes, garments, warnings = [], [], []
     for prim in stage.Traverse():
         if prim.IsA(UsdGeom.Mesh):

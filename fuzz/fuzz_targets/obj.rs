@@ -11,7 +11,7 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     let path = Path::new("fuzz.obj");
-    if let Ok(m) = parse_obj(std::io::Cursor::new(data), path) {
+    if let Ok(m) = parse_obj(data, path) {
         if m.triangles.len() <= 2000 {
             let _ = cloth_of_obj_mesh(path, m, Fabric::default());
         }

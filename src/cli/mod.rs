@@ -89,7 +89,7 @@ pub fn run() -> i32 {
         Command::Convert(a) => convert::run(a).map(|()| none_run()),
         Command::Mesh(a) => mesh::run(a).map(|()| none_run()),
         Command::Simulate(a) => simulate::run(a).map(|()| none_run()),
-        Command::Lab(c) => lab::run(*c).map(|()| none_run()),
+        Command::Lab(c) => lab::run(*c),
     };
     let summary = match outcome {
         Ok(summary) => summary,

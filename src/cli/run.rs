@@ -128,6 +128,10 @@ pub struct Knobs {
     // the simulator's; a corrector trained beside another is an error).
     #[command(flatten)]
     coarse: CoarseCalibration,
+    /// Seconds between publishing the output and the resume point while running (0: every
+    /// frame, as the fault tests kill runs).
+    #[arg(long)]
+    publish_every_s: Option<f64>,
     /// Write the MSR module's fine meshes as the network gives them. By default every fine
     /// vertex found inside a collider, or nearer it than half the fine simulation's contact
     /// thickness, is moved out to that distance (the 20 mm mesh's chords and the network's
@@ -150,6 +154,7 @@ impl Default for Knobs {
             self_collision: false,
             coarse: CoarseCalibration::default(),
             no_push_out: false,
+            publish_every_s: None,
         }
     }
 }
@@ -239,12 +244,8 @@ pub fn run(args: Args) -> anyhow::Result<RunSummary> {
 }
 
 /// Runs `lab run`.
-pub fn run_lab(args: LabArgs) -> anyhow::Result<()> {
-    let summary = run_with(args.user, args.knobs)?;
-    match summary.shots.iter().find_map(|s| s.error.as_ref()) {
-        Some(e) => anyhow::bail!("{}", e.message),
-        None => Ok(()),
-    }
+pub fn run_lab(args: LabArgs) -> anyhow::Result<RunSummary> {
+    run_with(args.user, args.knobs)
 }
 
 impl Knobs {
@@ -299,8 +300,14 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
             o.set_message(job.scene.display().to_string());
         }
         let t0 = std::time::Instant::now();
-        let outcome = run_one(&args, &knobs, job, &models, &settings, &multi)
-            .with_context(|| format!("{}", job.scene.display()));
+        let outcome = run_one(&args, &knobs, job, &models, &settings, &multi).map_err(|e| {
+            // Name the shot where the error does not already.
+            if format!("{e:#}").contains(&job.scene.display().to_string()) {
+                e
+            } else {
+                e.context(job.scene.display().to_string())
+            }
+        });
         let (status, report, error) = match outcome {
             Ok(r) => ("ok", Some(r), None),
             Err(err) => {
@@ -357,6 +364,7 @@ fn run_one(
         restart: args.restart,
         kind: args.layer,
         clip_frames: args.clip_frames,
+        publish_every_s: knobs.publish_every_s,
     };
     let bar = multi.add(ProgressBar::new(0));
     bar.set_style(
@@ -375,6 +383,9 @@ fn run_one(
         Ok(r) => r,
         Err(e) => {
             bar.abandon();
+            if !job.output.exists() {
+                return Err(e.into());
+            }
             return Err(e).with_context(|| {
                 format!(
                     "{} keeps the frames published before the failure; run again to resume",

@@ -181,7 +181,13 @@ pub struct ShotFiles {
     pub kind: OutputKind,
     /// A layered output's frames per value clip (0: every frame in the layer).
     pub clip_frames: usize,
+    /// Seconds between publishing the files and the resume point while running (`None`: every
+    /// [`DEFAULT_PUBLISH_EVERY_S`]).
+    pub publish_every_s: Option<f64>,
 }
+
+/// Seconds between publishing a run's files and resume point unless asked otherwise.
+pub const DEFAULT_PUBLISH_EVERY_S: f64 = 10.0;
 
 /// What [`run_shot`] did.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -215,6 +221,14 @@ pub fn run_shot(
         crate::io::usd::check_extension(extra)?;
     }
     crate::io::usd::check_extension(&files.output)?;
+    if files
+        .publish_every_s
+        .is_some_and(|s| !(s.is_finite() && s >= 0.0))
+    {
+        return Err(Error::Usage(
+            "the publishing interval must be a number of seconds >= 0".into(),
+        ));
+    }
     if files.ground_truth.is_some() && files.rrd.is_none() && !files.spawn {
         return Err(Error::Usage(
             "a ground truth colours the Rerun preview: save or stream one with it".into(),
@@ -296,7 +310,7 @@ pub fn run_shot(
         ),
         resume: !files.restart,
         fingerprint,
-        publish_every_s: 10.0,
+        publish_every_s: files.publish_every_s.unwrap_or(DEFAULT_PUBLISH_EVERY_S),
         layer: layer.then_some(files.clip_frames),
     };
     let report = run_to_files(&mut p, &scene, frames, &outputs, preview.as_ref(), progress)?;

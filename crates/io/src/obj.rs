@@ -20,13 +20,43 @@ pub struct ObjMesh {
 
 /// Reads every object of an OBJ file into one mesh.
 pub fn read_obj(path: &Path) -> Result<ObjMesh> {
-    let file = std::fs::File::open(path)
+    let bytes = std::fs::read(path)
         .map_err(|e| Error::bad_input(path, format!("cannot open the file: {e}")))?;
-    parse_obj(std::io::BufReader::new(file), path)
+    parse_obj(&bytes, path)
 }
 
-/// Reads OBJ text from `reader` (errors name `path`); materials are ignored.
-pub fn parse_obj(mut reader: impl std::io::BufRead, path: &Path) -> Result<ObjMesh> {
+/// The first face corner of OBJ text `bytes` whose vertex index is out of range, in words.
+fn bad_face_index(bytes: &[u8]) -> Option<String> {
+    let text = String::from_utf8_lossy(bytes);
+    let mut vertices: i64 = 0;
+    for (line_no, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => vertices += 1,
+            Some("f") => {
+                for corner in words {
+                    let Some(Ok(i)) = corner.split('/').next().map(str::parse::<i64>) else {
+                        continue;
+                    };
+                    let resolved = if i < 0 { vertices + i + 1 } else { i };
+                    if i == 0 || resolved < 1 || resolved > vertices {
+                        return Some(format!(
+                            "line {}: face vertex index {i} is outside the {vertices} vertices \
+                             defined before it",
+                            line_no + 1
+                        ));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+/// Reads OBJ text (`bytes`; errors name `path`); materials are ignored.
+pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<ObjMesh> {
+    let mut reader = std::io::BufReader::new(bytes);
     let opts = tobj::LoadOptions {
         single_index: true,
         triangulate: true,
@@ -37,7 +67,10 @@ pub fn parse_obj(mut reader: impl std::io::BufRead, path: &Path) -> Result<ObjMe
         tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed)).map_err(
             |e| match e {
                 tobj::LoadError::OpenFileFailed => Error::bad_input(path, "cannot open the file"),
-                other => Error::bad_input(path, format!("malformed OBJ: {other}")),
+                other => match bad_face_index(bytes) {
+                    Some(why) => Error::bad_input(path, format!("malformed OBJ: {why}")),
+                    None => Error::bad_input(path, format!("malformed OBJ: {other}")),
+                },
             },
         )?;
     let mut mesh = ObjMesh {

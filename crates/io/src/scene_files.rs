@@ -58,10 +58,10 @@ impl FileKind {
             Some("json") => Ok(FileKind::GarmentCode),
             Some("obj") => Ok(FileKind::Obj),
             Some("usd" | "usda" | "usdc") => Ok(FileKind::Usd),
-            _ => Err(Error::bad_input(
-                path,
-                "unknown file type (expected .json, .obj, .usd, .usda or .usdc)",
-            )),
+            _ => Err(Error::Usage(format!(
+                "{}: unknown file type (expected .json, .obj, .usd, .usda or .usdc)",
+                path.display()
+            ))),
         }
     }
 }
@@ -600,7 +600,16 @@ pub fn scene_of_usd(
                     .fabric
                     .as_ref()
                     .map_or_else(|| fabric.clone(), |(f, _)| f.clone());
-                let cloth = cloth_from_usd_mesh(path, m, f)?;
+                let cloth = cloth_from_usd_mesh(path, m, f).map_err(|e| match e {
+                    // Name the prim where the mesh checks did not.
+                    Error::BadInput { path, message } if !message.contains(&m.path) => {
+                        Error::BadInput {
+                            path,
+                            message: format!("mesh {}: {message}", m.path),
+                        }
+                    }
+                    other => other,
+                })?;
                 scene.sources.insert(cloth.name.clone(), source(&m.path));
                 scene.cloths.push(cloth);
             }

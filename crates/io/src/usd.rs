@@ -63,20 +63,40 @@ pub struct UsdMesh {
     pub fabric: Option<(Fabric, f64)>,
 }
 
+/// The farthest a point may lie from the origin, m: beyond, a garment or body is a units or
+/// export mistake that would only explode the simulation.
+pub const MAX_COORDINATE_M: f32 = 1e5;
+
 impl UsdMesh {
     /// Triangles by fan-splitting each polygon ([`UsdMesh::check`] first: faces past the
     /// indices, or of fewer than three points, are skipped).
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         let mut out = Vec::with_capacity(self.face_indices.len());
+        let rest = self.frames.first();
         let mut k = 0usize;
         for &c in &self.face_counts {
             let Some(f) = self.face_indices.get(k..k + c as usize) else {
                 break;
             };
+            k += c as usize;
+            // Polygons by ear clipping in their plane; a fan where that finds none.
+            let corners: Option<Vec<Vector3<f64>>> = rest.and_then(|r| {
+                f.iter()
+                    .map(|&i| r.get(i as usize).map(|p| p.cast::<f64>()))
+                    .collect()
+            });
+            if f.len() > 3 {
+                if let Some(tris) = corners
+                    .as_deref()
+                    .and_then(crate::mesh::triangulate_polygon)
+                {
+                    out.extend(tris.iter().map(|t| t.map(|j| f[j])));
+                    continue;
+                }
+            }
             for j in 1..f.len().saturating_sub(1) {
                 out.push([f[0], f[j], f[j + 1]]);
             }
-            k += c as usize;
         }
         out
     }
@@ -108,6 +128,28 @@ impl UsdMesh {
                 self.face_indices.len()
             ));
         }
+        let mut k = 0usize;
+        let mut seen = std::collections::HashMap::new();
+        // Cloth faces must each be a piece of cloth (a body's stray faces are harmless).
+        let faces = if self.role == MeshRole::Cloth {
+            self.face_counts.as_slice()
+        } else {
+            &[]
+        };
+        for (face, &c) in faces.iter().enumerate() {
+            let f = &self.face_indices[k..k + c as usize];
+            k += c as usize;
+            let mut sorted = f.to_vec();
+            sorted.sort_unstable();
+            if sorted.windows(2).any(|w| w[0] == w[1]) {
+                return bad(format!(
+                    "face {face} ({f:?}) repeats a point: it has no area"
+                ));
+            }
+            if let Some(first) = seen.insert(sorted, face) {
+                return bad(format!("face {face} repeats face {first}"));
+            }
+        }
         if let Some(i) = self.face_indices.iter().position(|&i| i as usize >= n) {
             return bad(format!(
                 "faceVertexIndices[{i}] = {} is past its {n} points",
@@ -137,6 +179,13 @@ impl UsdMesh {
             }
             if let Some(i) = f.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
                 return bad(format!("point {i} of frame {k} is not finite"));
+            }
+            if let Some(i) = f.iter().position(|p| p.amax() > MAX_COORDINATE_M) {
+                return bad(format!(
+                    "point {i} of frame {k} lies {:.3e} m from the origin (more than \
+                     {MAX_COORDINATE_M:.0e} m): check the stage's units",
+                    f[i].amax()
+                ));
             }
         }
         match &self.uv {

@@ -47,7 +47,8 @@ pub enum Command {
 }
 
 /// Runs a research command.
-pub fn run(command: Command) -> anyhow::Result<()> {
+pub fn run(command: Command) -> anyhow::Result<clothsr::pipeline::shot::RunSummary> {
+    let done = clothsr::pipeline::shot::RunSummary::of(Vec::new(), None);
     match command {
         Command::Dataset(a) => dataset::run(a),
         Command::Fork(a) => fork::run(a),
@@ -55,9 +56,10 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Rollout(a) => rollout::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Sr(a) => sr::run(a),
-        Command::Run(a) => super::run::run_lab(*a),
+        Command::Run(a) => return super::run::run_lab(*a),
         Command::Bench(a) => bench::run(a),
         Command::Samples(a) => samples::run(a),
         Command::Scenes(a) => scenes::run(a),
     }
+    .map(|()| done)
 }

@@ -239,6 +239,35 @@ fn parse_panel(name: &str, v: &Value, scale: f64, relative: bool) -> Result<Pane
                 }
             }
         };
+        // Curvature in range: control points within ten edge lengths of the edge, and a circle
+        // no smaller than the edge allows (SVG rounds a radius just short of half the chord
+        // up; a much smaller one is an error in the pattern, not rounding).
+        let chord = (b - a).norm();
+        let far = |c: &Vector2<f64>| (c - (a + b) * 0.5).norm() > 10.0 * chord;
+        match &curve {
+            Curve::Quadratic { control: c } | Curve::Cubic { control1: c, .. } if far(c) => {
+                return Err(invalid(format!(
+                    "{what}: a curvature control point lies {:.3} m from a {chord:.3} m edge \
+                     (more than ten edge lengths): curvature out of range",
+                    (c - (a + b) * 0.5).norm()
+                )))
+            }
+            Curve::Cubic { control2: c, .. } if far(c) => {
+                return Err(invalid(format!(
+                    "{what}: a curvature control point lies {:.3} m from a {chord:.3} m edge \
+                     (more than ten edge lengths): curvature out of range",
+                    (c - (a + b) * 0.5).norm()
+                )))
+            }
+            Curve::Arc { radius_m, .. } if *radius_m < 0.45 * chord => {
+                return Err(invalid(format!(
+                    "{what}: circle radius {radius_m:.4} m is far shorter than half its chord \
+                     ({:.4} m)",
+                    0.5 * chord
+                )))
+            }
+            _ => {}
+        }
         edges.push(PanelEdge { start, end, curve });
     }
     let translation = match v.get("translation") {

@@ -5,11 +5,13 @@
 mod flatten;
 mod from_uv;
 mod pattern;
+mod polygon;
 mod quality;
 
 pub use flatten::{flatten, Distortion, FlattenOptions, Flattening};
 pub use from_uv::{cloth_from_corners, connected_components};
-pub use pattern::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
+pub use pattern::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M, MAX_PANEL_VERTICES};
+pub use polygon::triangulate_polygon;
 pub use quality::{MeshStats, SHARP_CORNER_DEG};
 
 use nalgebra::{Vector2, Vector3};

@@ -56,6 +56,9 @@ impl MeshOptions {
 /// above 1; calibrated so that the mean edge length matches the target on real patterns.
 const AREA_FACTOR: f64 = 1.6;
 
+/// The most vertices one panel may mesh into (a 2.5 mm mesh of about 15 m²).
+pub const MAX_PANEL_VERTICES: f64 = 5e6;
+
 /// Meshes every panel of `garment` and records seam vertex pairs. World positions come from each
 /// panel's placement.
 pub fn mesh_garment(garment: &Garment, opts: &MeshOptions) -> Result<ClothMesh> {
@@ -64,6 +67,20 @@ pub fn mesh_garment(garment: &Garment, opts: &MeshOptions) -> Result<ClothMesh> 
         return Err(Error::Invalid(format!(
             "edge length must be positive, got {h} m"
         )));
+    }
+    // A garment of wrong units (a pattern in centimetres read as metres) would mesh into
+    // billions of vertices: refused before any work.
+    for p in &garment.panels {
+        let area = p.signed_area().abs();
+        let vertices = area / (0.433 * h * h);
+        if !vertices.is_finite() || vertices > MAX_PANEL_VERTICES {
+            return Err(Error::Invalid(format!(
+                "panel '{}': {area:.1} m² would mesh into about {vertices:.1e} vertices at {:.1} mm \
+                 (more than {MAX_PANEL_VERTICES:.0e}): check the pattern's units",
+                p.name,
+                h * 1e3
+            )));
+        }
     }
     // Segments per edge; seams share the larger count of their two sides.
     let mut segments: HashMap<EdgeRef, usize> = HashMap::new();

@@ -204,6 +204,38 @@ pub struct Isr {
     device: Device,
 }
 
+/// A field of `config.json` (at `path`) that this build does not know is an error: a newer
+/// build's option would make a different network of the same weights.
+fn unknown_fields(path: &Path, cfg: &IsrTrainingConfig) -> Result<()> {
+    fn walk(given: &serde_json::Value, known: &serde_json::Value, at: &str) -> Option<String> {
+        let (serde_json::Value::Object(g), serde_json::Value::Object(k)) = (given, known) else {
+            return None;
+        };
+        g.iter().find_map(|(key, v)| {
+            let here = if at.is_empty() {
+                key.clone()
+            } else {
+                format!("{at}.{key}")
+            };
+            match k.get(key) {
+                None => Some(here),
+                Some(kv) => walk(v, kv, &here),
+            }
+        })
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let given: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| Error::bad_input(path, e.to_string()))?;
+    let known = serde_json::to_value(cfg).map_err(|e| Error::bad_input(path, e.to_string()))?;
+    match walk(&given, &known, "") {
+        Some(field) => Err(Error::bad_input(
+            path,
+            format!("unknown field '{field}' (from a newer clothsr?)"),
+        )),
+        None => Ok(()),
+    }
+}
+
 impl Isr {
     /// Loads `dir/config.json` and `dir/model.bpk` on the default device
     /// ([`crate::common::default_device`]).
@@ -211,6 +243,7 @@ impl Isr {
         let cfg_path = dir.join(CONFIG_FILE);
         let cfg = <IsrTrainingConfig as burn::config::Config>::load(&cfg_path)
             .map_err(|e| Error::bad_input(&cfg_path, e.to_string()))?;
+        unknown_fields(&cfg_path, &cfg)?;
         cfg.model
             .check()
             .map_err(|e| Error::bad_input(&cfg_path, e))?;
