@@ -54,31 +54,44 @@ fn a_run_killed_ten_times_resumes_to_the_uninterrupted_output() {
         .success());
     let full = t0.elapsed();
     let killed = dir.path().join("killed.usdc");
-    // Ten kills at points spread over the run's length (a fixed pseudo-random sequence).
+    let expected = frames(&straight);
+    // Ten kills at points spread over a run (a fixed pseudo-random sequence). A run that ends
+    // before its kill closes a chain of killed and resumed runs: its output must be the
+    // uninterrupted one, bit for bit.
     let mut seed = 0x2545_f491_u64;
-    let mut kills = 0;
-    let mut resumed_mid_run = 0;
+    let (mut kills, mut resumed_kills, mut chains) = (0, 0, 0);
     while kills < 10 {
         seed ^= seed << 13;
         seed ^= seed >> 7;
         seed ^= seed << 17;
-        let at = full.mul_f64(0.35 + 0.6 * (seed % 1000) as f64 / 1000.0);
-        let before = killed.exists();
+        let at = full.mul_f64(0.2 + 0.5 * (seed % 1000) as f64 / 1000.0);
+        let resuming = killed.exists();
         let mut child = run_command(&killed, frames_n).spawn().expect("spawn");
         std::thread::sleep(at);
-        if child.try_wait().expect("wait").is_some() {
-            // It finished first: start over for the next kill.
-            std::fs::remove_file(&killed).ok();
+        if let Some(status) = child.try_wait().expect("wait") {
+            assert!(status.success(), "a resumed run failed");
+            assert_eq!(
+                frames(&killed),
+                expected,
+                "chain {chains}: resumed output differs"
+            );
+            std::fs::remove_file(&killed).expect("start a new chain");
+            chains += 1;
             continue;
         }
         child.kill().expect("SIGKILL");
         child.wait().expect("reap");
         kills += 1;
-        resumed_mid_run += usize::from(before);
+        resumed_kills += usize::from(resuming);
     }
     let status = run_command(&killed, frames_n).status().expect("finish");
     assert!(status.success());
-    assert_eq!(frames(&killed), frames(&straight), "resumed output differs");
+    assert_eq!(
+        frames(&killed),
+        expected,
+        "the last chain's resumed output differs"
+    );
+    chains += 1;
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .expect("dir")
         .filter_map(|e| e.ok())
@@ -86,10 +99,13 @@ fn a_run_killed_ten_times_resumes_to_the_uninterrupted_output() {
         .filter(|n| n.contains("clothsr-") || n.ends_with(".resume"))
         .collect();
     assert!(leftovers.is_empty(), "left behind: {leftovers:?}");
-    eprintln!("10 kills, {resumed_mid_run} of them on a run resumed from a published frame");
+    eprintln!(
+        "10 kills in {chains} chains, each resumed bit-identical; {resumed_kills} kills hit a \
+         resumed run"
+    );
     assert!(
-        resumed_mid_run >= 3,
-        "too few kills hit a resumed run: {resumed_mid_run}"
+        resumed_kills >= 3,
+        "too few kills hit a resumed run: {resumed_kills}"
     );
 }
 
