@@ -4,8 +4,9 @@
 
 use nalgebra::{Vector2, Vector3};
 
-/// Triangles (indices into `points`, in the polygon's winding) of the planar polygon `points`;
-/// `None` where it has no proper triangulation (self-intersecting, or of zero area).
+/// Triangles (indices into `points`, in the polygon's winding) of the planar polygon `points`:
+/// the fan from its first corner where every fan triangle is proper (a convex face), else by ear
+/// clipping; `None` where it has no proper triangulation (self-intersecting, or of zero area).
 pub fn triangulate_polygon(points: &[Vector3<f64>]) -> Option<Vec<[usize; 3]>> {
     let n = points.len();
     if n < 3 {
@@ -14,6 +15,7 @@ pub fn triangulate_polygon(points: &[Vector3<f64>]) -> Option<Vec<[usize; 3]>> {
     if n == 3 {
         return Some(vec![[0, 1, 2]]);
     }
+    let fan: Vec<[usize; 3]> = (1..n - 1).map(|j| [0, j, j + 1]).collect();
     // Newell's normal, and two axes of the plane it is normal to.
     let mut normal = Vector3::zeros();
     for i in 0..n {
@@ -25,6 +27,17 @@ pub fn triangulate_polygon(points: &[Vector3<f64>]) -> Option<Vec<[usize; 3]>> {
         );
     }
     let normal = normal.try_normalize(1e-300)?;
+    let size = points
+        .iter()
+        .map(|q| (q - points[0]).norm())
+        .fold(0.0, f64::max);
+    let proper = |t: &[usize; 3]| {
+        let (a, b, c) = (points[t[0]], points[t[1]], points[t[2]]);
+        (b - a).cross(&(c - a)).dot(&normal) > 1e-9 * size * size
+    };
+    if fan.iter().all(proper) {
+        return Some(fan);
+    }
     let helper = if normal.x.abs() < 0.9 {
         Vector3::x()
     } else {
