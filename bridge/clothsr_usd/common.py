@@ -35,10 +35,27 @@ def _check_dependencies(stage: Usd.Stage, path: str):
     else:  # USD before 24.11
         from pxr import UsdUtils
 
-        missing = [f"cannot resolve @{p}@" for p in UsdUtils.ComputeAllDependencies(str(path))[2]]
+        missing = [
+            f"cannot resolve @{p}@{_referenced_by(stage, p)}"
+            for p in UsdUtils.ComputeAllDependencies(str(path))[2]
+        ]
     if missing:
         more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
         raise BadInput(f"{path}: {missing[0]}{more}")
+
+
+def _referenced_by(stage: Usd.Stage, asset: str) -> str:
+    """" referenced by <prim>" for the first prim whose reference or payload names ``asset``."""
+    import os
+
+    name = os.path.basename(str(asset))
+    for prim in stage.TraverseAll():
+        for spec in prim.GetPrimStack():
+            arcs = list(spec.referenceList.GetAddedOrExplicitItems())
+            arcs += list(spec.payloadList.GetAddedOrExplicitItems())
+            if any(os.path.basename(a.assetPath) == name for a in arcs if a.assetPath):
+                return f" (referenced by {prim.GetPath()})"
+    return ""
 
 
 def compose(layer_path, shot_path, root=None) -> "Sdf.Layer":
