@@ -129,6 +129,10 @@ def _output(output: Optional[PathLike]) -> Iterator[Tuple[pathlib.Path, bool]]:
         yield pathlib.Path(tmp) / "out.usdc", False
 
 
+def _path(x: Optional[PathLike]) -> Optional[str]:
+    return os.fspath(x) if x is not None else None
+
+
 def _paths(xs: Sequence[PathLike]) -> list:
     return [os.fspath(x) for x in xs]
 
@@ -171,16 +175,16 @@ def run(
         _clothsr.run(
             os.fspath(path),
             os.fspath(out),
-            os.fspath(models) if models is not None else os.fspath(generic_models()),
+            _path(models) or os.fspath(generic_models()),
             frames=frames,
             fabric=fabric,
-            avatar=os.fspath(avatar) if avatar is not None else None,
+            avatar=_path(avatar),
             colliders=_paths(colliders),
             corrector=corrector,
             restart=restart,
             ascii=ascii,
-            rrd=os.fspath(rrd) if rrd is not None else None,
-            output_kind={None: "auto", True: "layer", False: "standalone"}[layer],
+            rrd=_path(rrd),
+            layer={None: "auto", True: "on", False: "off"}[layer],
             clip_frames=clip_frames,
             progress=progress,
         )
@@ -212,7 +216,7 @@ def convert(
             _paths(inputs),
             os.fspath(out),
             colliders=_paths(colliders),
-            avatar=os.fspath(avatar) if avatar is not None else None,
+            avatar=_path(avatar),
             fabric=fabric,
             fps=fps,
             frames=frames,
@@ -272,7 +276,7 @@ def fit(
             generic_isr=generic_isr,
             quality=quality,
             fabric=fabric,
-            avatar=os.fspath(avatar) if avatar is not None else None,
+            avatar=_path(avatar),
             colliders=_paths(colliders),
             frames=frames,
             isr_steps=isr_steps,

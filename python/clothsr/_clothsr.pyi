@@ -32,7 +32,7 @@ def run(
     restart: bool = ...,
     ascii: bool = ...,
     rrd: Optional[str] = ...,
-    output_kind: str = ...,
+    layer: str = ...,
     clip_frames: int = ...,
     progress: Optional[Callable[[int, int], Optional[bool]]] = ...,
 ) -> Dict[str, Any]: ...

@@ -78,7 +78,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let pred_anim = Animation::read_usd(&args.pred)?;
     // A data set's frames 1.. follow the prediction's first time code.
     let start = pred_anim.time_codes.first().copied().unwrap_or(0.0);
-    let gt = read(&args.gt, start)?;
+    let gt = Animation::read(&args.gt, start)?;
     let inputs = inputs(&args)?;
     let (series, anims) = measure(&gt, pred_anim, &inputs, start)?;
     let pred_mean = print_errors(&series);
@@ -106,16 +106,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         write_rrd(path, &gt, &series, &anims, max_m)?;
     }
     Ok(())
-}
-
-/// A fine animation: a `clothsr lab dataset` directory's fine frames from time code `start`
-/// on, else a USD file.
-fn read(path: &Path, start: f64) -> clothsr::Result<Animation> {
-    if path.is_dir() {
-        Animation::read_dataset(path, start)
-    } else {
-        Animation::read_usd(path)
-    }
 }
 
 /// The series to measure, labelled: the prediction, the baselines, then the twin as `floor`.
@@ -149,7 +139,7 @@ fn measure(
     for (name, path) in inputs {
         let a = match pred_anim.take() {
             Some(a) => a,
-            None => read(path, start)?,
+            None => Animation::read(path, start)?,
         };
         let mut m = compare(gt, &a, path)?;
         // A baseline counts over the prediction's frames only, so that the ratios compare

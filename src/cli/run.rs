@@ -47,7 +47,6 @@ pub struct Args {
         default_value = "auto",
         num_args = 0..=1,
         default_missing_value = "on",
-        value_parser = layer_choice,
         help_heading = "Output"
     )]
     layer: OutputKind,
@@ -226,15 +225,6 @@ fn jobs(args: &Args, knobs: &Knobs) -> anyhow::Result<Vec<Job>> {
                 .collect()
         }
         _ => anyhow::bail!("give the output: -o OUT.usdc (one scene) or --out-dir DIR"),
-    }
-}
-
-fn layer_choice(s: &str) -> Result<OutputKind, String> {
-    match s {
-        "auto" => Ok(OutputKind::Auto),
-        "on" => Ok(OutputKind::Layer),
-        "off" => Ok(OutputKind::Standalone),
-        _ => Err(format!("'{s}': expected auto, on or off")),
     }
 }
 

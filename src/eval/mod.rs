@@ -82,6 +82,16 @@ impl Animation {
         Ok(anim)
     }
 
+    /// A fine animation: a `clothsr lab dataset` directory's fine frames from time code `start`
+    /// on ([`Animation::read_dataset`]), else a USD file ([`Animation::read_usd`]).
+    pub fn read(path: &Path, start: f64) -> Result<Animation> {
+        if path.is_dir() {
+            Animation::read_dataset(path, start)
+        } else {
+            Animation::read_usd(path)
+        }
+    }
+
     /// The fine simulation of a `clothsr lab dataset` directory: frame k (k = 1..) at time code
     /// `start + k` (a run's frame k starts from the same scene frame); the rest frame is not
     /// stored.

@@ -145,11 +145,9 @@ impl std::str::FromStr for OutputKind {
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         match s {
             "auto" => Ok(OutputKind::Auto),
-            "layer" => Ok(OutputKind::Layer),
-            "standalone" => Ok(OutputKind::Standalone),
-            _ => Err(format!(
-                "output kind '{s}': expected auto, layer or standalone"
-            )),
+            "on" => Ok(OutputKind::Layer),
+            "off" => Ok(OutputKind::Standalone),
+            _ => Err(format!("layer '{s}': expected auto, on or off")),
         }
     }
 }
@@ -337,11 +335,7 @@ fn ground_truth(
     let Some(path) = path else {
         return Ok(None);
     };
-    let gt = if path.is_dir() {
-        Animation::read_dataset(path, start)?
-    } else {
-        Animation::read_usd(path)?
-    };
+    let gt = Animation::read(path, start)?;
     if gt.num_vertices() != p.fine.num_vertices() || gt.triangles != p.fine.triangles {
         return Err(Error::bad_input(
             path,

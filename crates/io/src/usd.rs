@@ -80,12 +80,12 @@ impl UsdMesh {
             };
             k += c as usize;
             // Polygons by ear clipping in their plane; a fan where that finds none.
-            let corners: Option<Vec<Vector3<f64>>> = rest.and_then(|r| {
-                f.iter()
-                    .map(|&i| r.get(i as usize).map(|p| p.cast::<f64>()))
-                    .collect()
-            });
             if f.len() > 3 {
+                let corners: Option<Vec<Vector3<f64>>> = rest.and_then(|r| {
+                    f.iter()
+                        .map(|&i| r.get(i as usize).map(|p| p.cast::<f64>()))
+                        .collect()
+                });
                 if let Some(tris) = corners
                     .as_deref()
                     .and_then(crate::mesh::triangulate_polygon)

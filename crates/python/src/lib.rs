@@ -144,7 +144,7 @@ impl Callback {
 #[pyfunction]
 #[pyo3(signature = (scene, output, models, *, frames=None, fabric="cotton", avatar=None,
     colliders=Vec::new(), corrector="auto", restart=false, ascii=false, rrd=None,
-    output_kind="auto", clip_frames=clothsr::pipeline::shot::DEFAULT_CLIP_FRAMES, progress=None))]
+    layer="auto", clip_frames=clothsr::pipeline::shot::DEFAULT_CLIP_FRAMES, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn run<'py>(
     py: Python<'py>,
@@ -159,7 +159,7 @@ fn run<'py>(
     restart: bool,
     ascii: bool,
     rrd: Option<PathBuf>,
-    output_kind: &str,
+    layer: &str,
     clip_frames: usize,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -176,7 +176,7 @@ fn run<'py>(
         rrd,
         ascii,
         restart,
-        kind: output_kind.parse().map_err(usage)?,
+        kind: layer.parse().map_err(usage)?,
         clip_frames,
         ..ShotFiles::default()
     };
@@ -293,21 +293,14 @@ fn eval<'py>(
     baselines: Vec<(String, PathBuf)>,
 ) -> PyResult<Bound<'py, PyDict>> {
     use clothsr::eval::{compare, summarise, Animation};
-    let read = |path: &std::path::Path, start: f64| {
-        if path.is_dir() {
-            Animation::read_dataset(path, start)
-        } else {
-            Animation::read_usd(path)
-        }
-    };
     let series = py
         .detach(|| -> clothsr::Result<_> {
             let pred = Animation::read_usd(&prediction)?;
             let start = pred.time_codes.first().copied().unwrap_or(0.0);
-            let gt = read(&ground_truth, start)?;
+            let gt = Animation::read(&ground_truth, start)?;
             let mut series = vec![("prediction".to_string(), compare(&gt, &pred, &prediction)?)];
             for (name, path) in &baselines {
-                let mut m = compare(&gt, &read(path, start)?, path)?;
+                let mut m = compare(&gt, &Animation::read(path, start)?, path)?;
                 let pred_frames = &series[0].1;
                 m.retain(|f| {
                     pred_frames
