@@ -21,7 +21,10 @@ fn copy_dir(src: &Path, dst: &Path) -> std::io::Result<()> {
 
 fn main() -> std::io::Result<()> {
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR").map_err(std::io::Error::other)?);
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    // Read when the script runs, not when it was compiled: a target directory shared by two
+    // checkouts reuses the compiled script.
+    let manifest_dir = std::env::var("CARGO_MANIFEST_DIR").map_err(std::io::Error::other)?;
+    let root = Path::new(&manifest_dir).join("../..");
     copy_dir(&root.join("bridge/clothsr_usd"), &out.join("clothsr_usd"))?;
     // The generic models without their training-data manifests.
     copy_dir(&root.join("models/generic"), &out.join("models/generic"))?;

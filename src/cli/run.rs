@@ -84,6 +84,9 @@ pub struct Args {
     /// Rerun preview then colours the fine mesh by its distance to it and plots the mean.
     #[arg(long, help_heading = "Preview")]
     gt: Option<PathBuf>,
+    /// Run only this shot of the batch (the batch runs each shot in a child process).
+    #[arg(long, hide = true)]
+    batch_shot: Option<usize>,
 }
 
 /// Arguments of `lab run`: the same, and every research setting of the pipeline.
@@ -265,8 +268,18 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
     );
-    let jobs = jobs(&args, &knobs)?;
+    let mut jobs = jobs(&args, &knobs)?;
     let models = RunModels::load(&models_dir, args.corrector, &settings)?;
+    if let Some(k) = args.batch_shot {
+        anyhow::ensure!(
+            k < jobs.len(),
+            "--batch-shot {k}: the batch has {} shots",
+            jobs.len()
+        );
+        jobs = vec![jobs.swap_remove(k)];
+    } else if jobs.len() > 1 && cfg!(target_os = "linux") {
+        return run_isolated(&jobs);
+    }
     tracing::info!("path: {}", models.why);
     if models.calibration.is_some() {
         tracing::info!(
@@ -332,6 +345,117 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
         tracing::error!("{failed} of {} shots failed", shots.len());
     }
     Ok(RunSummary::of(shots, None))
+}
+
+/// Runs a batch with each shot in a child process (this executable again, given the same
+/// arguments and `--batch-shot K`): a shot whose file crashes a native library (usd-core's
+/// parser overflowing its stack on a deeply nested layer, say) fails alone, and the batch goes
+/// on. The children print their progress; each hands its summary back as JSON.
+fn run_isolated(jobs: &[Job]) -> anyhow::Result<RunSummary> {
+    let exe = std::env::current_exe().context("cannot find this executable to run each shot")?;
+    let argv: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
+    let mut shots = Vec::with_capacity(jobs.len());
+    for (k, job) in jobs.iter().enumerate() {
+        tracing::info!("shot {}/{}: {}", k + 1, jobs.len(), job.scene.display());
+        let t0 = std::time::Instant::now();
+        let mut child = std::process::Command::new(&exe);
+        child.args(&argv).arg("--batch-shot").arg(k.to_string());
+        if !argv.iter().any(|a| a == "--json") {
+            child.arg("--json");
+        }
+        child
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::inherit());
+        die_with_parent(&mut child);
+        let out = child
+            .output()
+            .with_context(|| format!("cannot start the process for {}", job.scene.display()))?;
+        let reported = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .rev()
+            .find_map(|l| serde_json::from_str::<RunSummary>(l).ok());
+        let shot = match reported {
+            Some(mut r) if r.shots.len() == 1 => r.shots.swap_remove(0),
+            // The child failed before its shot (its error printed above).
+            Some(r) if r.error.is_some() => ShotSummary {
+                scene: job.scene.clone(),
+                output: job.output.clone(),
+                status: "failed".into(),
+                frames_computed: 0,
+                resumed_after: None,
+                wall_s: t0.elapsed().as_secs_f64(),
+                error: r.error,
+            },
+            _ => {
+                let message = format!(
+                    "{}: the process running this shot {}, with no result: a native library \
+                     (usd-core, say) crashed on it; the other shots go on",
+                    job.scene.display(),
+                    how_it_ended(&out.status)
+                );
+                eprintln!("error: {message}");
+                ShotSummary {
+                    scene: job.scene.clone(),
+                    output: job.output.clone(),
+                    status: "failed".into(),
+                    frames_computed: 0,
+                    resumed_after: None,
+                    wall_s: t0.elapsed().as_secs_f64(),
+                    error: Some(ErrorSummary {
+                        kind: clothsr::ErrorKind::Failure.name().into(),
+                        message,
+                    }),
+                }
+            }
+        };
+        shots.push(shot);
+    }
+    let failed = shots.iter().filter(|s| s.error.is_some()).count();
+    if failed > 0 {
+        tracing::error!("{failed} of {} shots failed", shots.len());
+    }
+    Ok(RunSummary::of(shots, None))
+}
+
+/// "was killed by signal 11 (SIGSEGV)", "exited with code 101".
+fn how_it_ended(status: &std::process::ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (status.code(), status.signal()) {
+        (_, Some(sig)) => {
+            let name = match sig {
+                libc::SIGSEGV => " (SIGSEGV)",
+                libc::SIGABRT => " (SIGABRT)",
+                libc::SIGBUS => " (SIGBUS)",
+                libc::SIGKILL => " (SIGKILL)",
+                libc::SIGILL => " (SIGILL)",
+                libc::SIGFPE => " (SIGFPE)",
+                _ => "",
+            };
+            format!("was killed by signal {sig}{name}")
+        }
+        (Some(code), None) => format!("exited with code {code}"),
+        (None, None) => "ended".into(),
+    }
+}
+
+/// Asks the kernel to kill the child when this process ends (Linux), so that a batch that is
+/// itself killed leaves no shot running behind it.
+#[allow(unsafe_code)]
+fn die_with_parent(child: &mut std::process::Command) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: `prctl` is async-signal-safe and touches no memory of ours.
+        unsafe {
+            child.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
 }
 
 fn run_one(

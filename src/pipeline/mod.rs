@@ -277,6 +277,9 @@ impl<'a> Pipeline<'a> {
     pub fn advance_frame(&mut self) -> Result<&[Vector3<f64>]> {
         let (mut sim_s, mut cor_s) = (0.0, 0.0);
         let mut start_v = Vec::new();
+        // A frame is where a run can resume: what steps cached starts afresh here, as it
+        // does in a resumed run.
+        self.coarse.sim.forget_history();
         for _ in 0..self.coarse.steps_per_frame {
             if self.corrector.is_some() {
                 start_v.clone_from(&self.coarse.state.v);

@@ -787,6 +787,11 @@ impl CholeskyPreconditioner {
         })
     }
 
+    /// Drops the factor: the next solve factorises again, as a new preconditioner would.
+    pub fn forget(&mut self) {
+        self.factor = None;
+    }
+
     /// Whether a factor is available.
     pub fn is_factored(&self) -> bool {
         self.factor.is_some()

@@ -380,6 +380,11 @@ pub fn generate(
     });
     let mut prev_int = downsample(&transfer, &fine.state);
     for k in start_frame + 1..=opts.frames {
+        // Every frame is a resume point: what the steps cached (hierarchies, clearances,
+        // factors) starts afresh here, as it does after a resume, so that a resumed data set
+        // is bit-identical to one made without the stop.
+        fine.sim.forget_history();
+        coarse.sim.forget_history();
         let buf = simulate_frame(&mut fine, &mut coarse, &transfer, &mut prev_int)?;
         write_frame(&frame_path(dir, k), &buf, &fine, &coarse)?;
         manifest.frames_done = k;

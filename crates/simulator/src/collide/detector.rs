@@ -140,6 +140,21 @@ impl CollisionDetector {
         }
     }
 
+    /// Drops what the detector kept from earlier calls (hierarchies, clearances, creases),
+    /// keeping its settings: the next call finds the same contacts as a new detector's would,
+    /// in the same order. A run resumed from a saved state starts with a new detector; one
+    /// that forgets at the same points gives the same result without the stop.
+    pub fn forget(&mut self) {
+        *self = CollisionDetector {
+            rebuild_every: self.rebuild_every,
+            obstacle_extra_m: self.obstacle_extra_m,
+            skip_clear_vertices: self.skip_clear_vertices,
+            crease_contacts: self.crease_contacts,
+            surface_turns: self.surface_turns,
+            ..CollisionDetector::new()
+        };
+    }
+
     /// Whether an edge of collider `collider` where its surface turns by more than
     /// [`SURFACE_TURN_DEG`], as the last call found them, passes within `r` of `p` (false
     /// unless [`Self::surface_turns`] is set).

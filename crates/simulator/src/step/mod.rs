@@ -168,6 +168,18 @@ impl Simulator {
             .max(self.params.detection_margin_m)
     }
 
+    /// Drops what steps carry from one to the next besides the state, the seam rest lengths
+    /// and the detection margin (cached hierarchies, clearances, preconditioner factors), so
+    /// that the next step is the one a new simulator restored to the same state would take.
+    /// Called at the points a run can be resumed from, it makes a resumed run bit-identical.
+    pub fn forget_history(&mut self) {
+        self.detector.forget();
+        self.last_cg_iters = usize::MAX;
+        if let Some(c) = self.cholesky.as_mut() {
+            c.forget();
+        }
+    }
+
     /// Sets the detection margin of the next step (resuming a run); clamped to the allowed range.
     pub fn set_obstacle_margin_m(&mut self, margin_m: f64) {
         if margin_m.is_finite() {
