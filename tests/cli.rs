@@ -768,6 +768,18 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     let rec = clothsr::viz::read_rrd(&eval_rrd).expect("a valid recording");
     assert!(rec.entities.contains("world/prediction"), "{rec:?}");
     assert!(rec.entities.contains("world/upsampled"), "{rec:?}");
+    // Without a ground truth, the prediction alone is checked.
+    let check = run(vec!["eval".into(), "--pred".into(), usd.clone().into()]);
+    assert!(check.contains("frames: 3"), "{check}");
+    assert!(check.contains("points not finite: 0"), "{check}");
+    assert!(
+        check.contains("inside the bodies: 0 frames with any"),
+        "{check}"
+    );
+    assert!(
+        check.contains("largest move of a vertex in one frame"),
+        "{check}"
+    );
     // The data set as the ground truth and its fork as its twin: the fork's distance from
     // it, the predictability floor, is about the 1 mm it was moved by at the end of frame 1.
     let table = run(vec![

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::eval::{
-    compare, floor_bound, plot, summarise, vertex_errors, write_csv, Animation, Bodies, FloorBound,
-    FrameMetrics,
+    compare, floor_bound, health, plot, summarise, vertex_errors, write_csv, Animation, Bodies,
+    FloorBound, FrameMetrics,
 };
 use clothsr::viz::{colours, Recorder};
 
@@ -17,8 +17,10 @@ use clothsr::viz::{colours, Recorder};
 pub struct Args {
     /// The ground truth: a fine simulation as USD (`clothsr simulate --edge-mm 2.5`), or a
     /// `clothsr lab dataset` directory (its fine frames, matched to the prediction's frames 1..).
+    /// Without it, the prediction alone is checked: points that are not finite, cloth inside
+    /// the bodies, the largest move of a vertex in one frame.
     #[arg(long)]
-    gt: PathBuf,
+    gt: Option<PathBuf>,
     /// The prediction: `clothsr run`'s output.
     #[arg(long)]
     pred: PathBuf,
@@ -75,10 +77,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(h) = args.heat_max_mm {
         anyhow::ensure!(h.is_finite() && h > 0.0, "--heat-max-mm must be positive");
     }
+    let Some(gt_path) = &args.gt else {
+        return check(&args);
+    };
     let pred_anim = Animation::read_usd(&args.pred)?;
     // A data set's frames 1.. follow the prediction's first time code.
     let start = pred_anim.time_codes.first().copied().unwrap_or(0.0);
-    let gt = Animation::read(&args.gt, start)?;
+    let gt = Animation::read(gt_path, start)?;
     let inputs = inputs(&args)?;
     let (series, anims) = measure(&gt, pred_anim, &inputs, start)?;
     let pred_mean = print_errors(&series);
@@ -97,13 +102,54 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         tracing::info!("wrote {}", path.display());
     }
     if let Some(path) = &args.plot {
-        let title = format!("{} against {}", args.pred.display(), args.gt.display());
+        let title = format!("{} against {}", args.pred.display(), gt_path.display());
         plot(path, &series, &title)?;
         tracing::info!("wrote {}", path.display());
     }
     if let Some(path) = &args.rrd {
         let max_m = args.heat_max_mm.unwrap_or(2.0 * pred_mean).max(1e-3) * 1e-3;
         write_rrd(path, &gt, &series, &anims, max_m)?;
+    }
+    Ok(())
+}
+
+/// `eval --pred OUT` without a ground truth: the output's [`Health`], and an error (bad input)
+/// when a point is not finite.
+fn check(args: &Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.baseline.is_empty()
+            && args.floor.is_none()
+            && args.plot.is_none()
+            && args.rrd.is_none()
+            && args.csv.is_none(),
+        "--baseline, --floor, --csv, --plot and --rrd measure against a ground truth: give --gt"
+    );
+    let anim = Animation::read_usd(&args.pred)?;
+    let bodies = Bodies::read_usd(&args.pred)?;
+    let h = health(&anim, &bodies);
+    println!("frames: {}", h.frames);
+    println!("points not finite: {}", h.non_finite);
+    if bodies.is_empty() {
+        println!("inside the bodies: no bodies in the file");
+    } else {
+        println!(
+            "inside the bodies: {} frames with any, {:.1} vertices a frame, deepest {:.2} mm",
+            h.frames_inside,
+            h.inside as f64 / h.frames.max(1) as f64,
+            h.deepest_m * 1e3
+        );
+    }
+    println!(
+        "largest move of a vertex in one frame: {:.2} mm (at time code {})",
+        h.max_move_m * 1e3,
+        h.max_move_time
+    );
+    if h.non_finite > 0 {
+        return Err(clothsr::Error::bad_input(
+            &args.pred,
+            format!("{} point coordinates are not finite", h.non_finite),
+        )
+        .into());
     }
     Ok(())
 }

@@ -235,6 +235,58 @@ impl Bodies {
     }
 }
 
+/// What an output holds that no ground truth is needed to judge ([`health`]): points that are
+/// not finite, cloth inside the bodies, and how far any vertex moved in one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Health {
+    /// Frames read.
+    pub frames: usize,
+    /// Point coordinates that are NaN or infinite, over all frames.
+    pub non_finite: usize,
+    /// Frames with at least one vertex inside a body.
+    pub frames_inside: usize,
+    /// Vertices inside a body, summed over the frames.
+    pub inside: usize,
+    /// The deepest vertex inside a body, m.
+    pub deepest_m: f64,
+    /// The largest distance a vertex moved between two consecutive frames, m.
+    pub max_move_m: f64,
+    /// The time code of the frame that move ended at.
+    pub max_move_time: f64,
+}
+
+/// The [`Health`] of `anim` against the bodies of its scene.
+pub fn health(anim: &Animation, bodies: &Bodies) -> Health {
+    let mut h = Health {
+        frames: anim.frames.len(),
+        ..Health::default()
+    };
+    for (k, (x, &t)) in anim.frames.iter().zip(&anim.time_codes).enumerate() {
+        h.non_finite += x
+            .iter()
+            .map(|p| p.iter().filter(|c| !c.is_finite()).count())
+            .sum::<usize>();
+        if !bodies.is_empty() {
+            let (inside, depth) = bodies.inside(x, t);
+            h.inside += inside;
+            h.frames_inside += usize::from(inside > 0);
+            h.deepest_m = h.deepest_m.max(depth);
+        }
+        if let Some(prev) = k.checked_sub(1).map(|j| &anim.frames[j]) {
+            let moved = x
+                .iter()
+                .zip(prev)
+                .map(|(a, b)| (a - b).norm())
+                .fold(0.0, f64::max);
+            if moved > h.max_move_m {
+                h.max_move_m = moved;
+                h.max_move_time = t;
+            }
+        }
+    }
+    h
+}
+
 /// Errors of one frame against the ground truth.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameMetrics {
@@ -511,6 +563,36 @@ mod tests {
         assert!(depth > 0.004 && depth < 0.005, "{depth}");
         assert_eq!(bodies.inside(&[near_top], 0.0), (0, 0.0));
         assert_eq!(bodies.inside(&[near_top], 2.0), (0, 0.0));
+    }
+
+    /// Three frames of two points over a still ball: one point dips 5 mm into it in the second
+    /// frame and jumps 30 mm in the third, where the other is NaN.
+    #[test]
+    fn health_counts_what_is_not_finite_inside_or_jumping() {
+        let ball = crate::scene::Collider::sphere("ball", Vector3::zeros(), 0.1, 3);
+        let bodies = Bodies { bodies: vec![ball] };
+        let (above, far) = (Vector3::new(0.0, 0.12, 0.0), Vector3::new(1.0, 0.0, 0.0));
+        let dipped = Vector3::new(0.0, 0.095, 0.0);
+        let anim = Animation {
+            parts: vec![("/cloth".into(), 0..2)],
+            triangles: Vec::new(),
+            time_codes: vec![0.0, 1.0, 2.0],
+            frames: vec![
+                vec![above, far],
+                vec![dipped, far],
+                vec![
+                    dipped + Vector3::new(0.03, 0.0, 0.0),
+                    Vector3::new(f64::NAN, 0.0, 0.0),
+                ],
+            ],
+        };
+        let h = health(&anim, &bodies);
+        assert_eq!(h.frames, 3);
+        assert_eq!(h.non_finite, 1);
+        assert_eq!((h.frames_inside, h.inside), (2, 2));
+        assert!(h.deepest_m > 0.004 && h.deepest_m < 0.0051, "{h:?}");
+        assert!((h.max_move_m - 0.03).abs() < 1e-12, "{h:?}");
+        assert_eq!(h.max_move_time, 2.0);
     }
 
     #[test]
