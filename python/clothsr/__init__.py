@@ -152,6 +152,7 @@ def run(
     rrd: Optional[PathLike] = None,
     layer: Optional[bool] = None,
     clip_frames: int = 100,
+    publish_every_s: Optional[float] = None,
     progress: Optional[Progress] = None,
 ):
     """Runs the whole pipeline on a shot and returns the output layer (``Sdf.Layer``).
@@ -166,7 +167,9 @@ def run(
     override layer for the USD shot (the default for USD input; sublayer it over the shot:
     each garment becomes its fine animated mesh at its own prim, in the shot's units, axis and
     time codes), ``False`` a standalone stage (garments under ``/World/Garments``, colliders,
-    metres, y up); a layered shot longer than ``clip_frames`` frames goes to value clips. ``progress(done, total)`` is
+    metres, y up); a layered shot longer than ``clip_frames`` frames goes to value clips.
+    ``publish_every_s``: seconds between publishing the files and the resume point while
+    running (default 10; 0: every frame). ``progress(done, total)`` is
     called after every frame, with the GIL taken; returning ``False`` stops the run (raising
     :class:`Cancelled`; the file keeps the frames so far and the next call resumes), and an
     exception it raises stops the run and propagates.
@@ -186,6 +189,7 @@ def run(
             rrd=_path(rrd),
             layer={None: "auto", True: "on", False: "off"}[layer],
             clip_frames=clip_frames,
+            publish_every_s=publish_every_s,
             progress=progress,
         )
         result = _open_layer(out, keep)

@@ -34,6 +34,7 @@ def run(
     rrd: Optional[str] = ...,
     layer: str = ...,
     clip_frames: int = ...,
+    publish_every_s: Optional[float] = ...,
     progress: Optional[Callable[[int, int], Optional[bool]]] = ...,
 ) -> Dict[str, Any]: ...
 def convert(

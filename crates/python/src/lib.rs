@@ -144,7 +144,8 @@ impl Callback {
 #[pyfunction]
 #[pyo3(signature = (scene, output, models, *, frames=None, fabric="cotton", avatar=None,
     colliders=Vec::new(), corrector="auto", restart=false, ascii=false, rrd=None,
-    layer="auto", clip_frames=clothsr::pipeline::shot::DEFAULT_CLIP_FRAMES, progress=None))]
+    layer="auto", clip_frames=clothsr::pipeline::shot::DEFAULT_CLIP_FRAMES,
+    publish_every_s=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn run<'py>(
     py: Python<'py>,
@@ -161,6 +162,7 @@ fn run<'py>(
     rrd: Option<PathBuf>,
     layer: &str,
     clip_frames: usize,
+    publish_every_s: Option<f64>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     self::fabric(fabric)?;
@@ -178,6 +180,7 @@ fn run<'py>(
         restart,
         kind: layer.parse().map_err(usage)?,
         clip_frames,
+        publish_every_s,
         ..ShotFiles::default()
     };
     let callback = Callback::new(progress);
