@@ -265,13 +265,16 @@ def fit(
     frames: Optional[int] = None,
     isr_steps: Optional[int] = None,
     from_scratch: bool = False,
+    coarse_mm: Optional[float] = None,
+    fine_mm: Optional[float] = None,
     progress: Optional[Callable[[int, int, str], Optional[bool]]] = None,
 ) -> pathlib.Path:
     """Makes the best models for one shot in the folder ``output`` (variations simulated, the
     coarse model calibrated, the ISR network fine-tuned from the generic one unless
     ``from_scratch``, a held-out report); a fit stopped there resumes. ``quality``:
-    ``preview`` or ``final``. ``progress(done, total, message)`` sees each task. Returns the
-    folder, for ``run(..., models=...)``."""
+    ``preview`` or ``final``. ``coarse_mm``/``fine_mm``: the resolutions (default 20 and
+    2.5). ``progress(done, total, message)`` sees each task. Returns the folder, for
+    ``run(..., models=...)``. :func:`clothsr.batch.fit` runs the same fit's tasks on Ray."""
     generic_isr = None if from_scratch else os.fspath(generic_models() / "isr")
     with _scene_path(shot) as path:
         _clothsr.fit(
@@ -284,6 +287,8 @@ def fit(
             colliders=_paths(colliders),
             frames=frames,
             isr_steps=isr_steps,
+            coarse_mm=coarse_mm,
+            fine_mm=fine_mm,
             progress=progress,
         )
     return pathlib.Path(os.fspath(output))

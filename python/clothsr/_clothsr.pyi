@@ -63,5 +63,27 @@ def fit(
     colliders: Sequence[str] = ...,
     frames: Optional[int] = ...,
     isr_steps: Optional[int] = ...,
+    coarse_mm: Optional[float] = ...,
+    fine_mm: Optional[float] = ...,
+    progress: Optional[Callable[[int, int, str], Optional[bool]]] = ...,
+) -> None: ...
+def fit_plan(
+    shot: str,
+    output: str,
+    *,
+    generic_isr: Optional[str] = ...,
+    quality: str = ...,
+    fabric: str = ...,
+    avatar: Optional[str] = ...,
+    colliders: Sequence[str] = ...,
+    frames: Optional[int] = ...,
+    isr_steps: Optional[int] = ...,
+    coarse_mm: Optional[float] = ...,
+    fine_mm: Optional[float] = ...,
+) -> List[Tuple[str, List[str]]]: ...
+def fit_task(
+    output: str,
+    id: str,
+    *,
     progress: Optional[Callable[[int, int, str], Optional[bool]]] = ...,
 ) -> None: ...

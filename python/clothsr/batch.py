@@ -1,6 +1,8 @@
-"""Many shots at once: one task per shot, on a Ray cluster or on a local pool of processes.
+"""Many shots at once: one task per shot, on a Ray cluster or on a local pool of processes;
+and a fit's tasks on Ray.
 
     python -m clothsr.batch SHOT... --out-dir DIR [--models DIR] [--ray ADDRESS|auto|local]
+    python -m clothsr.batch SHOT --fit MODELS [--quality preview|final] [--ray ...]
 
 Each shot runs the whole pipeline (:func:`clothsr.run`) into ``DIR/<shot name>.usdc``, in its
 own process: a Ray task asking for ``--cpus-per-shot`` CPUs (the Rust side's threads limited to
@@ -193,15 +195,9 @@ def _local(
         return list(pool.map(one, range(len(jobs))))
 
 
-def _ray(
-    jobs: List[tuple],
-    options: Dict[str, Any],
-    address: str,
-    cpus: int,
-    board: _Board,
-    runtime_env: Optional[Dict[str, Any]],
-) -> List[Dict[str, Any]]:
-    """One Ray task per shot, asking for `cpus` CPUs; progress through an actor."""
+def _connect(address: str, cpus: int, runtime_env: Optional[Dict[str, Any]]):
+    """Ray, connected to the cluster at `address` (or a local instance), and the runtime
+    environment of tasks asking for `cpus` CPUs."""
     if address.rsplit(":", 1)[0] in ("127.0.0.1", "localhost"):
         # A cluster bound to the loopback interface (one machine's): Ray would otherwise
         # look for it at the machine's network address. Read when ray is first imported.
@@ -215,6 +211,19 @@ def _ray(
             ray.init(address=address, log_to_driver=False)
     env = dict(runtime_env or {})
     env["env_vars"] = dict(env.get("env_vars", {}), RAYON_NUM_THREADS=str(cpus))
+    return ray, env
+
+
+def _ray(
+    jobs: List[tuple],
+    options: Dict[str, Any],
+    address: str,
+    cpus: int,
+    board: _Board,
+    runtime_env: Optional[Dict[str, Any]],
+) -> List[Dict[str, Any]]:
+    """One Ray task per shot, asking for `cpus` CPUs; progress through an actor."""
+    ray, env = _connect(address, cpus, runtime_env)
 
     @ray.remote(num_cpus=0)
     class Progress:
@@ -329,6 +338,83 @@ def run_batch(
     return summarise(shots_out)
 
 
+def fit(
+    shot: os.PathLike,
+    output: os.PathLike,
+    *,
+    ray: Optional[str] = None,
+    cpus_per_task: int = 1,
+    runtime_env: Optional[Dict[str, Any]] = None,
+    quality: str = "preview",
+    fabric: str = "cotton",
+    avatar: Optional[os.PathLike] = None,
+    colliders: Sequence[os.PathLike] = (),
+    frames: Optional[int] = None,
+    isr_steps: Optional[int] = None,
+    from_scratch: bool = False,
+    coarse_mm: Optional[float] = None,
+    fine_mm: Optional[float] = None,
+    quiet: bool = False,
+) -> pathlib.Path:
+    """:func:`clothsr.fit` with its plan's tasks as Ray tasks: the simulations of the shot's
+    variations fan out over the cluster, each task once those it needs are done (the training
+    and the calibration after the data sets), all in the folder ``output``, which every node
+    must see. The models are those a local fit makes, bit for bit where the training runs on
+    the same number of threads (``cpus_per_task``). A task whose process dies runs again and
+    resumes (a data set from its last frame, a training from its last checkpoint); a task
+    that fails raises its error here. Without ``ray``, the tasks run here in order."""
+    from . import generic_models
+
+    out = pathlib.Path(output)
+    generic_isr = None if from_scratch else os.fspath(generic_models() / "isr")
+    tasks = _clothsr.fit_plan(
+        os.fspath(shot),
+        os.fspath(out),
+        generic_isr=generic_isr,
+        quality=quality,
+        fabric=fabric,
+        avatar=os.fspath(avatar) if avatar is not None else None,
+        colliders=[os.fspath(c) for c in colliders],
+        frames=frames,
+        isr_steps=isr_steps,
+        coarse_mm=coarse_mm,
+        fine_mm=fine_mm,
+    )
+    out = out.resolve()
+
+    def say(line: str) -> None:
+        if not quiet:
+            print(f"[{time.strftime('%H:%M:%S')}] {line}", file=sys.stderr, flush=True)
+
+    if ray is None:
+        for k, (task_id, _) in enumerate(tasks):
+            say(f"task {k + 1}/{len(tasks)}: {task_id}")
+            _clothsr.fit_task(os.fspath(out), task_id)
+        return out
+    ray_mod, env = _connect(ray, cpus_per_task, runtime_env)
+
+    @ray_mod.remote(num_cpus=cpus_per_task, max_retries=RETRIES, runtime_env=env)
+    def fit_task(folder: str, task_id: str, *needs: str) -> str:
+        _clothsr.fit_task(folder, task_id)
+        return task_id
+
+    refs: Dict[str, Any] = {}
+    for task_id, after in tasks:
+        refs[task_id] = fit_task.options(name=f"fit_task:{task_id}").remote(
+            os.fspath(out), task_id, *[refs[a] for a in after]
+        )
+    pending = list(refs.values())
+    while pending:
+        ready, pending = ray_mod.wait(pending, num_returns=1)
+        for r in ready:
+            try:
+                done = ray_mod.get(r)
+            except ray_mod.exceptions.RayTaskError as e:
+                raise e.as_instanceof_cause() from None
+            say(f"{len(tasks) - len(pending)}/{len(tasks)} tasks done ({done})")
+    return out
+
+
 def format_table(summary: Dict[str, Any]) -> str:
     """The summary as a table: one row per shot."""
     rows = [f"{'shot':<32} {'status':<7} {'frames':>6} {'resumed':>8} {'wall s':>8}  error"]
@@ -380,10 +466,30 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--cpus-per-shot", type=int, default=1, help="CPUs each shot asks for")
     p.add_argument("--workers", type=int, help="without --ray: shots at once (default: CPUs)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument(
+        "--fit",
+        metavar="MODELS",
+        help="fit models for the one shot given into MODELS, its tasks on Ray (clothsr fit)",
+    )
+    p.add_argument("--quality", default="preview", choices=["preview", "final"])
     p.add_argument("--one", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.one is not None:
         return _one(args.one)
+    if args.fit is not None:
+        if len(args.shots) != 1:
+            p.error("--fit takes one shot")
+        fit(
+            args.shots[0],
+            args.fit,
+            ray=args.ray,
+            cpus_per_task=args.cpus_per_shot,
+            quality=args.quality,
+            fabric=args.fabric,
+            avatar=args.avatar,
+            frames=args.frames,
+        )
+        return 0
     if not args.shots or not args.out_dir:
         p.error("give the shots and --out-dir")
     # Stdout carries the result alone: what Ray prints on the driver goes to stderr.

@@ -87,10 +87,23 @@ def test_a_bad_shot_is_reported_not_retried_and_the_others_run(tmp_path):
     assert s["exit_code"] == 2 and not s["shots"], s
 
 
-def test_a_ray_cluster_runs_the_batch_and_resumes_a_killed_task(tmp_path):
-    ray = pytest.importorskip("ray")
+@pytest.fixture(scope="module")
+def cluster():
+    """A head and one more node, one CPU each, on 127.0.0.1 only."""
+    pytest.importorskip("ray")
     from ray.cluster_utils import Cluster
 
+    node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
+    c = Cluster(initialize_head=True, head_node_args=dict(node, include_dashboard=False))
+    try:
+        c.add_node(**node)
+        assert c.address.startswith("127.0.0.1:"), c.address
+        yield c.address
+    finally:
+        c.shutdown()
+
+
+def test_a_ray_cluster_runs_the_batch_and_resumes_a_killed_task(tmp_path, cluster):
     inputs = shots(tmp_path)
     local, on_ray = tmp_path / "local", tmp_path / "ray"
     local.mkdir()
@@ -109,35 +122,25 @@ def test_a_ray_cluster_runs_the_batch_and_resumes_a_killed_task(tmp_path):
     reference = json.loads(run.stdout.strip().splitlines()[-1])
     assert [s["frames_computed"] for s in reference["shots"]] == [FRAMES] * 4
 
-    # A head and one more node, one CPU each, on 127.0.0.1 only.
-    node = {"num_cpus": 1, "node_ip_address": "127.0.0.1"}
-    cluster = Cluster(
-        initialize_head=True, head_node_args=dict(node, include_dashboard=False)
+    driver = subprocess.Popen(
+        [sys.executable, "-m", "clothsr.batch", *map(str, inputs), "--out-dir", str(on_ray)]
+        + common
+        + ["--ray", cluster],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
-    try:
-        cluster.add_node(**node)
-        assert cluster.address.startswith("127.0.0.1:"), cluster.address
-        driver = subprocess.Popen(
-            [sys.executable, "-m", "clothsr.batch", *map(str, inputs), "--out-dir", str(on_ray)]
-            + common
-            + ["--ray", cluster.address],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        # Both nodes' first shots have published a resume point (a hidden file beside the
-        # output), seconds into shots that take tens of seconds: kill one of them.
-        deadline = time.monotonic() + 180
-        killed = None
-        while killed is None and time.monotonic() < deadline and driver.poll() is None:
-            running = shot_tasks()
-            if len(list(on_ray.glob(".*.clothsr-resume.safetensors"))) >= 2 and running:
-                os.kill(running[0], signal.SIGKILL)
-                killed = running[0]
-            time.sleep(0.2)
-        stdout, stderr = driver.communicate(timeout=240)
-    finally:
-        cluster.shutdown()
+    # Both nodes' first shots have published a resume point (a hidden file beside the
+    # output), seconds into shots that take tens of seconds: kill one of them.
+    deadline = time.monotonic() + 180
+    killed = None
+    while killed is None and time.monotonic() < deadline and driver.poll() is None:
+        running = shot_tasks()
+        if len(list(on_ray.glob(".*.clothsr-resume.safetensors"))) >= 2 and running:
+            os.kill(running[0], signal.SIGKILL)
+            killed = running[0]
+        time.sleep(0.2)
+    stdout, stderr = driver.communicate(timeout=240)
     assert killed is not None, "no shot task was found running: " + stderr[-2000:]
     assert stdout.strip(), f"no summary (exit {driver.returncode}): " + stderr[-3000:]
     summary = json.loads(stdout.strip().splitlines()[-1])
@@ -153,3 +156,42 @@ def test_a_ray_cluster_runs_the_batch_and_resumes_a_killed_task(tmp_path):
         a, b = fine_points(local / name), fine_points(on_ray / name)
         assert len(a) == FRAMES + 1
         assert same(a, b), f"{name}: the Ray batch's output differs from the local one's"
+
+
+def folder_files(root):
+    """{path relative to root: bytes} of a models folder, apart from the training log (wall
+    times) and the weights file (random parameter ids; the held-out figures in
+    held_out.csv and report.md are the network's outputs)."""
+    out = {}
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.name not in ("log.csv", "model.bpk"):
+            text = p.read_bytes().replace(os.fsencode(root), b"MODELS")
+            out[str(p.relative_to(root))] = text
+    return out
+
+
+def test_a_fit_on_ray_makes_the_models_a_local_fit_makes(tmp_path, cluster):
+    """The fit's tasks fan out over both nodes; on one thread each, its models are the local
+    fit's bit for bit."""
+    tiny = dict(coarse_mm=40, fine_mm=10, frames=3, isr_steps=60, from_scratch=True)
+    local, on_ray = tmp_path / "local", tmp_path / "ray"
+    sample = ROOT / "samples" / "sheet_sphere.usda"
+    code = (
+        "import sys, json; from clothsr import batch; "
+        "batch.fit(sys.argv[1], sys.argv[2], ray=sys.argv[3] or None, quiet=True, "
+        "**json.loads(sys.argv[4]))"
+    )
+    for folder, address in [(local, ""), (on_ray, cluster)]:
+        r = subprocess.run(
+            [sys.executable, "-c", code, str(sample), str(folder), address, json.dumps(tiny)],
+            env=dict(os.environ, RAYON_NUM_THREADS="1"),
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        assert r.returncode == 0, r.stderr[-3000:]
+    a, b = folder_files(local), folder_files(on_ray)
+    assert a.keys() == b.keys()
+    assert "held_out.csv" in a and "coarse.json" in a
+    for name in a:
+        assert a[name] == b[name], f"{name} differs"

@@ -235,6 +235,24 @@ impl Plan {
         })
     }
 
+    /// The plan a fit wrote in `dir` ([`save_plan`]).
+    pub fn load(dir: &Path) -> Result<Plan> {
+        let path = dir.join(PLAN_FILE);
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let plan: Plan =
+            serde_json::from_str(&text).map_err(|e| Error::bad_input(&path, e.to_string()))?;
+        if plan.format_version != PLAN_VERSION {
+            return Err(Error::bad_input(
+                &path,
+                format!(
+                    "plan format {} (this clothsr reads {PLAN_VERSION})",
+                    plan.format_version
+                ),
+            ));
+        }
+        Ok(plan)
+    }
+
     /// The variations of `role`.
     pub fn of_role(&self, role: Role) -> impl Iterator<Item = &PlannedVariation> {
         self.variations.iter().filter(move |v| v.role == role)
@@ -315,7 +333,7 @@ pub fn run(
     mut progress: impl FnMut(&FitProgress) -> ControlFlow<()>,
 ) -> Result<bool> {
     std::fs::create_dir_all(dir.join("tasks")).map_err(|e| Error::io(dir, e))?;
-    write_or_check_plan(plan, dir)?;
+    save_plan(plan, dir)?;
     let total = plan.tasks.len();
     for (k, task) in plan.tasks.iter().enumerate() {
         let marker = dir.join("tasks").join(format!("{}.done", task.id));
@@ -342,7 +360,50 @@ pub fn run(
     Ok(true)
 }
 
-fn write_or_check_plan(plan: &Plan, dir: &Path) -> Result<()> {
+/// Runs the one task `id` of `plan` in `dir`, whose tasks it needs must be done (by this or
+/// another process: a cluster runs a fit's independent tasks on several machines over one
+/// shared folder); a task already done is skipped. Returns whether it is done.
+pub fn run_one(
+    plan: &Plan,
+    dir: &Path,
+    id: &str,
+    mut progress: impl FnMut(&FitProgress) -> ControlFlow<()>,
+) -> Result<bool> {
+    std::fs::create_dir_all(dir.join("tasks")).map_err(|e| Error::io(dir, e))?;
+    save_plan(plan, dir)?;
+    let done = |id: &str| dir.join("tasks").join(format!("{id}.done"));
+    let (k, task) = plan
+        .tasks
+        .iter()
+        .enumerate()
+        .find(|(_, t)| t.id == id)
+        .ok_or_else(|| Error::Usage(format!("the plan in {} has no task '{id}'", dir.display())))?;
+    if done(id).exists() {
+        return Ok(true);
+    }
+    if let Some(missing) = task.after.iter().find(|a| !done(a).exists()) {
+        return Err(Error::Usage(format!(
+            "task '{id}' needs task '{missing}' done first"
+        )));
+    }
+    let total = plan.tasks.len();
+    let mut report = |message: String| {
+        progress(&FitProgress {
+            done: k,
+            total,
+            message: format!("{id}: {message}"),
+        })
+    };
+    if report("started".into()).is_break() || !run_task(plan, dir, task, &mut report)? {
+        return Ok(false);
+    }
+    write_atomic(&done(id), b"done\n")?;
+    Ok(true)
+}
+
+/// Writes `plan` to `dir/plan.json`, or checks that the plan already there is the same.
+pub fn save_plan(plan: &Plan, dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let path = dir.join(PLAN_FILE);
     let text = serde_json::to_string_pretty(plan).map_err(|e| Error::Invalid(e.to_string()))?;
     if path.exists() {

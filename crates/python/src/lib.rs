@@ -337,10 +337,54 @@ fn eval<'py>(
     Ok(out)
 }
 
+/// A fit's plan for `shot` (see `clothsr.fit`).
+#[allow(clippy::too_many_arguments)]
+fn fit_plan_of(
+    shot: PathBuf,
+    generic_isr: Option<PathBuf>,
+    quality: &str,
+    fabric: &str,
+    avatar: Option<PathBuf>,
+    colliders: Vec<PathBuf>,
+    frames: Option<usize>,
+    isr_steps: Option<usize>,
+    coarse_mm: Option<f64>,
+    fine_mm: Option<f64>,
+) -> PyResult<(clothsr::pipeline::fit::Plan, SceneSource)> {
+    use clothsr::pipeline::fit::{FitOptions, Plan, Quality};
+    self::fabric(fabric)?;
+    let quality: Quality = quality.parse().map_err(usage)?;
+    let absolute =
+        |p: &PathBuf| std::path::absolute(p).map_err(|e| usage(format!("{}: {e}", p.display())));
+    let source = SceneSource {
+        scene: absolute(&shot)?,
+        colliders: colliders.iter().map(absolute).collect::<PyResult<_>>()?,
+        avatar: avatar.as_ref().map(absolute).transpose()?,
+        fabric: fabric.to_string(),
+    };
+    let edge = |mm: Option<f64>, default_m: f64, name: &str| match mm {
+        Some(v) if v.is_finite() && v > 0.0 => Ok(v * 1e-3),
+        Some(v) => Err(usage(format!("{name} must be positive, got {v}"))),
+        None => Ok(default_m),
+    };
+    let opts = FitOptions {
+        quality,
+        coarse_edge_m: edge(coarse_mm, clothsr::mesh::COARSE_EDGE_M, "coarse_mm")?,
+        fine_edge_m: edge(fine_mm, clothsr::mesh::FINE_EDGE_M, "fine_mm")?,
+        frames,
+        isr_steps,
+        generic_isr,
+    };
+    let scene = source.load().map_err(error)?;
+    let plan = Plan::new(source.clone(), &scene, &opts).map_err(error)?;
+    Ok((plan, source))
+}
+
 /// The best models for one shot (see `clothsr.fit`).
 #[pyfunction]
 #[pyo3(signature = (shot, output, *, generic_isr=None, quality="preview", fabric="cotton",
-    avatar=None, colliders=Vec::new(), frames=None, isr_steps=None, progress=None))]
+    avatar=None, colliders=Vec::new(), frames=None, isr_steps=None, coarse_mm=None,
+    fine_mm=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -353,39 +397,103 @@ fn fit(
     colliders: Vec<PathBuf>,
     frames: Option<usize>,
     isr_steps: Option<usize>,
+    coarse_mm: Option<f64>,
+    fine_mm: Option<f64>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<()> {
-    use clothsr::pipeline::fit::{self, FitOptions, Plan, Quality};
-    self::fabric(fabric)?;
-    let quality: Quality = quality.parse().map_err(usage)?;
-    let absolute =
-        |p: &PathBuf| std::path::absolute(p).map_err(|e| usage(format!("{}: {e}", p.display())));
-    let source = SceneSource {
-        scene: absolute(&shot)?,
-        colliders: colliders.iter().map(absolute).collect::<PyResult<_>>()?,
-        avatar: avatar.as_ref().map(absolute).transpose()?,
-        fabric: fabric.to_string(),
-    };
-    let opts = FitOptions {
-        quality,
-        coarse_edge_m: clothsr::mesh::COARSE_EDGE_M,
-        fine_edge_m: clothsr::mesh::FINE_EDGE_M,
-        frames,
-        isr_steps,
-        generic_isr,
-    };
+    let (plan, _) = py.detach(|| {
+        fit_plan_of(
+            shot,
+            generic_isr,
+            quality,
+            fabric,
+            avatar,
+            colliders,
+            frames,
+            isr_steps,
+            coarse_mm,
+            fine_mm,
+        )
+    })?;
     let callback = Callback::new(progress);
     let done = py
-        .detach(|| -> clothsr::Result<bool> {
-            let scene = source.load()?;
-            let plan = Plan::new(source.clone(), &scene, &opts)?;
-            fit::run(&plan, &output, |p| {
+        .detach(|| {
+            clothsr::pipeline::fit::run(&plan, &output, |p| {
                 callback.call(|py| (p.done, p.total, p.message.as_str()).into_pyobject(py))
             })
         })
         .map_err(error)?;
     if !done || callback.was_stopped() {
         return Err(callback.stopped("the fit"));
+    }
+    Ok(())
+}
+
+/// Writes a fit's plan into `output` (a plan already there must be the same) and returns its
+/// tasks in order, as (id, ids of the tasks it needs): for running them on a cluster
+/// (`clothsr.batch.fit`), each with `fit_task`.
+#[pyfunction]
+#[pyo3(signature = (shot, output, *, generic_isr=None, quality="preview", fabric="cotton",
+    avatar=None, colliders=Vec::new(), frames=None, isr_steps=None, coarse_mm=None,
+    fine_mm=None))]
+#[allow(clippy::too_many_arguments)]
+fn fit_plan(
+    py: Python<'_>,
+    shot: PathBuf,
+    output: PathBuf,
+    generic_isr: Option<PathBuf>,
+    quality: &str,
+    fabric: &str,
+    avatar: Option<PathBuf>,
+    colliders: Vec<PathBuf>,
+    frames: Option<usize>,
+    isr_steps: Option<usize>,
+    coarse_mm: Option<f64>,
+    fine_mm: Option<f64>,
+) -> PyResult<Vec<(String, Vec<String>)>> {
+    py.detach(|| {
+        let (plan, _) = fit_plan_of(
+            shot,
+            generic_isr,
+            quality,
+            fabric,
+            avatar,
+            colliders,
+            frames,
+            isr_steps,
+            coarse_mm,
+            fine_mm,
+        )?;
+        clothsr::pipeline::fit::save_plan(&plan, &output).map_err(error)?;
+        Ok(plan
+            .tasks
+            .iter()
+            .map(|t| (t.id.clone(), t.after.clone()))
+            .collect())
+    })
+}
+
+/// Runs task `id` of the fit planned in `output` (`fit_plan`), once the tasks it needs are
+/// done; `progress(done, total, message)` as `fit`'s.
+#[pyfunction]
+#[pyo3(signature = (output, id, *, progress=None))]
+fn fit_task(
+    py: Python<'_>,
+    output: PathBuf,
+    id: &str,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<()> {
+    let callback = Callback::new(progress);
+    let done = py
+        .detach(|| {
+            let plan = clothsr::pipeline::fit::Plan::load(&output)?;
+            clothsr::pipeline::fit::run_one(&plan, &output, id, |p| {
+                callback.call(|py| (p.done, p.total, p.message.as_str()).into_pyobject(py))
+            })
+        })
+        .map_err(error)?;
+    if !done || callback.was_stopped() {
+        return Err(callback.stopped("the task"));
     }
     Ok(())
 }
@@ -406,5 +514,7 @@ fn _clothsr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
     m.add_function(wrap_pyfunction!(eval, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_task, m)?)?;
     Ok(())
 }
