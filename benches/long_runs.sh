@@ -36,5 +36,5 @@ for name in sphere three_balls table skirt; do
   echo "== $name"
   cat "$OUT/$name.check"
   grep -E "Maximum resident|Elapsed" "$OUT/$name.log" | sed 's/^\s*/  /'
-  grep -c "WARN" "$OUT/$name.log" | sed 's/^/  warnings: /'
+  echo "  warnings: $(grep -c WARN "$OUT/$name.log" || true)"
 done | tee "$OUT/summary.txt"
