@@ -32,7 +32,7 @@ DATA=${DATA:-data/generic}
 OUT=${OUT:-models/generic}
 JOBS=${JOBS:-1}
 TRAIN_FRAMES=${TRAIN_FRAMES:-30}
-HELD_FRAMES=${HELD_FRAMES:-30}
+HELD_FRAMES=${HELD_FRAMES:-150}
 STAGE=${1:-all}
 COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
 # The avatar of the avatar shots: the walk baked to a point cache (2 s).
