@@ -28,7 +28,8 @@ pub struct Args {
     /// sample per frame.
     #[arg(short, long, conflicts_with = "out_dir", help_heading = "Output")]
     output: Option<PathBuf>,
-    /// Output folder for several scenes: DIR/<scene name>.usdc (and .rrd with --rrd).
+    /// Output folder for several scenes: DIR/<scene name>.usdc (and .rrd with --rrd). Each
+    /// scene runs in its own process; the batch goes on past one that fails.
     #[arg(long, help_heading = "Output")]
     out_dir: Option<PathBuf>,
     /// Frames to run (default: the scene's frame range).
