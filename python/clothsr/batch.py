@@ -49,6 +49,19 @@ def shot_output(scene: os.PathLike, out_dir: os.PathLike) -> pathlib.Path:
     return pathlib.Path(out_dir) / (pathlib.Path(scene).stem + ".usdc")
 
 
+def _shot(scene: str, output: str, error: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
+    """A shot's summary before it ran: ``ok`` with nothing computed, or failed with ``error``."""
+    return {
+        "scene": scene,
+        "output": output,
+        "status": "ok" if error is None else "failed",
+        "frames_computed": 0,
+        "resumed_after": None,
+        "wall_s": 0.0,
+        "error": error,
+    }
+
+
 def run_one(
     scene: str,
     output: str,
@@ -61,15 +74,7 @@ def run_one(
     from . import BadInputError, UsageError, generic_models
 
     t0 = time.monotonic()
-    summary: Dict[str, Any] = {
-        "scene": scene,
-        "output": output,
-        "status": "ok",
-        "frames_computed": 0,
-        "resumed_after": None,
-        "wall_s": 0.0,
-        "error": None,
-    }
+    summary = _shot(scene, output)
     try:
         report = _clothsr.run(
             scene,
@@ -178,18 +183,8 @@ def _local(
                 file=sys.stderr,
             )
         board.finish(k)
-        return {
-            "scene": scene,
-            "output": output,
-            "status": "failed",
-            "frames_computed": 0,
-            "resumed_after": None,
-            "wall_s": 0.0,
-            "error": {
-                "kind": "failure",
-                "message": f"{scene}: the process running this shot died {RETRIES + 1} times",
-            },
-        }
+        message = f"{scene}: the process running this shot died {RETRIES + 1} times"
+        return _shot(scene, output, {"kind": "failure", "message": message})
 
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
         return list(pool.map(one, range(len(jobs))))
@@ -262,15 +257,7 @@ def _ray(
                 results[k] = ray.get(r)
             except Exception as e:  # the task's process died more often than it is retried
                 scene, output = jobs[k]
-                results[k] = {
-                    "scene": scene,
-                    "output": output,
-                    "status": "failed",
-                    "frames_computed": 0,
-                    "resumed_after": None,
-                    "wall_s": 0.0,
-                    "error": {"kind": "failure", "message": f"{scene}: {e}"},
-                }
+                results[k] = _shot(scene, output, {"kind": "failure", "message": f"{scene}: {e}"})
             board.finish(k)
         done, total = ray.get(progress.get.remote())
         for k, (d, t) in enumerate(zip(done, total)):

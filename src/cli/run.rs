@@ -376,18 +376,19 @@ fn run_isolated(jobs: &[Job]) -> anyhow::Result<RunSummary> {
             .lines()
             .rev()
             .find_map(|l| serde_json::from_str::<RunSummary>(l).ok());
+        let failed = |error: ErrorSummary| ShotSummary {
+            scene: job.scene.clone(),
+            output: job.output.clone(),
+            status: "failed".into(),
+            frames_computed: 0,
+            resumed_after: None,
+            wall_s: t0.elapsed().as_secs_f64(),
+            error: Some(error),
+        };
         let shot = match reported {
             Some(mut r) if r.shots.len() == 1 => r.shots.swap_remove(0),
             // The child failed before its shot (its error printed above).
-            Some(r) if r.error.is_some() => ShotSummary {
-                scene: job.scene.clone(),
-                output: job.output.clone(),
-                status: "failed".into(),
-                frames_computed: 0,
-                resumed_after: None,
-                wall_s: t0.elapsed().as_secs_f64(),
-                error: r.error,
-            },
+            Some(RunSummary { error: Some(e), .. }) => failed(e),
             _ => {
                 let message = format!(
                     "{}: the process running this shot {}, with no result: a native library \
@@ -396,18 +397,10 @@ fn run_isolated(jobs: &[Job]) -> anyhow::Result<RunSummary> {
                     how_it_ended(&out.status)
                 );
                 eprintln!("error: {message}");
-                ShotSummary {
-                    scene: job.scene.clone(),
-                    output: job.output.clone(),
-                    status: "failed".into(),
-                    frames_computed: 0,
-                    resumed_after: None,
-                    wall_s: t0.elapsed().as_secs_f64(),
-                    error: Some(ErrorSummary {
-                        kind: clothsr::ErrorKind::Failure.name().into(),
-                        message,
-                    }),
-                }
+                failed(ErrorSummary {
+                    kind: clothsr::ErrorKind::Failure.name().into(),
+                    message,
+                })
             }
         };
         shots.push(shot);

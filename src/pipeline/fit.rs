@@ -334,24 +334,12 @@ pub fn run(
 ) -> Result<bool> {
     std::fs::create_dir_all(dir.join("tasks")).map_err(|e| Error::io(dir, e))?;
     save_plan(plan, dir)?;
-    let total = plan.tasks.len();
-    for (k, task) in plan.tasks.iter().enumerate() {
-        let marker = dir.join("tasks").join(format!("{}.done", task.id));
-        if marker.exists() {
-            continue;
-        }
-        let mut report = |message: String| {
-            progress(&FitProgress {
-                done: k,
-                total,
-                message: format!("{}: {message}", task.id),
-            })
-        };
-        if report("started".into()).is_break() || !run_task(plan, dir, task, &mut report)? {
+    for k in 0..plan.tasks.len() {
+        if !run_marked(plan, dir, k, &mut progress)? {
             return Ok(false);
         }
-        write_atomic(&marker, b"done\n")?;
     }
+    let total = plan.tasks.len();
     let _ = progress(&FitProgress {
         done: total,
         total,
@@ -371,33 +359,50 @@ pub fn run_one(
 ) -> Result<bool> {
     std::fs::create_dir_all(dir.join("tasks")).map_err(|e| Error::io(dir, e))?;
     save_plan(plan, dir)?;
-    let done = |id: &str| dir.join("tasks").join(format!("{id}.done"));
     let (k, task) = plan
         .tasks
         .iter()
         .enumerate()
         .find(|(_, t)| t.id == id)
         .ok_or_else(|| Error::Usage(format!("the plan in {} has no task '{id}'", dir.display())))?;
-    if done(id).exists() {
-        return Ok(true);
-    }
-    if let Some(missing) = task.after.iter().find(|a| !done(a).exists()) {
+    if let Some(missing) = task.after.iter().find(|a| !done_marker(dir, a).exists()) {
         return Err(Error::Usage(format!(
             "task '{id}' needs task '{missing}' done first"
         )));
+    }
+    run_marked(plan, dir, k, &mut progress)
+}
+
+/// The file a finished task leaves.
+fn done_marker(dir: &Path, id: &str) -> PathBuf {
+    dir.join("tasks").join(format!("{id}.done"))
+}
+
+/// Runs task `k` unless its marker says it is done, reporting its progress, and leaves the
+/// marker when it ends. Returns whether it is done.
+fn run_marked(
+    plan: &Plan,
+    dir: &Path,
+    k: usize,
+    progress: &mut impl FnMut(&FitProgress) -> ControlFlow<()>,
+) -> Result<bool> {
+    let task = &plan.tasks[k];
+    let marker = done_marker(dir, &task.id);
+    if marker.exists() {
+        return Ok(true);
     }
     let total = plan.tasks.len();
     let mut report = |message: String| {
         progress(&FitProgress {
             done: k,
             total,
-            message: format!("{id}: {message}"),
+            message: format!("{}: {message}", task.id),
         })
     };
     if report("started".into()).is_break() || !run_task(plan, dir, task, &mut report)? {
         return Ok(false);
     }
-    write_atomic(&done(id), b"done\n")?;
+    write_atomic(&marker, b"done\n")?;
     Ok(true)
 }
 
