@@ -923,6 +923,16 @@ fn inspect_reports_the_flattening_of_a_mesh_without_uvs() {
         text.contains(&format!("as cloth: {charts} panels")),
         "{text}"
     );
+    // Each chart is remeshed like a pattern panel at both resolutions, 64 times the vertices
+    // at 2.5 mm as at 20 mm (edges 8 times shorter), give or take the boundaries.
+    let vertices: Vec<f64> = text
+        .lines()
+        .filter(|l| l.contains("remeshed in"))
+        .filter_map(|l| l.split(':').nth(1)?.split_whitespace().next()?.parse().ok())
+        .collect();
+    assert_eq!(vertices.len(), 2, "{text}");
+    let ratio = vertices[1] / vertices[0];
+    assert!((40.0..80.0).contains(&ratio), "{ratio}: {text}");
 }
 
 /// Without `--models`, `run` takes the generic models: `$CLOTHSR_MODELS` first.

@@ -30,11 +30,9 @@ fn on_the_walking_avatar_at(pattern: &str, edge_m: f64) -> Simulation {
     Simulation::new(&scene, edge_m, |p| p.newton_exact = false).expect("set-up")
 }
 
-/// A dressed garment as a modelled one arrives: its seams welded (one vertex where the
-/// pattern has two), its pattern forgotten. Flattened (`mesh::flatten`), it must give the
-/// pattern back up to a rigid motion of each chart: returns the distortion against the
-/// pattern and the number of charts.
-fn flatten_dressed(sim: &Simulation, name: &str) -> (clothsr::mesh::Distortion, usize) {
+/// The dressed garment of `sim` with its seams welded (one point where the pattern has two,
+/// at their mean): points, triangles, and the number of vertices before welding.
+fn welded_dressed(sim: &Simulation) -> (Vec<nalgebra::Vector3<f64>>, Vec<[u32; 3]>, usize) {
     let mesh = &sim.sim.model.mesh;
     let n = mesh.num_vertices();
     let mut parent: Vec<usize> = (0..n).collect();
@@ -70,6 +68,16 @@ fn flatten_dressed(sim: &Simulation, name: &str) -> (clothsr::mesh::Distortion, 
         .iter()
         .map(|t| t.map(|v| index[root(&mut parent, v as usize)]))
         .collect();
+    (points, tris, n)
+}
+
+/// A dressed garment as a modelled one arrives: its seams welded (one vertex where the
+/// pattern has two), its pattern forgotten. Flattened (`mesh::flatten`), it must give the
+/// pattern back up to a rigid motion of each chart: returns the distortion against the
+/// pattern and the number of charts.
+fn flatten_dressed(sim: &Simulation, name: &str) -> (clothsr::mesh::Distortion, usize) {
+    let mesh = &sim.sim.model.mesh;
+    let (points, tris, n) = welded_dressed(sim);
     let f = clothsr::mesh::flatten(&points, &tris, &clothsr::mesh::FlattenOptions::default())
         .expect("flatten");
     let pattern: Vec<nalgebra::Vector2<f64>> = mesh
@@ -256,4 +264,77 @@ fn a_finer_skirt_dresses_from_the_coarse_dressing() {
     );
     assert_eq!(d.settle_steps, 30);
     assert!(fine.state.v.iter().all(|v| v.norm() == 0.0));
+}
+
+/// Issue 50: a garment modelled in 3D arrives without texture coordinates. The pencil skirt,
+/// dressed on the walking avatar, welded and written as OBJ with no `vt`, runs through the
+/// whole pipeline with the generic models: flattened, its chart remeshed at 20 mm and 2.5 mm
+/// like a pattern's panels and sewn again, then lifted to a fine mesh as fine as the
+/// pattern's own, which stays out of the body.
+#[test]
+#[ignore = "heavy: dresses a skirt on the walking avatar and runs the pipeline (run by .ci/run)"]
+fn a_modelled_skirt_without_uvs_is_remeshed_and_runs_on_the_walking_avatar() {
+    use std::fmt::Write;
+    let pencil = "patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json";
+    let mut sim = on_the_walking_avatar(pencil);
+    sim.dress(0.8, 0.1, 1e-3).expect("dressing");
+    let (points, tris, _) = welded_dressed(&sim);
+    let dir = tempfile::tempdir().expect("tmp");
+    let obj = dir.path().join("modelled_skirt.obj");
+    let mut text = String::new();
+    for p in &points {
+        writeln!(text, "v {:.6} {:.6} {:.6}", p.x, p.y, p.z).expect("text");
+    }
+    for t in &tris {
+        writeln!(text, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1).expect("text");
+    }
+    std::fs::write(&obj, text).expect("write obj");
+
+    let avatar = fixture("avatars/mh_walk_train_baked_2s.usdc");
+    let out = dir.path().join("fine.usda");
+    let started = std::time::Instant::now();
+    let res = std::process::Command::new(env!("CARGO_BIN_EXE_clothsr"))
+        .arg("run")
+        .arg(&obj)
+        .arg("--avatar")
+        .arg(&avatar)
+        .args(["--frames", "3", "-o"])
+        .arg(&out)
+        .output()
+        .expect("run");
+    let stderr = String::from_utf8_lossy(&res.stderr);
+    assert!(res.status.success(), "{stderr}");
+    assert!(!stderr.contains("not remeshed"), "{stderr}");
+    println!(
+        "the modelled skirt: {} points in, run over 3 frames in {:.0} s",
+        points.len(),
+        started.elapsed().as_secs_f64()
+    );
+
+    // As fine as the pattern's own 2.5 mm mesh.
+    let fabric = Fabric::preset("cotton").expect("preset");
+    let scene = Scene::load(&fixture(pencil), &fabric).expect("pattern");
+    let pattern_fine = clothsr::mesh::mesh_garment(
+        &scene.garments[0],
+        &clothsr::mesh::MeshOptions::with_edge(0.0025),
+    )
+    .expect("mesh")
+    .num_vertices();
+    let anim = clothsr::eval::Animation::read_usd(&out).expect("read the output");
+    let bodies = clothsr::eval::Bodies::read_usd(&out).expect("read the bodies");
+    let fine = anim.frames[0].len();
+    println!("fine mesh: {fine} vertices (the pattern's: {pattern_fine})");
+    assert!(
+        (fine as f64 / pattern_fine as f64 - 1.0).abs() < 0.1,
+        "{fine} fine vertices against the pattern's {pattern_fine}"
+    );
+    let h = clothsr::eval::health(&anim, &bodies);
+    println!("{h:?}");
+    assert_eq!(h.frames, 4);
+    assert_eq!(h.non_finite, 0);
+    assert!(
+        h.deepest_m < 1e-3,
+        "{:.2} mm inside the body",
+        h.deepest_m * 1e3
+    );
 }

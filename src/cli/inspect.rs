@@ -1,12 +1,14 @@
-//! `clothsr inspect FILE`: panels, seams, areas, vertex counts at 20 mm and 2.5 mm, meshes and
-//! collider frame ranges.
+//! `clothsr inspect FILE`: panels, seams, areas, vertex counts at 20 mm and 2.5 mm (patterns
+//! meshed, garment meshes flattened where they have no texture coordinates and remeshed),
+//! meshes and collider frame ranges.
 
 use std::path::PathBuf;
 
 use clothsr::garment::{garmentcode, Garment};
-use clothsr::io::scene_files::{obj_cloth, FileKind};
+use clothsr::io::scene_files::{obj_cloth, FileKind, SceneFiles};
 use clothsr::io::{obj, usd};
-use clothsr::mesh::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
+use clothsr::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M};
+use clothsr::scene::Scene;
 
 /// Arguments of `inspect`.
 #[derive(Debug, clap::Args)]
@@ -70,6 +72,27 @@ fn print_garment(g: &Garment, mesh: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A mesh garment remeshed chart by chart at 20 mm and 2.5 mm, as `run` does.
+fn print_remeshing(mesh: &ClothMesh) {
+    for h in [COARSE_EDGE_M, FINE_EDGE_M] {
+        let t = std::time::Instant::now();
+        match remesh(mesh, &MeshOptions::with_edge(h)) {
+            Ok(m) => println!(
+                "  at {:>4} mm: {:>7} vertices, {:>7} triangles, {} seam pairs (remeshed in {:.2} s)",
+                h * 1e3,
+                m.num_vertices(),
+                m.triangles.len(),
+                m.seam_pairs.len(),
+                t.elapsed().as_secs_f64()
+            ),
+            Err(e) => println!(
+                "  at {:>4} mm: not remeshed, simulated at its own resolution: {e}",
+                h * 1e3
+            ),
+        }
+    }
+}
+
 /// Runs `inspect`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = &args.file;
@@ -108,6 +131,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 st.area_m2,
                 st.mean_edge_m * 1e3
             );
+            if !args.no_mesh {
+                print_remeshing(&c.mesh);
+            }
         }
         FileKind::Usd => {
             let s = usd::inspect_usd(path)?;
@@ -140,6 +166,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             for g in &s.garments {
                 print_garment(g, !args.no_mesh)?;
+            }
+            if !args.no_mesh && s.meshes.iter().any(|m| m.role == usd::MeshRole::Cloth) {
+                for c in Scene::load(path, &Default::default())?.cloths {
+                    let st = c.mesh.stats();
+                    println!(
+                        "garment mesh '{}': {} panels, {} seam pairs, material area {:.4} m², \
+                         mean edge {:.1} mm",
+                        c.name,
+                        c.mesh.panel_names.len(),
+                        c.mesh.seam_pairs.len(),
+                        st.area_m2,
+                        st.mean_edge_m * 1e3
+                    );
+                    print_remeshing(&c.mesh);
+                }
             }
         }
     }

@@ -9,8 +9,8 @@ use super::model::ClothModel;
 use super::step::{ColliderFrame, SimParams, SimState, Simulator, StepStats};
 use crate::error::{Error, Result};
 use crate::garment::Fabric;
-use crate::mesh::{mesh_garment, ClothMesh, MeshOptions};
-use crate::scene::{Collider, Scene};
+use crate::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
+use crate::scene::{ClothPiece, Collider, Scene};
 
 /// The colliders' triangles with their points `points` (one point list per collider).
 fn collider_frames<'a>(
@@ -74,8 +74,26 @@ pub struct DressStats {
     pub max_penetration_m: f64,
 }
 
+/// A mesh garment's mesh at `edge_m`: remeshed chart by chart like a pattern
+/// ([`remesh`]), or, when a chart cannot be an outline (a hole, a
+/// boundary that touches itself), as it is, with a warning.
+pub fn remeshed(cloth: &ClothPiece, edge_m: f64) -> ClothMesh {
+    match remesh(&cloth.mesh, &MeshOptions::with_edge(edge_m)) {
+        Ok(m) => m,
+        Err(e) => {
+            tracing::warn!(
+                "garment '{}': kept at its own resolution, not remeshed at {:.1} mm: {e}",
+                cloth.name,
+                edge_m * 1e3
+            );
+            cloth.mesh.clone()
+        }
+    }
+}
+
 impl Simulation {
-    /// Meshes the scene's garments at `edge_m` (mesh garments are used as they are) and sets up
+    /// Meshes the scene's garments at `edge_m` (patterns meshed, mesh garments remeshed chart by
+    /// chart, see [`remeshed`]) and sets up
     /// the simulator with the scene's gravity and time step; `tune` may change the defaults.
     pub fn new(
         scene: &Scene,
@@ -91,7 +109,7 @@ impl Simulation {
             ));
         }
         for c in &scene.cloths {
-            meshed.push((c.name.clone(), c.mesh.clone(), c.fabric.clone()));
+            meshed.push((c.name.clone(), remeshed(c, edge_m), c.fabric.clone()));
         }
         let pieces: Vec<(&str, &ClothMesh, &Fabric)> =
             meshed.iter().map(|(n, m, f)| (n.as_str(), m, f)).collect();

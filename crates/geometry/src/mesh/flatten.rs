@@ -25,8 +25,9 @@
 //!    its 3D area (conformal maps shrink curved regions), then improved by local/global
 //!    as-rigid-as-possible iterations (Liu et al. 2008), which make edge lengths (the cloth's
 //!    rest lengths) close to the 3D ones, and scaled to its 3D area again.
-//! 3. **Splitting.** A chart whose flattening flips a triangle or whose mean area distortion
-//!    exceeds [`FlattenOptions::max_area_distortion`] is grown again, inside its own triangles,
+//! 3. **Splitting.** A chart whose flattening flips a triangle, lies over itself (its outline
+//!    crosses itself) or whose mean area distortion exceeds
+//!    [`FlattenOptions::max_area_distortion`] is grown again, inside its own triangles,
 //!    with a normal-cone limit (every triangle within a cone around its seed's normal), the
 //!    cone halving until the pieces flatten well or the cone reaches
 //!    [`FlattenOptions::min_cone_deg`]; small pieces left between the cones are given to
@@ -169,9 +170,24 @@ pub fn flatten(
     while let Some((grown, cone)) = work.pop() {
         let chart = surface.flatten_chart(grown, opts.arap_iterations)?;
         let d = surface.chart_distortion(&chart);
-        let bad = d.flipped > 0 || d.area_mean > opts.max_area_distortion;
+        let overlaps = outline_overlaps(&chart);
+        let bad = d.flipped > 0 || d.area_mean > opts.max_area_distortion || overlaps;
         if !bad || chart.tris.len() < 2 {
             charts.push(chart);
+            continue;
+        }
+        // A chart that flattens well but lies over itself (a tube cut open, its ends
+        // wrapping past each other) is cut in two across its length: the fewest new seams.
+        let halve = |chart: &Chart| -> Vec<(Chart, Option<f64>)> {
+            surface
+                .halves(&chart.tris)
+                .iter()
+                .flat_map(|half| surface.grow_charts(half, None))
+                .map(|c| (c, None))
+                .collect()
+        };
+        if overlaps && d.flipped == 0 && d.area_mean <= opts.max_area_distortion {
+            work.extend(halve(&chart));
             continue;
         }
         // Split with a narrower cone until the chart comes apart or the cone is at its limit.
@@ -188,6 +204,8 @@ pub fn flatten(
         };
         match pieces {
             Some(p) => work.extend(p.into_iter().map(|c| (c, Some(next)))),
+            // One the cone cannot tell apart (a nearly flat spiral) is halved too.
+            None if overlaps => work.extend(halve(&chart)),
             None => charts.push(chart),
         }
     }
@@ -215,6 +233,43 @@ pub fn flatten(
         charts: charts.len(),
         distortion,
     })
+}
+
+/// Whether a flattened chart's outline crosses itself: the chart then lies over itself in the
+/// plane (a global overlap, with no triangle flipped), which no pattern panel can.
+fn outline_overlaps(chart: &Chart) -> bool {
+    // Boundary edges: those of one triangle only (by chart vertex).
+    let mut count: HashMap<(u32, u32), u32> = HashMap::new();
+    for c in &chart.corners {
+        for j in 0..3 {
+            let (a, b) = (c[j], c[(j + 1) % 3]);
+            *count.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let mut segs: Vec<(u32, u32, Vector2<f64>, Vector2<f64>)> = count
+        .into_iter()
+        .filter(|&(_, n)| n == 1)
+        .map(|((a, b), _)| (a, b, chart.uv[a as usize], chart.uv[b as usize]))
+        .collect();
+    segs.sort_by(|s, t| s.2.x.min(s.3.x).total_cmp(&t.2.x.min(t.3.x)));
+    let side = |p: Vector2<f64>, q: Vector2<f64>, r: Vector2<f64>| (q - p).perp(&(r - p));
+    for (i, &(a, b, p, q)) in segs.iter().enumerate() {
+        let x_max = p.x.max(q.x);
+        for &(c, d, r, s) in &segs[i + 1..] {
+            if r.x.min(s.x) > x_max {
+                break;
+            }
+            if a == c || a == d || b == c || b == d {
+                continue;
+            }
+            let crosses =
+                side(p, q, r) * side(p, q, s) < 0.0 && side(r, s, p) * side(r, s, q) < 0.0;
+            if crosses {
+                return true;
+            }
+        }
+    }
+    false
 }
 
 fn check_input(points: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Result<()> {
@@ -566,6 +621,39 @@ impl<'a> Surface<'a> {
             .map(|g| g.chart)
             .filter(|c| !c.tris.is_empty())
             .collect()
+    }
+
+    /// `region` cut in two halves across its length: by the median of the triangles'
+    /// centroids along the line through two centroids far apart.
+    fn halves(&self, region: &[u32]) -> [Vec<u32>; 2] {
+        let centroid = |t: u32| {
+            self.tris[t as usize]
+                .iter()
+                .map(|&v| self.points[v as usize])
+                .sum::<Vector3<f64>>()
+                / 3.0
+        };
+        let c: Vec<Vector3<f64>> = region.iter().map(|&t| centroid(t)).collect();
+        let mean = c.iter().sum::<Vector3<f64>>() / c.len().max(1) as f64;
+        let far = |from: Vector3<f64>| {
+            c.iter()
+                .copied()
+                .max_by(|a, b| {
+                    (a - from)
+                        .norm_squared()
+                        .total_cmp(&(b - from).norm_squared())
+                })
+                .unwrap_or(from)
+        };
+        let p0 = far(mean);
+        let axis = far(p0) - p0;
+        let mut order: Vec<usize> = (0..region.len()).collect();
+        order.sort_by(|&a, &b| c[a].dot(&axis).total_cmp(&c[b].dot(&axis)).then(a.cmp(&b)));
+        let (lo, hi) = order.split_at(order.len() / 2);
+        [
+            lo.iter().map(|&k| region[k]).collect(),
+            hi.iter().map(|&k| region[k]).collect(),
+        ]
     }
 
     /// Grows a chart from each free triangle of `seeds` in turn (see [`Surface::grow_charts`])
@@ -1202,6 +1290,49 @@ mod tests {
             edge_error(&points, &tris, &f)
         );
         assert_eq!(f.distortion.flipped, 0);
+    }
+
+    /// A gently rising ramp wound one and a quarter turns: nearly developable, it would
+    /// flatten into an annulus of 450°, lying over itself. It is split into charts that don't.
+    #[test]
+    fn a_chart_that_would_lie_over_itself_is_split() {
+        let (nr, nt) = (4, 120);
+        let (points, tris) = grid(nr, nt, 0.1, 2.5 * PI, |r, t| {
+            let r = 0.2 + r;
+            Vector3::new(r * t.cos(), 0.01 * t, r * t.sin())
+        });
+        let f = flatten(&points, &tris, &FlattenOptions::default()).expect("flatten");
+        report("ramp", &f);
+        assert!(f.charts > 1, "one chart lies over itself");
+        assert_charts_are_discs(&tris, &f);
+        assert_charts_apart(&f);
+        assert_eq!(f.distortion.flipped, 0);
+        // No chart's outline crosses itself.
+        for k in 0..f.charts as u32 {
+            let mut chart = Chart {
+                tris: Vec::new(),
+                verts: Vec::new(),
+                corners: Vec::new(),
+                uv: Vec::new(),
+            };
+            for t in (0..tris.len()).filter(|&t| f.chart_of_triangle[t] == k) {
+                let c = [0, 1, 2].map(|j| {
+                    chart.uv.push(f.corner_uv[3 * t + j]);
+                    (chart.uv.len() - 1) as u32
+                });
+                chart.corners.push(c);
+            }
+            // Corners of one point share their coordinate: merge them so edges are shared.
+            let mut id: HashMap<(u64, u64), u32> = HashMap::new();
+            let uv = chart.uv.clone();
+            for c in &mut chart.corners {
+                *c = c.map(|i| {
+                    let p = uv[i as usize];
+                    *id.entry((p.x.to_bits(), p.y.to_bits())).or_insert(i)
+                });
+            }
+            assert!(!outline_overlaps(&chart), "chart {k} lies over itself");
+        }
     }
 
     #[test]

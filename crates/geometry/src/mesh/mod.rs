@@ -7,12 +7,14 @@ mod from_uv;
 mod pattern;
 mod polygon;
 mod quality;
+mod remesh;
 
 pub use flatten::{flatten, Distortion, FlattenOptions, Flattening};
 pub use from_uv::{cloth_from_corners, connected_components};
 pub use pattern::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M, MAX_PANEL_VERTICES};
 pub use polygon::triangulate_polygon;
 pub use quality::{MeshStats, SHARP_CORNER_DEG};
+pub use remesh::{remesh, CORNER_DEG};
 
 use nalgebra::{Vector2, Vector3};
 

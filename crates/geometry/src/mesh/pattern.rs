@@ -141,6 +141,9 @@ pub fn mesh_garment(garment: &Garment, opts: &MeshOptions) -> Result<ClothMesh> 
     Ok(mesh)
 }
 
+/// Material coordinates and triangles of a meshed outline.
+pub(super) type OutlineMesh = (Vec<Vector2<f64>>, Vec<[u32; 3]>);
+
 /// Material coordinates, triangles and, per outline edge, the local indices of its vertices.
 type PanelMesh = (Vec<Vector2<f64>>, Vec<[u32; 3]>, Vec<Vec<u32>>);
 
@@ -169,7 +172,23 @@ fn mesh_panel(panel: &Panel, counts: &[usize], opts: &MeshOptions) -> Result<Pan
             *last %= nb;
         }
     }
+    let ends = [boundary.len()];
+    let (material, triangles) = mesh_outline(boundary, &ends, panel.signed_area().abs(), opts)?;
+    Ok((material, triangles, runs))
+}
 
+/// Meshes the inside of the closed outline `boundary` (loops one after the other, loop `k`
+/// ending before `loop_ends[k]`, each in loop order, either orientation: an outline and its
+/// holes; `area` m² inside): a constrained Delaunay triangulation of the loops, refined to the
+/// target edge length and angle; faces enclosed by an even number of loops (outside, or in a
+/// hole) are left out. The outline points keep their indices; the points the refinement adds
+/// come after them. Triangles are counter-clockwise.
+pub(super) fn mesh_outline(
+    boundary: Vec<Vector2<f64>>,
+    loop_ends: &[usize],
+    area: f64,
+    opts: &MeshOptions,
+) -> Result<OutlineMesh, String> {
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let mut handles = Vec::with_capacity(boundary.len());
     for (i, p) in boundary.iter().enumerate() {
@@ -190,20 +209,44 @@ fn mesh_panel(panel: &Panel, counts: &[usize], opts: &MeshOptions) -> Result<Pan
         }
         handles.push(hnd);
     }
+    let mut loop_start = 0;
     for i in 0..handles.len() {
-        let (a, b) = (handles[i], handles[(i + 1) % handles.len()]);
+        // The last point of a loop closes it back to the loop's first.
+        let end = loop_ends
+            .iter()
+            .copied()
+            .find(|&e| e > i)
+            .unwrap_or(handles.len());
+        let j = if i + 1 == end { loop_start } else { i + 1 };
+        if i + 1 == end {
+            loop_start = end;
+        }
+        let (a, b) = (handles[i], handles[j]);
         if !cdt.can_add_constraint(a, b) {
+            let (p, q) = (boundary[i], boundary[j]);
+            let other = (0..boundary.len())
+                .map(|k| (k, boundary[k], boundary[(k + 1) % boundary.len()]))
+                .find(|&(k, c, d)| k != i && k != j && segments_cross(p, q, c, d))
+                .map_or(String::new(), |(k, c, d)| {
+                    format!(
+                        " (segment {k}, ({:.4}, {:.4})–({:.4}, {:.4}) m)",
+                        c.x, c.y, d.x, d.y
+                    )
+                });
             return Err(format!(
-                "outline segment {i} crosses another one at {:.1} mm edges: the panel is too narrow \
-                 for this resolution",
+                "outline segment {i}, ({:.4}, {:.4})–({:.4}, {:.4}) m, crosses another one{other} \
+                 at {:.1} mm edges: the panel is too narrow for this resolution",
+                p.x,
+                p.y,
+                q.x,
+                q.y,
                 opts.edge_m * 1e3
             ));
         }
         cdt.add_constraint(a, b);
     }
     let target_area = AREA_FACTOR * 3f64.sqrt() / 4.0 * opts.edge_m * opts.edge_m;
-    let expected =
-        (panel.signed_area().abs() / target_area * 2.0) as usize + 16 * handles.len() + 64;
+    let expected = (area / target_area * 2.0) as usize + 16 * handles.len() + 64;
     let result = cdt.refine(
         RefinementParameters::<f64>::new()
             .exclude_outer_faces(true)
@@ -240,5 +283,13 @@ fn mesh_panel(panel: &Panel, counts: &[usize], opts: &MeshOptions) -> Result<Pan
     if triangles.is_empty() {
         return Err("meshing produced no triangles".into());
     }
-    Ok((material, triangles, runs))
+    Ok((material, triangles))
+}
+
+/// Whether segments `a`–`b` and `c`–`d` cross at a point inside both.
+fn segments_cross(a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64>, d: Vector2<f64>) -> bool {
+    let side = |p: Vector2<f64>, q: Vector2<f64>, r: Vector2<f64>| (q - p).perp(&(r - p));
+    let (d1, d2) = (side(a, b, c), side(a, b, d));
+    let (d3, d4) = (side(c, d, a), side(c, d, b));
+    d1 * d2 < 0.0 && d3 * d4 < 0.0
 }

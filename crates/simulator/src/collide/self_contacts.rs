@@ -292,4 +292,61 @@ mod swept_tests {
         assert_eq!(push_out(&mut y, &[(&pts, &[])], c), PushOut::default());
         assert_eq!(y, before);
     }
+
+    /// An L-shaped prism: its inner corner is a reflex edge, where the outside is a quarter
+    /// wedge. Points inside near that edge go out from one face, into the other's slab, and
+    /// must still end outside both, at the clearance.
+    #[test]
+    fn push_out_clears_the_inside_corner_of_a_concave_body() {
+        let l = [
+            (0.0, 0.0),
+            (2.0, 0.0),
+            (2.0, 1.0),
+            (1.0, 1.0),
+            (1.0, 2.0),
+            (0.0, 2.0),
+        ];
+        let (s, h) = (0.1, 0.1);
+        let mut pts: Vec<Vector3<f64>> = l
+            .iter()
+            .map(|&(x, y)| Vector3::new(x * s, y * s, 0.0))
+            .collect();
+        pts.extend(l.iter().map(|&(x, y)| Vector3::new(x * s, y * s, h)));
+        let cap = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]];
+        let mut tris: Vec<[u32; 3]> = cap.iter().map(|t| [t[0], t[2], t[1]]).collect();
+        tris.extend(cap.iter().map(|t| t.map(|v| v + 6)));
+        for i in 0..6u32 {
+            let j = (i + 1) % 6;
+            tris.push([i, j, j + 6]);
+            tris.push([i, j + 6, i + 6]);
+        }
+        assert!(is_closed(&tris));
+        let c = 1e-3;
+        let mut x = Vec::new();
+        for a in -6..=6 {
+            for b in -6..=6 {
+                let (u, v) = (a as f64 * 5e-4, b as f64 * 5e-4);
+                if u < 0.0 || v < 0.0 {
+                    x.push(Vector3::new(s + u, s + v, 0.5 * h));
+                }
+            }
+        }
+        let r = push_out(&mut x, &[(&pts, &tris)], c);
+        assert_eq!(r.inside, x.len(), "{r:?}");
+        let left = count_inside(&x, &[(&pts, &tris)], 0.05);
+        assert_eq!(
+            left.inside,
+            0,
+            "{} points left inside, {:.3} mm deep",
+            left.inside,
+            left.max_depth_m * 1e3
+        );
+        for p in &x {
+            // Outside the L near its inner corner means x ≥ s and y ≥ s.
+            assert!(
+                p.x >= s + c * (1.0 - 1e-6) && p.y >= s + c * (1.0 - 1e-6),
+                "{p:?}"
+            );
+        }
+    }
 }
