@@ -912,12 +912,15 @@ fn inspect_reports_the_flattening_of_a_mesh_without_uvs() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(text.contains("texture coordinates: no"), "{text}");
-    let charts: usize = text
-        .split("flattened into ")
-        .nth(1)
-        .and_then(|t| t.split_whitespace().next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("no flattening reported: {text}"));
+    // The number printed after `label`.
+    let after = |label: &str| -> f64 {
+        text.split(label)
+            .nth(1)
+            .and_then(|t| t.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no '{label}' reported: {text}"))
+    };
+    let charts = after("flattened into ") as usize;
     assert!(charts >= 2, "{text}");
     assert!(
         text.contains(&format!("as cloth: {charts} panels")),
@@ -926,12 +929,7 @@ fn inspect_reports_the_flattening_of_a_mesh_without_uvs() {
     // Each chart is remeshed like a pattern panel: the bunny, in its own units read as metres,
     // covers about 219 m², some 2.5K vertices a square metre at 20 mm (a pattern meshes so);
     // at 2.5 mm it would be millions, which the remeshing refuses, naming the units.
-    let area: f64 = text
-        .split("material area ")
-        .nth(1)
-        .and_then(|t| t.split_whitespace().next())
-        .and_then(|a| a.parse().ok())
-        .unwrap_or_else(|| panic!("no area: {text}"));
+    let area = after("material area ");
     let remeshed: Vec<f64> = text
         .lines()
         .filter(|l| l.contains("remeshed in"))

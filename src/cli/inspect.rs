@@ -72,8 +72,20 @@ fn print_garment(g: &Garment, mesh: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A mesh garment remeshed chart by chart at 20 mm and 2.5 mm, as `run` does.
-fn print_remeshing(mesh: &ClothMesh) {
+/// A mesh garment as cloth (`heading`: what it is), and, with `remeshed`, remeshed chart by
+/// chart at 20 mm and 2.5 mm as `run` does.
+fn print_cloth(heading: &str, mesh: &ClothMesh, remeshed: bool) {
+    let st = mesh.stats();
+    println!(
+        "{heading}: {} panels, {} seam pairs, material area {:.4} m², mean edge {:.1} mm",
+        mesh.panel_names.len(),
+        mesh.seam_pairs.len(),
+        st.area_m2,
+        st.mean_edge_m * 1e3
+    );
+    if !remeshed {
+        return;
+    }
     for h in [COARSE_EDGE_M, FINE_EDGE_M] {
         let t = std::time::Instant::now();
         match remesh(mesh, &MeshOptions::with_edge(h)) {
@@ -123,17 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     d.angle_max_deg
                 );
             }
-            let st = c.mesh.stats();
-            println!(
-                "  as cloth: {} panels, {} seam pairs, material area {:.4} m², mean edge {:.1} mm",
-                c.mesh.panel_names.len(),
-                c.mesh.seam_pairs.len(),
-                st.area_m2,
-                st.mean_edge_m * 1e3
-            );
-            if !args.no_mesh {
-                print_remeshing(&c.mesh);
-            }
+            print_cloth("  as cloth", &c.mesh, !args.no_mesh);
         }
         FileKind::Usd => {
             let s = usd::inspect_usd(path)?;
@@ -169,17 +171,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             if !args.no_mesh && s.meshes.iter().any(|m| m.role == usd::MeshRole::Cloth) {
                 for c in Scene::load(path, &Default::default())?.cloths {
-                    let st = c.mesh.stats();
-                    println!(
-                        "garment mesh '{}': {} panels, {} seam pairs, material area {:.4} m², \
-                         mean edge {:.1} mm",
-                        c.name,
-                        c.mesh.panel_names.len(),
-                        c.mesh.seam_pairs.len(),
-                        st.area_m2,
-                        st.mean_edge_m * 1e3
-                    );
-                    print_remeshing(&c.mesh);
+                    print_cloth(&format!("garment mesh '{}'", c.name), &c.mesh, true);
                 }
             }
         }

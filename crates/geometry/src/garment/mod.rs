@@ -374,7 +374,13 @@ fn first_self_intersection(poly: &[Vector2<f64>]) -> Option<(usize, usize)> {
     None
 }
 
-fn segments_cross(p0: Vector2<f64>, p1: Vector2<f64>, q0: Vector2<f64>, q1: Vector2<f64>) -> bool {
+/// Whether segments `p0`–`p1` and `q0`–`q1` cross at a point inside both.
+pub(crate) fn segments_cross(
+    p0: Vector2<f64>,
+    p1: Vector2<f64>,
+    q0: Vector2<f64>,
+    q1: Vector2<f64>,
+) -> bool {
     let d1 = (p1 - p0).perp(&(q0 - p0));
     let d2 = (p1 - p0).perp(&(q1 - p0));
     let d3 = (q1 - q0).perp(&(p0 - q0));

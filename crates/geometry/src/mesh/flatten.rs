@@ -42,6 +42,7 @@ use faer::linalg::solvers::SolveCore;
 use nalgebra::{Vector2, Vector3};
 
 use crate::error::{Error, Result};
+use crate::garment::segments_cross;
 
 /// Settings of [`flatten`].
 #[derive(Debug, Clone, PartialEq)]
@@ -252,7 +253,6 @@ fn outline_overlaps(chart: &Chart) -> bool {
         .map(|((a, b), _)| (a, b, chart.uv[a as usize], chart.uv[b as usize]))
         .collect();
     segs.sort_by(|s, t| s.2.x.min(s.3.x).total_cmp(&t.2.x.min(t.3.x)));
-    let side = |p: Vector2<f64>, q: Vector2<f64>, r: Vector2<f64>| (q - p).perp(&(r - p));
     for (i, &(a, b, p, q)) in segs.iter().enumerate() {
         let x_max = p.x.max(q.x);
         for &(c, d, r, s) in &segs[i + 1..] {
@@ -262,9 +262,7 @@ fn outline_overlaps(chart: &Chart) -> bool {
             if a == c || a == d || b == c || b == d {
                 continue;
             }
-            let crosses =
-                side(p, q, r) * side(p, q, s) < 0.0 && side(r, s, p) * side(r, s, q) < 0.0;
-            if crosses {
+            if segments_cross(p, q, r, s) {
                 return true;
             }
         }

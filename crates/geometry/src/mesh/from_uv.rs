@@ -134,6 +134,15 @@ fn rescale_charts(mesh: &mut ClothMesh) -> Option<f64> {
 
 /// Component id of every vertex (components numbered in order of their smallest vertex).
 pub fn connected_components(n: usize, triangles: &[[u32; 3]]) -> Vec<u32> {
+    components_of_edges(
+        n,
+        triangles.iter().flat_map(|t| [[t[0], t[1]], [t[1], t[2]]]),
+    )
+}
+
+/// Component id of every vertex of the graph with `edges` (components numbered in order of
+/// their smallest vertex).
+pub(crate) fn components_of_edges(n: usize, edges: impl IntoIterator<Item = [u32; 2]>) -> Vec<u32> {
     let mut parent: Vec<usize> = (0..n).collect();
     fn find(parent: &mut [usize], mut x: usize) -> usize {
         while parent[x] != x {
@@ -142,15 +151,10 @@ pub fn connected_components(n: usize, triangles: &[[u32; 3]]) -> Vec<u32> {
         }
         x
     }
-    for t in triangles {
-        for k in 0..2 {
-            let (a, b) = (
-                find(&mut parent, t[k] as usize),
-                find(&mut parent, t[k + 1] as usize),
-            );
-            if a != b {
-                parent[a.max(b)] = a.min(b);
-            }
+    for [a, b] in edges {
+        let (a, b) = (find(&mut parent, a as usize), find(&mut parent, b as usize));
+        if a != b {
+            parent[a.max(b)] = a.min(b);
         }
     }
     let mut ids = HashMap::new();

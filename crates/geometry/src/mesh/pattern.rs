@@ -16,7 +16,7 @@ use spade::{
 
 use super::ClothMesh;
 use crate::error::{Error, Result};
-use crate::garment::{EdgeRef, Garment, Panel};
+use crate::garment::{segments_cross, EdgeRef, Garment, Panel};
 
 /// The paper's coarse resolution: 20 mm edges.
 pub const COARSE_EDGE_M: f64 = 0.020;
@@ -284,12 +284,4 @@ pub(super) fn mesh_outline(
         return Err("meshing produced no triangles".into());
     }
     Ok((material, triangles))
-}
-
-/// Whether segments `a`–`b` and `c`–`d` cross at a point inside both.
-fn segments_cross(a: Vector2<f64>, b: Vector2<f64>, c: Vector2<f64>, d: Vector2<f64>) -> bool {
-    let side = |p: Vector2<f64>, q: Vector2<f64>, r: Vector2<f64>| (q - p).perp(&(r - p));
-    let (d1, d2) = (side(a, b, c), side(a, b, d));
-    let (d3, d4) = (side(c, d, a), side(c, d, b));
-    d1 * d2 < 0.0 && d3 * d4 < 0.0
 }

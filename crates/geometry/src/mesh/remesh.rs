@@ -29,6 +29,7 @@ use std::collections::HashMap;
 
 use nalgebra::{Vector2, Vector3};
 
+use super::from_uv::components_of_edges;
 use super::pattern::mesh_outline;
 use super::{ClothMesh, MeshOptions, MAX_PANEL_VERTICES};
 use crate::error::{Error, Result};
@@ -123,7 +124,8 @@ fn remesh_sampled(mesh: &ClothMesh, opts: &MeshOptions, sampling: Sampling) -> R
             .cloned()
             .unwrap_or_else(|| format!("panel_{p}"))
     };
-    let class = weld_classes(n, &mesh.seam_pairs);
+    // Weld classes: the vertices sewn together, directly or not.
+    let class = components_of_edges(n, mesh.seam_pairs.iter().copied());
     let (loops, loop_panel) = boundary_loops(mesh, panels, &name)?;
     let m = &mesh.material;
 
@@ -395,26 +397,6 @@ fn remesh_sampled(mesh: &ClothMesh, opts: &MeshOptions, sampling: Sampling) -> R
     out.reorder_for_locality();
     out.validate()?;
     Ok(out)
-}
-
-/// Weld class of every vertex: the smallest vertex it is sewn to, directly or not.
-fn weld_classes(n: usize, pairs: &[[u32; 2]]) -> Vec<u32> {
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(parent: &mut [u32], mut v: u32) -> u32 {
-        while parent[v as usize] != v {
-            let g = parent[parent[v as usize] as usize];
-            parent[v as usize] = g;
-            v = g;
-        }
-        v
-    }
-    for &[a, b] in pairs {
-        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-        if ra != rb {
-            parent[ra.max(rb) as usize] = ra.min(rb);
-        }
-    }
-    (0..n as u32).map(|v| find(&mut parent, v)).collect()
 }
 
 /// The boundary loops of every panel and the panel of each: per panel, its outer loop
