@@ -7,9 +7,16 @@ use std::path::{Path, PathBuf};
 use clothsr::data::SceneSource;
 use clothsr::pipeline::fit::{self, FitOptions, Plan, Quality, Role, TaskKind};
 
-fn shot() -> SceneSource {
+/// The sample sheet's scene, in folder `root` (a copy of it is made there).
+fn shot(root: &Path) -> SceneSource {
+    let scene = root.join("sheet_sphere.usda");
+    if !scene.exists() {
+        std::fs::create_dir_all(root).expect("mkdir");
+        let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
+        std::fs::copy(sample, &scene).expect("copy the sample");
+    }
     SceneSource {
-        scene: Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda"),
+        scene,
         colliders: Vec::new(),
         avatar: None,
         fabric: "cotton".into(),
@@ -27,9 +34,23 @@ fn options() -> FitOptions {
     }
 }
 
-fn plan() -> Plan {
-    let scene = shot().load().expect("scene");
-    Plan::new(shot(), &scene, &options()).expect("plan")
+fn plan(root: &Path) -> Plan {
+    let scene = shot(root).load().expect("scene");
+    Plan::new(shot(root), &scene, &options()).expect("plan")
+}
+
+/// Every text file under `dir` that names `needle`.
+fn naming(dir: &Path, needle: &str) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(dir).expect("read_dir") {
+        let path = entry.expect("entry").path();
+        if path.is_dir() {
+            found.extend(naming(&path, needle));
+        } else if std::fs::read_to_string(&path).is_ok_and(|t| t.contains(needle)) {
+            found.push(path);
+        }
+    }
+    found
 }
 
 fn read(path: PathBuf) -> Vec<u8> {
@@ -38,8 +59,10 @@ fn read(path: PathBuf) -> Vec<u8> {
 
 #[test]
 fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
-    let p = plan();
-    assert_eq!(p, plan());
+    let tmp = tempfile::tempdir().expect("tmp");
+    let repo = tmp.path().join("repo");
+    let p = plan(&repo);
+    assert_eq!(p, plan(&repo));
     let json = serde_json::to_string(&p).expect("json");
     assert_eq!(serde_json::from_str::<Plan>(&json).expect("parse"), p);
     assert_eq!(p.of_role(Role::Train).count(), 2);
@@ -61,8 +84,7 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
         .count();
     assert_eq!(datasets, p.variations.len());
 
-    let tmp = tempfile::tempdir().expect("tmp");
-    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    let (a, b) = (repo.join("a"), repo.join("b"));
     assert!(fit::run(&p, &a, |_| ControlFlow::Continue(())).expect("fit"));
     // Stopped before the second data set, then in the middle of the ISR training.
     let stop_at = |what: &'static str| {
@@ -127,8 +149,8 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     assert!(report.contains("fit's / floor"), "{report}");
     // Another plan is not mixed into a fit's folder.
     let other = Plan::new(
-        shot(),
-        &shot().load().expect("scene"),
+        shot(&repo),
+        &shot(&repo).load().expect("scene"),
         &FitOptions {
             quality: Quality::Final,
             ..options()
@@ -137,4 +159,32 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     .expect("plan");
     let err = fit::run(&other, &a, |_| ControlFlow::Continue(())).expect_err("refused");
     assert!(err.to_string().contains("plan.json"), "{err}");
+
+    // The folder names what it was made from relative to itself: moved with the shot (a
+    // repository cloned elsewhere), its plan and data sets still find it, and the fit is done.
+    let root = tmp.path().to_string_lossy().into_owned();
+    assert_eq!(naming(&a, &root), Vec::<PathBuf>::new());
+    let moved = tmp.path().join("moved");
+    std::fs::rename(&repo, &moved).expect("move");
+    let scene = moved.join("sheet_sphere.usda");
+    let again = Plan::load(&moved.join("a")).expect("plan");
+    assert_eq!(again.shot.scene, scene);
+    assert_eq!(
+        again,
+        Plan {
+            shot: shot(&moved),
+            ..p
+        }
+    );
+    let m = clothsr::data::read_manifest(&moved.join("a/data/held_out_0_twin")).expect("read");
+    assert_eq!(m.source.expect("source").scene, scene);
+    let fork = m.fork.expect("a fork");
+    assert_eq!(fork.from, moved.join("a/data/held_out_0"));
+    let mut ran = Vec::new();
+    let done = fit::run(&again, &moved.join("a"), |f| {
+        ran.push(f.message.clone());
+        ControlFlow::Continue(())
+    })
+    .expect("fit");
+    assert!(done && ran == ["done"], "{ran:?}");
 }

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clothsr::data::SceneSource;
 use clothsr::pipeline::fit::{self, FitOptions, Plan, Quality};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -41,22 +40,7 @@ pub struct Args {
 /// Runs `fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scene = args.inputs.load(&args.shot)?;
-    let shot = SceneSource {
-        scene: super::absolute(&args.shot)?,
-        colliders: args
-            .inputs
-            .collider
-            .iter()
-            .map(|c| super::absolute(c))
-            .collect::<anyhow::Result<_>>()?,
-        avatar: args
-            .inputs
-            .avatar
-            .as_deref()
-            .map(super::absolute)
-            .transpose()?,
-        fabric: args.inputs.fabric.clone(),
-    };
+    let shot = args.inputs.source(&args.shot).absolute();
     let generic_isr = if args.from_scratch {
         None
     } else {

@@ -149,11 +149,6 @@ pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBu
     Ok(output.to_path_buf())
 }
 
-/// An absolute path (for files recorded in manifests).
-pub(crate) fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
-    std::path::absolute(p).with_context(|| format!("{}: cannot resolve the path", p.display()))
-}
-
 /// Three numbers x,y,z from a comma-separated option; zero when absent.
 pub(crate) fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
     match v {

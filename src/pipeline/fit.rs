@@ -235,12 +235,28 @@ impl Plan {
         })
     }
 
-    /// The plan a fit wrote in `dir` ([`save_plan`]).
+    /// The same plan naming its files from folder `base`, as `base/plan.json` holds it.
+    fn relative_to(&self, base: &Path) -> Plan {
+        Plan {
+            shot: self.shot.relative_to(base),
+            fine_tune_from: self
+                .fine_tune_from
+                .as_deref()
+                .map(|p| crate::io::relative_to(p, base)),
+            ..self.clone()
+        }
+    }
+
+    /// The plan a fit wrote in `dir` ([`save_plan`]), its files resolved.
     pub fn load(dir: &Path) -> Result<Plan> {
         let path = dir.join(PLAN_FILE);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let plan: Plan =
+        let mut plan: Plan =
             serde_json::from_str(&text).map_err(|e| Error::bad_input(&path, e.to_string()))?;
+        plan.shot = plan.shot.resolved_against(dir);
+        plan.fine_tune_from = plan
+            .fine_tune_from
+            .map(|p| crate::io::resolve_against(&p, dir));
         if plan.format_version != PLAN_VERSION {
             return Err(Error::bad_input(
                 &path,
@@ -406,11 +422,13 @@ fn run_marked(
     Ok(true)
 }
 
-/// Writes `plan` to `dir/plan.json`, or checks that the plan already there is the same.
+/// Writes `plan` to `dir/plan.json` (its files named from `dir`, so that the folder can move
+/// with what it was made from), or checks that the plan already there is the same.
 pub fn save_plan(plan: &Plan, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let path = dir.join(PLAN_FILE);
-    let text = serde_json::to_string_pretty(plan).map_err(|e| Error::Invalid(e.to_string()))?;
+    let text = serde_json::to_string_pretty(&plan.relative_to(dir))
+        .map_err(|e| Error::Invalid(e.to_string()))?;
     if path.exists() {
         let old = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
         if old.trim_end() != text.trim_end() {
@@ -474,8 +492,9 @@ fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result
                 source: Some(plan.shot.clone()),
                 match_contact_thickness: true,
             };
-            let name = plan.shot.scene.display().to_string();
-            generate(&scene, &name, &opts, &data_dir(dir, variation), |p| {
+            let data = data_dir(dir, variation);
+            let name = crate::io::relative_to(&plan.shot.scene, &data);
+            generate(&scene, &name.display().to_string(), &opts, &data, |p| {
                 let _ = report(format!("frame {}/{}", p.frames_done, p.frames));
             })?;
             Ok(true)
@@ -528,7 +547,7 @@ fn calibrate(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
 
 /// The ISR recipe of the shipped models: geometry channels and the fabric as inputs, no
 /// initialisation input, the Swin body on 4 × 4 pixel blocks.
-fn isr_config(plan: &Plan) -> Result<IsrTrainingConfig> {
+fn isr_config(plan: &Plan, dir: &Path) -> Result<IsrTrainingConfig> {
     if let Some(from) = &plan.fine_tune_from {
         let generic = Isr::load(from)?;
         return Ok(generic
@@ -537,7 +556,11 @@ fn isr_config(plan: &Plan) -> Result<IsrTrainingConfig> {
             .with_steps(plan.isr_steps)
             .with_lr_start(1e-4)
             .with_lr_end(1e-5)
-            .with_fine_tune_from(Some(from.display().to_string())));
+            .with_fine_tune_from(Some(
+                crate::io::relative_to(from, &dir.join("isr"))
+                    .display()
+                    .to_string(),
+            )));
     }
     let model = IsrConfig::new()
         .with_depths(vec![2, 2, 2])
@@ -549,7 +572,7 @@ fn isr_config(plan: &Plan) -> Result<IsrTrainingConfig> {
 }
 
 fn train_isr(plan: &Plan, dir: &Path, report: &mut Report) -> Result<bool> {
-    let cfg = isr_config(plan)?;
+    let cfg = isr_config(plan, dir)?;
     let seqs = plan
         .of_role(Role::Train)
         .map(|v| {
@@ -736,7 +759,7 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
     )
     .map_err(|e| tracing::warn!("no plot: {e}"))
     .is_ok();
-    let text = report_text(plan, &chosen, &rows, plotted);
+    let text = report_text(&plan.relative_to(dir), &chosen, &rows, plotted);
     write_atomic(&dir.join("report.md"), text.as_bytes())?;
     write_manifest(plan, dir, &rows)
 }
@@ -754,7 +777,9 @@ fn write_manifest(plan: &Plan, dir: &Path, rows: &[HeldOut]) -> Result<()> {
     let ids: Vec<&str> = rows.iter().map(|r| r.id.as_str()).collect();
     let manifest = super::ModelsManifest {
         format_version: super::ModelsManifest::FORMAT_VERSION,
-        scene: plan.shot.scene.display().to_string(),
+        scene: crate::io::relative_to(&plan.shot.scene, dir)
+            .display()
+            .to_string(),
         held_out: format!("data/{{{}}}", ids.join(",")),
         protocol: format!(
             "`clothsr fit`: the whole pipeline with these models on each held-out variation, \

@@ -19,7 +19,7 @@ pub(crate) use clothsr_sim as sim;
 pub use scene_files::{FileKind, SceneFiles};
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Component, Path, PathBuf};
 
 use crate::error::{Error, Result};
 
@@ -57,4 +57,57 @@ pub fn open_log(path: &Path, resuming: bool, header: &str) -> Result<std::fs::Fi
         writeln!(log, "{header}").map_err(|e| Error::io(path, e))?;
     }
     Ok(log)
+}
+
+/// `path` as a file in folder `base` names it: relative to `base` when both are on the same
+/// root, else absolute. A folder that travels (a models folder in a repository, a data set
+/// moved to another machine) keeps naming its inputs through the paths around it.
+pub fn relative_to(path: &Path, base: &Path) -> PathBuf {
+    let (path, base) = (absolute(path), absolute(base));
+    pathdiff::diff_paths(&path, &base).unwrap_or(path)
+}
+
+/// A path read from a file in folder `base` ([`relative_to`]): relative ones are from `base`.
+pub fn resolve_against(path: &Path, base: &Path) -> PathBuf {
+    absolute(&base.join(path))
+}
+
+/// `path` made absolute from the working directory, `.` and `..` taken lexically (as
+/// [`relative_to`] makes them), so that one file has one name.
+pub fn absolute(path: &Path) -> PathBuf {
+    let full = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut out = PathBuf::new();
+    for c in full.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                if !out.pop() {
+                    out.push(c);
+                }
+            }
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_relative_to_a_folder_resolve_back() {
+        let base = Path::new("/repo/samples/models/table");
+        let scene = Path::new("/repo/samples/./x/../sheet_table.usda");
+        let rel = relative_to(scene, base);
+        assert_eq!(rel, Path::new("../../sheet_table.usda"));
+        assert_eq!(
+            resolve_against(&rel, base),
+            Path::new("/repo/samples/sheet_table.usda")
+        );
+        // Absolute paths read back as they are; relative inputs are from the working folder.
+        assert_eq!(resolve_against(scene, base), absolute(scene));
+        let cwd = std::env::current_dir().expect("cwd");
+        assert_eq!(absolute(Path::new("a/../b")), cwd.join("b"));
+    }
 }

@@ -354,14 +354,13 @@ fn fit_plan_of(
     use clothsr::pipeline::fit::{FitOptions, Plan, Quality};
     self::fabric(fabric)?;
     let quality: Quality = quality.parse().map_err(usage)?;
-    let absolute =
-        |p: &PathBuf| std::path::absolute(p).map_err(|e| usage(format!("{}: {e}", p.display())));
     let source = SceneSource {
-        scene: absolute(&shot)?,
-        colliders: colliders.iter().map(absolute).collect::<PyResult<_>>()?,
-        avatar: avatar.as_ref().map(absolute).transpose()?,
+        scene: shot,
+        colliders,
+        avatar,
         fabric: fabric.to_string(),
-    };
+    }
+    .absolute();
     let edge = |mm: Option<f64>, default_m: f64, name: &str| match mm {
         Some(v) if v.is_finite() && v > 0.0 => Ok(v * 1e-3),
         Some(v) => Err(usage(format!("{name} must be positive, got {v}"))),

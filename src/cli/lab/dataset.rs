@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use clothsr::data::{generate, Manifest, Options, SceneSource};
+use clothsr::data::{generate, Manifest, Options};
 use clothsr::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -69,22 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         variation,
         fast: args.fast,
         match_contact_thickness: !args.coarse_contact_thickness,
-        source: Some(SceneSource {
-            scene: crate::cli::absolute(&args.scene)?,
-            colliders: args
-                .inputs
-                .collider
-                .iter()
-                .map(|c| crate::cli::absolute(c))
-                .collect::<anyhow::Result<_>>()?,
-            avatar: args
-                .inputs
-                .avatar
-                .as_deref()
-                .map(crate::cli::absolute)
-                .transpose()?,
-            fabric: args.inputs.fabric.clone(),
-        }),
+        source: Some(args.inputs.source(&args.scene).absolute()),
     };
     generate_with_progress(
         &scene,

@@ -196,7 +196,7 @@ pub struct Manifest {
 /// Where a forked data set branched off ([`fork`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fork {
-    /// The data set it continues, as an absolute path.
+    /// The data set it continues (in the file: relative to the fork's folder).
     pub from: PathBuf,
     /// Its last frame shared with `from`: frames 1..=frame are copies.
     pub frame: usize,
@@ -229,17 +229,43 @@ fn yes() -> bool {
 /// Where a data set's scene came from, so that tools can load it again.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneSource {
-    /// The scene file (USD, GarmentCode JSON, OBJ), absolute.
+    /// The scene file (USD, GarmentCode JSON, OBJ): absolute in memory, relative to the
+    /// folder of the file that records it on disk ([`SceneSource::relative_to`]).
     pub scene: PathBuf,
-    /// Extra collider files, absolute.
+    /// Extra collider files.
     pub colliders: Vec<PathBuf>,
-    /// The avatar file, absolute.
+    /// The avatar file.
     pub avatar: Option<PathBuf>,
     /// Fabric preset for garments without one.
     pub fabric: String,
 }
 
 impl SceneSource {
+    /// The same files named from folder `base` ([`crate::relative_to`]), as a file there
+    /// records them.
+    pub fn relative_to(&self, base: &Path) -> SceneSource {
+        self.map_paths(|p| crate::relative_to(p, base))
+    }
+
+    /// The files a record in folder `base` names ([`SceneSource::relative_to`]), absolute.
+    pub fn resolved_against(&self, base: &Path) -> SceneSource {
+        self.map_paths(|p| crate::resolve_against(p, base))
+    }
+
+    /// The same files named by absolute paths ([`crate::absolute`]).
+    pub fn absolute(&self) -> SceneSource {
+        self.map_paths(crate::absolute)
+    }
+
+    fn map_paths(&self, f: impl Fn(&Path) -> PathBuf) -> SceneSource {
+        SceneSource {
+            scene: f(&self.scene),
+            colliders: self.colliders.iter().map(|c| f(c)).collect(),
+            avatar: self.avatar.as_deref().map(&f),
+            fabric: self.fabric.clone(),
+        }
+    }
+
     /// Loads the scene as the data set saw it before its variation.
     pub fn load(&self) -> Result<Scene> {
         let fabric = crate::garment::Fabric::preset(&self.fabric)
@@ -388,7 +414,7 @@ pub fn generate(
         let buf = simulate_frame(&mut fine, &mut coarse, &transfer, &mut prev_int)?;
         write_frame(&frame_path(dir, k), &buf, &fine, &coarse)?;
         manifest.frames_done = k;
-        crate::write_atomic(&manifest_path, &manifest_json(&manifest)?)?;
+        crate::write_atomic(&manifest_path, &manifest_json(&manifest, dir)?)?;
         progress(Progress {
             frames_done: k,
             frames: opts.frames,
@@ -602,7 +628,7 @@ fn start_new(
         &coarse.sim.model.mesh,
         &fine.sim.model.mesh,
     )?;
-    crate::write_atomic(&dir.join("manifest.json"), &manifest_json(manifest)?)
+    crate::write_atomic(&dir.join("manifest.json"), &manifest_json(manifest, dir)?)
 }
 
 /// The steps of one output frame: the fine simulation's, each downsampled to M_int, and the
@@ -675,8 +701,8 @@ fn write_frame(
 ///
 /// The copy is made beside `dst` and renamed into place, so a killed or failed fork leaves no
 /// data set. Forking again into a `dst` that already holds the same fork returns its manifest
-/// (its frames beyond `frame` are kept, for resuming). The record names `src` as an absolute
-/// path; a fork of a fork records only the last fork.
+/// (its frames beyond `frame` are kept, for resuming). A fork of a fork records only the last
+/// fork.
 pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Result<Manifest> {
     let source = read_manifest(src)?;
     let src_manifest = src.join("manifest.json");
@@ -695,7 +721,7 @@ pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Res
         )));
     }
     let record = Fork {
-        from: std::fs::canonicalize(src).map_err(|e| Error::io(src, e))?,
+        from: crate::absolute(src),
         frame,
         offset_m: offset_m.into(),
     };
@@ -794,7 +820,7 @@ fn fork_into(
         fork: Some(record),
         ..source
     };
-    crate::write_atomic(&tmp.join("manifest.json"), &manifest_json(&manifest)?)?;
+    crate::write_atomic(&tmp.join("manifest.json"), &manifest_json(&manifest, tmp)?)?;
     Ok(manifest)
 }
 
@@ -866,15 +892,27 @@ pub fn coarse_simulation(scene: &Scene, dir: &Path, frame: usize) -> Result<Simu
     Ok(sim)
 }
 
-fn manifest_json(m: &Manifest) -> Result<Vec<u8>> {
-    serde_json::to_vec_pretty(m).map_err(|e| Error::Invalid(format!("manifest: {e}")))
+/// `m` as `dir/manifest.json` holds it: the files it names relative to `dir`.
+fn manifest_json(m: &Manifest, dir: &Path) -> Result<Vec<u8>> {
+    let mut m = m.clone();
+    m.source = m.source.map(|s| s.relative_to(dir));
+    if let Some(f) = &mut m.fork {
+        f.from = crate::relative_to(&f.from, dir);
+    }
+    serde_json::to_vec_pretty(&m).map_err(|e| Error::Invalid(format!("manifest: {e}")))
 }
 
-/// A data set's manifest.
+/// A data set's manifest, the files it names resolved (relative ones are from `dir`).
 pub fn read_manifest(dir: &Path) -> Result<Manifest> {
     let p = dir.join("manifest.json");
     let text = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
-    serde_json::from_str(&text).map_err(|e| Error::bad_input(&p, e.to_string()))
+    let mut m: Manifest =
+        serde_json::from_str(&text).map_err(|e| Error::bad_input(&p, e.to_string()))?;
+    m.source = m.source.map(|s| s.resolved_against(dir));
+    if let Some(f) = &mut m.fork {
+        f.from = crate::resolve_against(&f.from, dir);
+    }
+    Ok(m)
 }
 
 /// One frame's arrays: (int_x, coarse_x) as (steps, Nc, 3) and fine_x as (Nf, 3), f32.

@@ -118,8 +118,9 @@ pub struct IsrTrainingConfig {
     /// Random seed.
     #[config(default = 7)]
     pub seed: u64,
-    /// Start from the weights of this trained model (a directory with the same network)
-    /// instead of random ones: fine-tuning. `None`: from scratch.
+    /// Start from the weights of this trained model (a directory with the same network;
+    /// relative to the model's own directory) instead of random ones: fine-tuning. `None`:
+    /// from scratch.
     pub fine_tune_from: Option<String>,
 }
 
@@ -288,7 +289,7 @@ pub fn train(
             .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
         tracing::info!("resuming at step {}", position.done);
     } else if let Some(from) = &cfg.fine_tune_from {
-        net = start_from(net, &cfg.model, Path::new(from))?;
+        net = start_from(net, &cfg.model, &out.join(from))?;
     }
     let mut log = LossLog::open(out, resuming)?;
     let t0 = Instant::now();
