@@ -410,18 +410,24 @@ fn a_run_writes_valid_usd_and_rerun_files_and_resumes_exactly() {
     assert!(err.to_string().contains("do not match"), "{err}");
 }
 
-/// The models shipped for the samples (the README's demo runs the first) still load with
-/// today's code and run the whole pipeline (corrector included) on their sample scene: a
-/// frame of finite fine positions on the 2.5 mm mesh they were trained for.
+/// The models shipped for the samples (made by `clothsr fit`; the README's demo runs the
+/// first) and the research models with a corrector still load with today's code and run the
+/// whole pipeline (corrector included) on their sample scene: a frame of finite fine positions
+/// on the 2.5 mm mesh they were trained for.
 #[test]
 fn shipped_sample_models_run_a_frame_of_their_scene() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    // (folder, scene, whether a corrector ships: the table's does not, see its README)
+    // (folder, scene, whether a corrector ships)
     for (models, scene, ships_corrector) in [
-        ("three_balls", "sheet_three_balls.usda", true),
-        ("table", "sheet_table.usda", false),
+        ("samples/models/three_balls", "sheet_three_balls.usda", false),
+        ("samples/models/table", "sheet_table.usda", false),
+        (
+            "tests/data/models/three_balls_lab",
+            "sheet_three_balls.usda",
+            true,
+        ),
     ] {
-        let models = root.join("samples/models").join(models);
+        let models = root.join(models);
         let isr = Isr::load(&models.join("isr")).expect("the shipped ISR model loads");
         assert!((isr.cfg.pixel_m - 0.0025).abs() < 1e-12);
         let scene = clothsr::scene::Scene::load(
@@ -503,25 +509,23 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
             };
             assert!(Pipeline::new(&scene, &isr, corrector, off).is_ok());
         }
-        // Without a corrector, the folder's own coarse model (the table's, chosen by
-        // `clothsr calibrate` on its training drops: c = 0.01, wrinkle bending 1, the
-        // fabric's bending, no crease contacts), as `clothsr run` and `clothsr bench` take it.
+        // Without a corrector, the folder's own coarse model (the one `clothsr fit` chose on
+        // its training variations), as `clothsr run` and `clothsr bench` take it.
         let (opts, cal) =
             clothsr::pipeline::options_for_run(&models, corrector, Options::default())
                 .expect("a valid coarse.json, if any");
         let mut p = Pipeline::new(&scene, &isr, corrector, opts).expect("set up");
         if !ships_corrector {
-            let table = CoarseCalibration {
-                compression: Some(0.01),
-                wrinkle_bending: Some(1.0),
-                crease_contacts: Some(false),
-                ..CoarseCalibration::default()
-            };
-            assert_eq!(cal, Some(table));
+            let own = CoarseCalibration::load(&models)
+                .expect("a valid coarse.json")
+                .expect("fit leaves a coarse.json");
+            assert_eq!(cal, Some(own));
             let k = &p.coarse.sim.model.membrane_k;
-            assert!(k.iter().all(|k| k.compression == 0.01), "{:?}", k.first());
-            assert_eq!(p.coarse.sim.model.bending_scale(), 1.0);
-            assert!(!p.coarse.sim.detector().crease_contacts);
+            let c = own.compression.unwrap_or(1.0);
+            assert!(k.iter().all(|k| k.compression == c), "{:?}", k.first());
+            if let Some(f) = own.friction {
+                assert_eq!(p.coarse.sim.params.friction, f);
+            }
         }
         if ships_corrector {
             // Without its corrector (`run --no-corrector`), the coarse model `clothsr
@@ -708,8 +712,14 @@ fn the_run_takes_the_better_validated_path_of_a_models_folder() {
         .to_string()
         .contains("no corrector"));
     // The shipped folders' manifests are valid and their best path is what `run` takes.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/models");
-    for folder in ["three_balls", "table", "skirt"] {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for folder in [
+        "samples/models/three_balls",
+        "samples/models/table",
+        "samples/models/skirt",
+        "tests/data/models/three_balls_lab",
+        "tests/data/models/skirt_lab",
+    ] {
         let m = ModelsManifest::load(&root.join(folder))
             .expect("valid")
             .expect("every shipped folder has a models.json");

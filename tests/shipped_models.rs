@@ -1,6 +1,7 @@
-//! Every shipped models folder, on each path it ships (with its corrector, and the coarse
-//! model alone), gives the output it gave when its reference was recorded: three frames of the
-//! whole pipeline on its scene, compared with `tests/data/reference/<folder>_<path>.json`
+//! Every shipped models folder (the samples' and the generic ones, made by `clothsr fit` and
+//! its recipe, and the research models with a corrector in `tests/data/models`), on each path
+//! it ships (with its corrector, and the coarse model alone), gives the output it gave when its
+//! reference was recorded: three frames of the whole pipeline on its scene, compared with `tests/data/reference/<folder>_<path>.json`
 //! within 1e-6 m (the corrector's fused pass may sum in another order on another thread
 //! count). Refactors must keep these; a change meant to alter the output records new
 //! references with `CLOTHSR_BLESS=1 cargo test --release --test shipped_models -- --include-ignored`
@@ -117,11 +118,13 @@ fn sample_scene(file: &str) -> Scene {
 #[test]
 fn three_balls_models_give_their_reference_output() {
     let scene = sample_scene("sheet_three_balls.usda");
-    check("three_balls_corrector", run("three_balls", &scene, true));
     check(
         "three_balls_coarse_alone",
         run("three_balls", &scene, false),
     );
+    let lab = "tests/data/models/three_balls_lab";
+    check("three_balls_lab_corrector", run(lab, &scene, true));
+    check("three_balls_lab_coarse_alone", run(lab, &scene, false));
 }
 
 #[test]
@@ -151,7 +154,7 @@ fn skirt_models_give_their_reference_output() {
     scene
         .add_collider_file(&root().join("tests/data/avatars/mh_walk_train_baked_2s.usdc"))
         .expect("avatar");
-    let with = run("skirt", &scene, true);
+    let with = run("tests/data/models/skirt_lab", &scene, true);
     assert_eq!((with.coarse_vertices, with.fine_vertices), (1_686, 99_796));
     // Dressed around the hips (about 0.8-1 m up), the skirt moves with the body by
     // millimetres a frame, not metres.
@@ -164,7 +167,11 @@ fn skirt_models_give_their_reference_output() {
         .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt())
         .fold(0.0, f64::max);
     assert!(moved > 1e-5 && moved < 0.05, "{moved}");
-    check("skirt_corrector", with);
+    check("skirt_lab_corrector", with);
+    check(
+        "skirt_lab_coarse_alone",
+        run("tests/data/models/skirt_lab", &scene, false),
+    );
     check("skirt_coarse_alone", run("skirt", &scene, false));
 }
 
@@ -174,9 +181,9 @@ fn skirt_models_give_their_reference_output() {
 #[test]
 fn shipped_corrector_configs_are_in_the_current_form() {
     use clothsr::corrector::training::{TrainingConfig, CORRECTOR_FORMAT_VERSION};
-    let models = root().join("samples/models");
+    let models = root().join("tests/data/models");
     let mut seen = 0;
-    for entry in std::fs::read_dir(&models).expect("samples/models") {
+    for entry in std::fs::read_dir(&models).expect("tests/data/models") {
         let path = entry.expect("entry").path().join("corrector/config.json");
         if !path.exists() {
             continue;

@@ -154,7 +154,7 @@ impl TrainingConfig {
                     "this corrector configuration has {found}, this clothsr reads \
                      {CORRECTOR_FORMAT_VERSION}: it was written by {by} clothsr. Make the \
                      model again with this one: a shipped model with its models folder's \
-                     make.sh (samples/models/<scene>/make.sh), any other with \
+                     make.sh (tests/data/models/<folder>/make.sh), any other with \
                      'clothsr lab train corrector'"
                 ),
             ));

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates samples/models/skirt/ (this folder) from this repository alone:
+# Regenerates tests/data/models/skirt_lab/ (this folder) from this repository alone:
 # GarmentCode's pencil skirt (cotton) dressed on the CC0 walking avatar, simulated at 20 mm and
 # 2.5 mm (99,796 fine vertices) through the first 1.5 s of the walk, then the ISR network
 # trained on frames 1-30 and measured on frames 31-45 and on a second sequence, then the
@@ -9,12 +9,12 @@
 # are capped at half the 2.5 mm mesh's contact margin an iteration, and a leg swinging 5 mm a
 # step into the skirt halves most steps (70 s a frame by frame 5).
 #
-#   CLOTHSR=path/to/clothsr DATA=/tmp/skirt_data bash samples/models/skirt/make.sh
+#   CLOTHSR=path/to/clothsr DATA=/tmp/skirt_data bash tests/data/models/skirt_lab/make.sh
 set -euo pipefail
-cd "$(dirname "$0")/../../.."
+cd "$(dirname "$0")/../../../.."
 BIN=${CLOTHSR:-clothsr}
 DATA=${DATA:-data/skirt}
-OUT=${OUT:-samples/models/skirt}
+OUT=${OUT:-tests/data/models/skirt_lab}
 PATTERN=tests/data/patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json
 # The walk baked to a point cache (every 2nd time code, as the models were trained on).
 AVATAR=$DATA/mh_walk_train_baked.usdc

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates samples/models/three_balls/ (this folder) from this repository alone: training data from
+# Regenerates tests/data/models/three_balls_lab/ (this folder) from this repository alone: training data from
 # our own fine simulations of samples/sheet_three_balls.usda (20 mm coarse / 2.5 mm fine), then
 # the ISR network and the corrector, each with its config, log and the data manifests it was
 # trained on, and the coarse model chosen for runs without the corrector. About 2 h on 2 CPU
@@ -10,12 +10,12 @@
 # ISR network trains on all 150 frames of the two main drops, the corrector on every frame of
 # all six.
 #
-#   CLOTHSR=path/to/clothsr DATA=/tmp/three_balls_data bash samples/models/three_balls/make.sh
+#   CLOTHSR=path/to/clothsr DATA=/tmp/three_balls_data bash tests/data/models/three_balls_lab/make.sh
 set -euo pipefail
-cd "$(dirname "$0")/../../.."
+cd "$(dirname "$0")/../../../.."
 BIN=${CLOTHSR:-clothsr}
 DATA=${DATA:-data/three_balls}
-OUT=${OUT:-samples/models/three_balls}
+OUT=${OUT:-tests/data/models/three_balls_lab}
 SCENE=samples/sheet_three_balls.usda
 COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
 
