@@ -30,7 +30,7 @@ long_run() { # NAME ARGS…
 long_run sphere samples/sheet_sphere.usda
 long_run three_balls samples/sheet_three_balls.usda --models samples/models/three_balls
 long_run table samples/sheet_table.usda --models samples/models/table
-long_run skirt samples/skirt.usda --avatar "$walk" --models samples/models/skirt
+long_run skirt samples/skirt.usda --avatar "$walk" --models tests/data/models/skirt_lab
 
 for name in sphere three_balls table skirt; do
   echo "== $name"

@@ -172,7 +172,6 @@ fn skirt_models_give_their_reference_output() {
         "skirt_lab_coarse_alone",
         run("tests/data/models/skirt_lab", &scene, false),
     );
-    check("skirt_coarse_alone", run("skirt", &scene, false));
 }
 
 /// Every shipped corrector's `config.json` is in this build's one form: it loads, and writing
