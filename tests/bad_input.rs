@@ -293,7 +293,10 @@ fn a_missing_file_is_named_once_with_its_reason() {
     let missing = dir.path().join("no_such_drop");
     let res = Command::new(env!("CARGO_BIN_EXE_clothsr"))
         .args(["lab", "rollout", "--model"])
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/models/three_balls_lab/corrector"))
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/data/models/three_balls_lab/corrector"),
+        )
         .arg("--data")
         .arg(&missing)
         .output()

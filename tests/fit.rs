@@ -99,6 +99,17 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     assert!(!fit::run(&p, &b, stop_at("data_train_1: started")).expect("fit"));
     assert!(b.join("tasks/data_train_0.done").exists());
     assert!(!b.join("tasks/data_train_1.done").exists());
+    // Another process running that task: a second fit there is refused, naming it.
+    {
+        let held = std::fs::File::create(b.join("tasks/data_train_1.lock")).expect("lock file");
+        held.lock().expect("lock");
+        let err = fit::run(&p, &b, |_| ControlFlow::Continue(())).expect_err("refused");
+        assert!(
+            err.to_string().contains("'data_train_1'")
+                && err.to_string().contains("another process"),
+            "{err}"
+        );
+    }
     assert!(!fit::run(&p, &b, stop_at("train_isr: step 10/")).expect("fit"));
     assert!(b.join("isr/checkpoint").exists());
     assert!(!b.join("tasks/train_isr.done").exists());
@@ -131,6 +142,15 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     let report = String::from_utf8(read(a.join("report.md"))).expect("utf-8");
     assert!(report.contains("| held_out_0 |"), "{report}");
     assert!(!a.join("isr/checkpoint").exists());
+    // A finished fit leaves no lock files.
+    let locks = std::fs::read_dir(a.join("tasks"))
+        .expect("tasks")
+        .filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "lock"))
+        })
+        .count();
+    assert_eq!(locks, 0);
     // The folder's manifest: the whole pipeline held out, beside the paper's baseline, which
     // the held-out variation's own coarse and fine simulations do not match exactly.
     let m = clothsr::pipeline::ModelsManifest::load(&a)

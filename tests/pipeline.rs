@@ -419,7 +419,11 @@ fn shipped_sample_models_run_a_frame_of_their_scene() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     // (folder, scene, whether a corrector ships)
     for (models, scene, ships_corrector) in [
-        ("samples/models/three_balls", "sheet_three_balls.usda", false),
+        (
+            "samples/models/three_balls",
+            "sheet_three_balls.usda",
+            false,
+        ),
         ("samples/models/table", "sheet_table.usda", false),
         (
             "tests/data/models/three_balls_lab",

@@ -407,6 +407,25 @@ fn run_marked(
     if marker.exists() {
         return Ok(true);
     }
+    // One process a task: a second fit in the same folder (or a task run twice on a cluster)
+    // is refused while the first runs it, rather than both writing the same files.
+    let lock_path = dir.join("tasks").join(format!("{}.lock", task.id));
+    let lock = std::fs::File::create(&lock_path).map_err(|e| Error::io(&lock_path, e))?;
+    match lock.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            return Err(Error::Usage(format!(
+                "task '{}' of the fit in {} is running in another process; wait for it, or \
+                 stop it first",
+                task.id,
+                dir.display()
+            )))
+        }
+        Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(&lock_path, e)),
+    }
+    if marker.exists() {
+        return Ok(true);
+    }
     let total = plan.tasks.len();
     let mut report = |message: String| {
         progress(&FitProgress {
@@ -419,6 +438,8 @@ fn run_marked(
         return Ok(false);
     }
     write_atomic(&marker, b"done\n")?;
+    // Best effort: a process that opened it meanwhile finds the marker once it holds it.
+    let _ = std::fs::remove_file(&lock_path);
     Ok(true)
 }
 
