@@ -237,12 +237,14 @@ impl Plan {
 
     /// The same plan naming its files from folder `base`, as `base/plan.json` holds it.
     fn relative_to(&self, base: &Path) -> Plan {
+        self.map_paths(|p| crate::io::relative_to(p, base))
+    }
+
+    /// The same plan with `f` applied to every file it names.
+    fn map_paths(&self, f: impl Fn(&Path) -> PathBuf) -> Plan {
         Plan {
-            shot: self.shot.relative_to(base),
-            fine_tune_from: self
-                .fine_tune_from
-                .as_deref()
-                .map(|p| crate::io::relative_to(p, base)),
+            shot: self.shot.map_paths(&f),
+            fine_tune_from: self.fine_tune_from.as_deref().map(&f),
             ..self.clone()
         }
     }
@@ -251,12 +253,9 @@ impl Plan {
     pub fn load(dir: &Path) -> Result<Plan> {
         let path = dir.join(PLAN_FILE);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let mut plan: Plan =
-            serde_json::from_str(&text).map_err(|e| Error::bad_input(&path, e.to_string()))?;
-        plan.shot = plan.shot.resolved_against(dir);
-        plan.fine_tune_from = plan
-            .fine_tune_from
-            .map(|p| crate::io::resolve_against(&p, dir));
+        let plan = serde_json::from_str::<Plan>(&text)
+            .map_err(|e| Error::bad_input(&path, e.to_string()))?
+            .map_paths(|p| crate::io::resolve_against(p, dir));
         if plan.format_version != PLAN_VERSION {
             return Err(Error::bad_input(
                 &path,

@@ -205,6 +205,15 @@ pub struct Fork {
 }
 
 impl Manifest {
+    /// The same manifest with `f` applied to every file it names (its source, its fork's).
+    fn map_paths(mut self, f: impl Fn(&Path) -> PathBuf) -> Manifest {
+        self.source = self.source.map(|s| s.map_paths(&f));
+        if let Some(fork) = &mut self.fork {
+            fork.from = f(&fork.from);
+        }
+        self
+    }
+
     /// The [`generate`] options that made this data set, for `frames` frames: resuming it
     /// (or a [`fork`] of it) with these continues the same simulation.
     pub fn options(&self, frames: usize) -> Options {
@@ -230,7 +239,7 @@ fn yes() -> bool {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneSource {
     /// The scene file (USD, GarmentCode JSON, OBJ): absolute in memory, relative to the
-    /// folder of the file that records it on disk ([`SceneSource::relative_to`]).
+    /// folder of the file that records it on disk ([`crate::relative_to`]).
     pub scene: PathBuf,
     /// Extra collider files.
     pub colliders: Vec<PathBuf>,
@@ -241,23 +250,13 @@ pub struct SceneSource {
 }
 
 impl SceneSource {
-    /// The same files named from folder `base` ([`crate::relative_to`]), as a file there
-    /// records them.
-    pub fn relative_to(&self, base: &Path) -> SceneSource {
-        self.map_paths(|p| crate::relative_to(p, base))
-    }
-
-    /// The files a record in folder `base` names ([`SceneSource::relative_to`]), absolute.
-    pub fn resolved_against(&self, base: &Path) -> SceneSource {
-        self.map_paths(|p| crate::resolve_against(p, base))
-    }
-
     /// The same files named by absolute paths ([`crate::absolute`]).
     pub fn absolute(&self) -> SceneSource {
         self.map_paths(crate::absolute)
     }
 
-    fn map_paths(&self, f: impl Fn(&Path) -> PathBuf) -> SceneSource {
+    /// The same files with `f` applied to each path.
+    pub fn map_paths(&self, f: impl Fn(&Path) -> PathBuf) -> SceneSource {
         SceneSource {
             scene: f(&self.scene),
             colliders: self.colliders.iter().map(|c| f(c)).collect(),
@@ -894,11 +893,7 @@ pub fn coarse_simulation(scene: &Scene, dir: &Path, frame: usize) -> Result<Simu
 
 /// `m` as `dir/manifest.json` holds it: the files it names relative to `dir`.
 fn manifest_json(m: &Manifest, dir: &Path) -> Result<Vec<u8>> {
-    let mut m = m.clone();
-    m.source = m.source.map(|s| s.relative_to(dir));
-    if let Some(f) = &mut m.fork {
-        f.from = crate::relative_to(&f.from, dir);
-    }
+    let m = m.clone().map_paths(|p| crate::relative_to(p, dir));
     serde_json::to_vec_pretty(&m).map_err(|e| Error::Invalid(format!("manifest: {e}")))
 }
 
@@ -906,13 +901,9 @@ fn manifest_json(m: &Manifest, dir: &Path) -> Result<Vec<u8>> {
 pub fn read_manifest(dir: &Path) -> Result<Manifest> {
     let p = dir.join("manifest.json");
     let text = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
-    let mut m: Manifest =
+    let m: Manifest =
         serde_json::from_str(&text).map_err(|e| Error::bad_input(&p, e.to_string()))?;
-    m.source = m.source.map(|s| s.resolved_against(dir));
-    if let Some(f) = &mut m.fork {
-        f.from = crate::resolve_against(&f.from, dir);
-    }
-    Ok(m)
+    Ok(m.map_paths(|p| crate::resolve_against(p, dir)))
 }
 
 /// One frame's arrays: (int_x, coarse_x) as (steps, Nc, 3) and fine_x as (Nf, 3), f32.
