@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Long runs: FRAMES (1,000) frames of the whole pipeline on each sample scene, each with its
-# shipped models (the generic ones for the sphere), the skirt on the avatar's walk played
+# shipped models (the generic ones for the sphere), the pencil skirt on the avatar's walk played
 # forward and back (benches/pingpong_walk.py); then `clothsr eval --pred` checks every output
 # frame: no point that is not finite, no fine vertex inside a body, the largest move of a
 # vertex in one frame. Peak memory (GNU time) beside each run.
@@ -30,7 +30,8 @@ long_run() { # NAME ARGS…
 long_run sphere samples/sheet_sphere.usda
 long_run three_balls samples/sheet_three_balls.usda --models samples/models/three_balls
 long_run table samples/sheet_table.usda --models samples/models/table
-long_run skirt samples/skirt.usda --avatar "$walk" --models tests/data/models/skirt_lab
+long_run skirt tests/data/patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json \
+  --avatar "$walk" --models samples/models/skirt
 
 for name in sphere three_balls table skirt; do
   echo "== $name"

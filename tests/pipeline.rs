@@ -720,6 +720,7 @@ fn the_run_takes_the_better_validated_path_of_a_models_folder() {
     for folder in [
         "samples/models/three_balls",
         "samples/models/table",
+        "samples/models/skirt",
         "tests/data/models/three_balls_lab",
         "tests/data/models/skirt_lab",
     ] {

@@ -142,7 +142,8 @@ fn generic_models_give_their_reference_output() {
     check("generic_coarse_alone", run("models/generic", &scene, false));
 }
 
-/// The skirt dresses on the walking avatar before its first frame: the heavy tier.
+/// The skirt (the fit-made sample models and the research models with a corrector) dresses
+/// on the walking avatar before its first frame: the heavy tier.
 #[test]
 #[ignore = "heavy: dresses the skirt on the avatar (run by .ci/run)"]
 fn skirt_models_give_their_reference_output() {
@@ -172,6 +173,7 @@ fn skirt_models_give_their_reference_output() {
         "skirt_lab_coarse_alone",
         run("tests/data/models/skirt_lab", &scene, false),
     );
+    check("skirt_coarse_alone", run("skirt", &scene, false));
 }
 
 /// Every shipped corrector's `config.json` is in this build's one form: it loads, and writing
