@@ -167,6 +167,33 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     // The held-out variation's twin (its predictability floor) resumed its source's fork.
     assert!(a.join("data/held_out_0_twin/manifest.json").exists());
     assert!(report.contains("fit's / floor"), "{report}");
+    // The pipeline against the twin, per frame: by the triangle inequality (per vertex, so
+    // for the mean too) it differs from the pipeline against the fine simulation by at most
+    // the two fine simulations' distance.
+    let gt = clothsr::eval::Animation::read_dataset(&a.join("data/held_out_0"), 0.0).expect("gt");
+    let twin =
+        clothsr::eval::Animation::read_dataset(&a.join("data/held_out_0_twin"), 0.0).expect("twin");
+    let csv = String::from_utf8(read(a.join("held_out.csv"))).expect("utf-8");
+    let mut rows = 0;
+    for (k, line) in csv.lines().skip(1).enumerate() {
+        let v: Vec<f64> = line
+            .split(',')
+            .skip(4)
+            .map(|x| x.parse().expect("a number"))
+            .collect();
+        let &[fit, base, to_twin] = v.as_slice() else {
+            panic!("{line}");
+        };
+        let floor = clothsr::metrics::mean_distance_mm(&gt.frames[k], &twin.frames[k]);
+        assert!(fit > 0.0 && base > 0.0 && to_twin > 0.0, "{line}");
+        assert!(
+            (fit - to_twin).abs() <= floor + 1e-6,
+            "{line}: floor {floor} mm"
+        );
+        rows += 1;
+    }
+    assert_eq!(rows, 3);
+    assert!(report.contains("fit's to the twin"), "{report}");
     // Another plan is not mixed into a fit's folder.
     let other = Plan::new(
         shot(&repo),
