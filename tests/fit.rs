@@ -174,7 +174,7 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     let twin =
         clothsr::eval::Animation::read_dataset(&a.join("data/held_out_0_twin"), 0.0).expect("twin");
     let csv = String::from_utf8(read(a.join("held_out.csv"))).expect("utf-8");
-    let mut rows = 0;
+    let (mut rows, mut apart) = (0, 0);
     for (k, line) in csv.lines().skip(1).enumerate() {
         let v: Vec<f64> = line
             .split(',')
@@ -186,13 +186,32 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
         };
         let floor = clothsr::metrics::mean_distance_mm(&gt.frames[k], &twin.frames[k]);
         assert!(fit > 0.0 && base > 0.0 && to_twin > 0.0, "{line}");
+        // The CSV's four decimals.
         assert!(
-            (fit - to_twin).abs() <= floor + 1e-6,
+            (fit - to_twin).abs() <= floor + 2e-4,
             "{line}: floor {floor} mm"
         );
+        // Measured against the twin, not the fine simulation again.
+        if floor > 1e-3 && (fit - to_twin).abs() > 1e-4 {
+            apart += 1;
+        }
         rows += 1;
     }
     assert_eq!(rows, 3);
+    assert!(apart > 0, "{csv}");
+    // The mean distance to the two is at least half the floor: the report's last column.
+    let row = report
+        .lines()
+        .find(|l| l.starts_with("| held_out_0 |") && l.split('|').count() == 10)
+        .unwrap_or_else(|| panic!("{report}"));
+    let both: f64 = row
+        .split('|')
+        .nth(8)
+        .expect("column")
+        .trim()
+        .parse()
+        .expect("a number");
+    assert!(both >= 0.99, "{row}");
     assert!(report.contains("fit's to the twin"), "{report}");
     // Another plan is not mixed into a fit's folder.
     let other = Plan::new(

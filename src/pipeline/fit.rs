@@ -655,10 +655,11 @@ impl HeldOut {
 
     /// Against the twin, mean over frames, and the mean over the two fine simulations as a
     /// share of the least any prediction from their shared start can average there (half
-    /// the floor, by the triangle inequality); `None` without a twin.
+    /// the floor, by the triangle inequality); `None` without a twin or a floor.
     fn twin_means(&self) -> Option<(f64, f64)> {
-        let floor = self.floor_mm?;
-        if self.twin_per_frame.is_empty() {
+        let floor = self.floor_mm.filter(|&f| f > 0.0)?;
+        // The floor averages over the same frames.
+        if self.twin_per_frame.len() != self.run_per_frame.len() {
             return None;
         }
         let twin = self.twin_per_frame.iter().sum::<f64>() / self.twin_per_frame.len() as f64;
@@ -872,13 +873,14 @@ fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotte
          `clothsr run` with these models on each held-out variation against its fine \
          simulation, beside the simulator's own coarse model upsampled (the paper's baseline), \
          mean over frames.\n\n\
-         | variation | fit's models (mm) | simulator's coarse model upsampled (mm) | ratio | floor (mm) | fit's / floor | fit's to the twin (mm) | over both / least |\n\
+         | variation | fit's models (mm) | simulator's coarse model upsampled (mm) | ratio | floor (mm) | fit's / floor | fit's to the twin (mm) | mean to both / half the floor |\n\
          |---|---|---|---|---|---|---|---|\n{}\n\
          The floor: the distance between the variation's fine simulation and its twin from a \
          start 0.1 mm away, which no prediction is expected to beat. Where a shot forks (a \
-         large floor), the twin may take another road than the fine simulation: the fit's \
-         models against the twin, and their mean distance to the two as a share of the least \
-         any prediction can average there (half the floor), say which road they follow.\n\n\
+         large floor), the twin may take another road than the fine simulation, and the fit's \
+         models against the twin say which road they follow. Their mean distance to the two \
+         is at least half the floor (the triangle inequality); the last column is it as a \
+         share of that.\n\n\
          ## The stages, held out\n\n\
          | variation | coarse alone, simulator's model (mm to M_int) | calibrated | ISR on M_int (mm to the fine simulation) | M_int upsampled | ISR / upsampled | bend angles, ISR (W1 °) | upsampled |\n\
          |---|---|---|---|---|---|---|---|\n",
