@@ -471,23 +471,6 @@ fn twin_dir(dir: &Path, variation: &str) -> PathBuf {
     dir.join("data").join(format!("{variation}_twin"))
 }
 
-/// The predictability floor of a held-out variation with a twin: the mean distance between
-/// its fine simulation and the twin's over its frames (the shared first frame counting as
-/// zero, as `clothsr eval --floor` counts it), mm; `None` without a twin.
-fn floor_mm(dir: &Path, variation: &str) -> Result<Option<f64>> {
-    let twin = twin_dir(dir, variation);
-    if !twin.join("manifest.json").exists() {
-        return Ok(None);
-    }
-    let a = crate::eval::Animation::read_dataset(&data_dir(dir, variation), 0.0)?;
-    let b = crate::eval::Animation::read_dataset(&twin, 0.0)?;
-    let n = a.frames.len().min(b.frames.len());
-    let sum: f64 = (1..n)
-        .map(|k| crate::metrics::mean_distance_mm(&a.frames[k], &b.frames[k]))
-        .sum();
-    Ok(Some(sum / n.max(1) as f64))
-}
-
 /// Reports a task's progress; `Break` asks it to stop.
 type Report<'a> = dyn FnMut(String) -> ControlFlow<()> + 'a;
 
@@ -639,7 +622,7 @@ struct HeldOut {
     /// The same pipeline against the twin's fine simulation, per frame, mm (empty without a
     /// twin): a shot that forks (a large floor) may follow the twin's road.
     twin_per_frame: Vec<f64>,
-    /// The predictability floor ([`floor_mm`]), where measured.
+    /// The predictability floor, where measured ([`HeldOutRun::floor_mm`]).
     floor_mm: Option<f64>,
 }
 
@@ -658,10 +641,6 @@ impl HeldOut {
     /// the floor, by the triangle inequality); `None` without a twin or a floor.
     fn twin_means(&self) -> Option<(f64, f64)> {
         let floor = self.floor_mm.filter(|&f| f > 0.0)?;
-        // The floor averages over the same frames.
-        if self.twin_per_frame.len() != self.run_per_frame.len() {
-            return None;
-        }
         let twin = self.twin_per_frame.iter().sum::<f64>() / self.twin_per_frame.len() as f64;
         Some((twin, (self.run_means_mm().0 + twin) / floor))
     }
@@ -673,6 +652,10 @@ struct HeldOutRun {
     against_gt: Vec<(f64, f64)>,
     /// The pipeline against the twin's fine simulation (empty without a twin).
     against_twin: Vec<f64>,
+    /// The predictability floor: the mean distance between the variation's fine simulation
+    /// and its twin's over the same frames (the shared first frame is zero, as `clothsr eval
+    /// --floor` counts it); `None` without a twin.
+    floor_mm: Option<f64>,
 }
 
 /// The whole pipeline on held-out variation `v` with the fit's ISR and coarse model `cal`,
@@ -719,10 +702,12 @@ fn run_held_out(
     run.super_resolve()?;
     let mut out = Vec::with_capacity(gt.frames.len());
     let mut to_twin = Vec::new();
+    let mut apart_mm = 0.0;
     for (k, truth) in gt.frames.iter().enumerate() {
         let fine = run.advance_frame()?;
         if let Some(twin) = twin.as_ref().and_then(|t| t.frames.get(k)) {
             to_twin.push(crate::metrics::mean_distance_mm(twin, fine));
+            apart_mm += crate::metrics::mean_distance_mm(truth, twin);
         }
         let own = crate::metrics::mean_distance_mm(truth, fine);
         for _ in 0..paper.coarse.steps_per_frame {
@@ -733,9 +718,13 @@ fn run_held_out(
             crate::metrics::mean_distance_mm(truth, &paper.upsampled()?),
         ));
     }
+    // Over the same frames as the pipeline's figures, or none.
+    let floor_mm =
+        (twin.is_some() && to_twin.len() == out.len()).then(|| apart_mm / out.len().max(1) as f64);
     Ok(HeldOutRun {
         against_gt: out,
         against_twin: to_twin,
+        floor_mm,
     })
 }
 
@@ -777,7 +766,7 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
             per_frame,
             run_per_frame: run.against_gt,
             twin_per_frame: run.against_twin,
-            floor_mm: floor_mm(dir, &v.id)?,
+            floor_mm: run.floor_mm,
         });
     }
     write_atomic(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
