@@ -310,3 +310,26 @@ fn a_missing_file_is_named_once_with_its_reason() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_bad_triple_flag_is_refused_by_name_not_a_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
+    for v in ["1,2", "-1", "nan,0,0", "1e400,0,0", "1,2,3,4"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_clothsr"))
+            .arg("simulate")
+            .arg(&scene)
+            .args(["--frames", "1", "--collider"])
+            .arg(&scene)
+            .arg(format!("--collider-offset={v}"))
+            .arg("-o")
+            .arg(dir.path().join("out.usda"))
+            .output()
+            .expect("run clothsr");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{v}: {stderr}");
+        assert!(stderr.contains("--collider-offset"), "{v}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{v}: {stderr}");
+        assert!(!dir.path().join("out.usda").exists(), "{v}");
+    }
+}

@@ -43,6 +43,7 @@ fn make_dataset(variation: Variation) -> tempfile::TempDir {
         self_collision: false,
         variation,
         fast: true,
+        fine_mode: clothsr::sim::step::SolverMode::Data,
         match_contact_thickness: true,
         source: None,
     };

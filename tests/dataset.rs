@@ -25,6 +25,7 @@ fn opts(frames: usize) -> Options {
             ..Variation::default()
         },
         fast: false,
+        fine_mode: clothsr::sim::step::SolverMode::Data,
         match_contact_thickness: false,
         source: None,
     }

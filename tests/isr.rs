@@ -47,6 +47,7 @@ fn dataset() -> std::path::PathBuf {
             self_collision: false,
             variation: Variation::default(),
             fast: true,
+            fine_mode: clothsr::sim::step::SolverMode::Data,
             match_contact_thickness: true,
             source: None,
         };

@@ -740,8 +740,14 @@ struct TableDrop {
 
 fn coarse_table_drop(crease_contacts: bool) -> TableDrop {
     let scene = clothsr::scene::samples::sample("sheet_table").expect("sample");
-    let mut sim =
-        clothsr::data::new_simulation(&scene, 0.02, false, true, Some(4e-4)).expect("setup");
+    let mut sim = clothsr::data::new_simulation(
+        &scene,
+        0.02,
+        false,
+        clothsr::sim::step::SolverMode::Fast,
+        Some(4e-4),
+    )
+    .expect("setup");
     sim.sim.detector_mut().crease_contacts = crease_contacts;
     // The part that lands on the table, away from its edge (x = 0.2 m).
     let inner: Vec<usize> = (0..sim.state.x.len())

@@ -126,13 +126,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The scene with the extra colliders, the avatar and the time step given.
 fn load_scene(args: &Args) -> anyhow::Result<Scene> {
+    let [x, y, z] = super::triple(&args.collider_offset)
+        .map_err(|e| anyhow::anyhow!("--collider-offset: {e}"))?;
+    let offset = nalgebra::Vector3::new(x, y, z);
     let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
-    let offset = args
-        .collider_offset
-        .as_ref()
-        .map_or(nalgebra::Vector3::zeros(), |o| {
-            nalgebra::Vector3::new(o[0], o[1], o[2])
-        });
     for c in &args.collider {
         scene.add_collider_file_transformed(c, args.collider_scale, offset)?;
     }

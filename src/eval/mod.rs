@@ -3,6 +3,8 @@
 //! (mean ‖x_{t+1} − 2x_t + x_{t−1}‖, set beside the ground truth's own); error-over-time plots
 //! (Fig. 11) and per-vertex heat maps (Fig. 9/10) through [`crate::viz`].
 
+pub mod converge;
+
 use std::path::Path;
 
 use nalgebra::Vector3;

@@ -137,6 +137,7 @@ impl CalibrationSet {
     /// first).
     pub fn load(scene: Scene, dir: &std::path::Path, frames: Option<usize>) -> Result<Self> {
         let m = crate::data::read_manifest(dir)?;
+        m.check_reference(dir)?;
         let frames = frames.unwrap_or(m.frames_done.saturating_sub(1));
         if frames == 0 || frames + 1 > m.frames_done {
             return Err(Error::bad_input(

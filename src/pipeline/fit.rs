@@ -124,7 +124,8 @@ pub struct Plan {
     pub fine_edge_m: f64,
     /// Frames of every variation.
     pub frames: usize,
-    /// Fine simulations in fast mode without self-collision, as the shipped models' data.
+    /// Coarse steps in fast mode and no self-collision at either resolution, as the shipped
+    /// models' data (the fine simulations always run in data mode).
     pub fast: bool,
     /// The ISR model fine-tuned from (`None`: trained from scratch).
     pub fine_tune_from: Option<PathBuf>,
@@ -493,6 +494,7 @@ fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result
                 variation: v.variation,
                 fast: plan.fast,
                 source: Some(plan.shot.clone()),
+                fine_mode: crate::sim::step::SolverMode::Data,
                 match_contact_thickness: true,
             };
             let data = data_dir(dir, variation);

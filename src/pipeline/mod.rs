@@ -11,7 +11,7 @@ use std::time::Instant;
 use nalgebra::Vector3;
 
 use crate::corrector::Corrector;
-use crate::data::new_simulation;
+use crate::data::{coarse_mode, new_simulation};
 use crate::error::{Error, Result};
 use crate::garment::Fabric;
 use crate::mesh::ClothMesh;
@@ -169,7 +169,13 @@ impl<'a> Pipeline<'a> {
             )));
         }
         // The fine mesh: meshed exactly as the training data's fine simulation (never stepped).
-        let fine_sim = new_simulation(scene, fine_edge, opts.self_collision, opts.fast, None)?;
+        let fine_sim = new_simulation(
+            scene,
+            fine_edge,
+            opts.self_collision,
+            coarse_mode(opts.fast),
+            None,
+        )?;
         let dhat = opts
             .match_contact_thickness
             .then_some(fine_sim.sim.params.collision.dhat_m);
@@ -177,7 +183,7 @@ impl<'a> Pipeline<'a> {
             scene,
             opts.coarse_edge_m,
             opts.self_collision,
-            opts.fast,
+            coarse_mode(opts.fast),
             dhat,
         )?;
         if opts.dress && !coarse.sim.model.mesh.seam_pairs.is_empty() {

@@ -224,6 +224,8 @@ impl Simulation {
             frame.steps.cg_iters += stats.cg_iters;
             frame.steps.contacts = stats.contacts;
             frame.steps.substeps += stats.substeps;
+            frame.steps.capped_solves += stats.capped_solves;
+            frame.steps.unconverged_steps += stats.unconverged_steps;
             frame.steps.energy_j = stats.energy_j;
             frame.steps.times.add(&stats.times);
         }

@@ -375,7 +375,7 @@ fn pipeline_row(
         &scene,
         isr.cfg.pixel_m,
         opts.self_collision,
-        opts.fast,
+        clothsr::data::coarse_mode(opts.fast),
         None,
     )?;
     let t = Instant::now();

@@ -35,14 +35,29 @@ pub struct Args {
     /// Skip sewing and settling before frame 0.
     #[arg(long)]
     no_dress: bool,
-    /// One Newton iteration per step when its full step is accepted (Baraff & Witkin style),
-    /// at both resolutions; the corrector then runs beside the same fast solver.
+    /// The coarse steps (M_c) in fast mode, one Newton iteration a step when its full step is
+    /// accepted, as the pipeline's coarse simulation runs; the corrector then learns beside
+    /// the same solver.
     #[arg(long)]
     fast: bool,
+    /// The fine simulation's solver mode: `data` (checked against a tight reference by
+    /// `clothsr lab converge`) or `tight` (the reference itself, slower).
+    #[arg(long, default_value = "data", value_parser = fine_mode)]
+    fine_mode: clothsr::sim::step::SolverMode,
     /// Keep the coarse mesh's own contact thickness d̂ (15 % of its edge) instead of the fine
     /// simulation's.
     #[arg(long)]
     coarse_contact_thickness: bool,
+}
+
+fn fine_mode(s: &str) -> Result<clothsr::sim::step::SolverMode, String> {
+    use clothsr::sim::step::SolverMode;
+    match SolverMode::from_name(s) {
+        Some(m @ (SolverMode::Data | SolverMode::Tight)) => Ok(m),
+        _ => Err(format!(
+            "'{s}': the fine simulation runs in 'data' or 'tight' mode"
+        )),
+    }
 }
 
 /// Runs `dataset`.
@@ -68,6 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         self_collision: !args.no_self_collision,
         variation,
         fast: args.fast,
+        fine_mode: args.fine_mode,
         match_contact_thickness: !args.coarse_contact_thickness,
         source: Some(args.inputs.source(&args.scene).absolute()),
     };

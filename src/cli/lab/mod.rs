@@ -4,6 +4,7 @@
 
 mod bench;
 mod calibrate;
+mod converge;
 mod dataset;
 mod fork;
 mod rollout;
@@ -38,6 +39,9 @@ pub enum Command {
     /// The whole pipeline with every research setting (coarse model, variations, extra
     /// outputs).
     Run(Box<super::run::LabArgs>),
+    /// How far the fine simulation's solver modes and coarser resolutions are from a tight
+    /// reference of the same shot, frame by frame, with their solver work and wall time.
+    Converge(converge::Args),
     /// Benchmarks (the simulator side by side with Newton 1.8; the pipeline's stages).
     Bench(bench::Args),
     /// Regenerate the sample scenes shipped in samples/.
@@ -57,6 +61,7 @@ pub fn run(command: Command) -> anyhow::Result<clothsr::pipeline::shot::RunSumma
         Command::Calibrate(a) => calibrate::run(a),
         Command::Sr(a) => sr::run(a),
         Command::Run(a) => return super::run::run_lab(*a),
+        Command::Converge(a) => converge::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Samples(a) => samples::run(a),
         Command::Scenes(a) => scenes::run(a),

@@ -32,6 +32,7 @@ use crate::mesh::ClothMesh;
 use crate::scene::Scene;
 use crate::scene_files::SceneFiles;
 use crate::sim::driver::Simulation;
+use crate::sim::step::SolverMode;
 use crate::sim::SimState;
 use crate::tensors::{TensorReader, TensorWriter};
 use crate::transfer::Transfer;
@@ -177,6 +178,16 @@ pub struct Manifest {
     /// off), for both resolutions; the corrector must run beside the same solver.
     #[serde(default)]
     pub fast: bool,
+    /// The fine simulation's solver mode ([`SolverMode::name`]): `data` for data sets checked
+    /// against a tight reference (`clothsr lab converge`); empty in data sets made before,
+    /// whose fine simulation ran in the mode `fast` names, off the converged solution on
+    /// stiff fabrics. Training and calibration refuse those ([`Manifest::check_reference`]).
+    #[serde(default)]
+    pub fine_solver: String,
+    /// The fine simulation's linear solves taken at their iteration cap (at a step's last
+    /// halving) and sub-steps taken with Newton's iterations run out, over the frames done.
+    #[serde(default)]
+    pub fine_unconverged: [usize; 2],
     /// Cloth self-collision at both resolutions.
     #[serde(default = "yes")]
     pub self_collision: bool,
@@ -205,6 +216,21 @@ pub struct Fork {
 }
 
 impl Manifest {
+    /// Fails unless the fine simulation ran in a mode checked against a tight reference
+    /// ([`SolverMode::Data`] or [`SolverMode::Tight`]): data sets made before learned the
+    /// fast solver's error on stiff fabrics, and neither training nor calibration takes them.
+    pub fn check_reference(&self, dir: &Path) -> Result<()> {
+        match SolverMode::from_name(&self.fine_solver) {
+            Some(SolverMode::Data | SolverMode::Tight) => Ok(()),
+            _ => Err(Error::bad_input(
+                &dir.join("manifest.json"),
+                "made before the fine simulation was checked against a tight reference (its \
+                 fine steps ran in fast mode, off the converged solution on stiff fabrics); \
+                 make it again with `clothsr lab dataset` or `clothsr fit`",
+            )),
+        }
+    }
+
     /// The same manifest with `f` applied to every file it names (its source, its fork's).
     fn map_paths(mut self, f: impl Fn(&Path) -> PathBuf) -> Manifest {
         self.source = self.source.map(|s| s.map_paths(&f));
@@ -225,6 +251,7 @@ impl Manifest {
             self_collision: self.self_collision,
             variation: self.variation,
             fast: self.fast,
+            fine_mode: SolverMode::from_name(&self.fine_solver).unwrap_or(SolverMode::Data),
             source: self.source.clone(),
             match_contact_thickness: self.coarse_dhat_m.is_some(),
         }
@@ -292,8 +319,10 @@ pub struct Options {
     pub self_collision: bool,
     /// Scene variation.
     pub variation: Variation,
-    /// One Newton iteration per step when accepted (see [`Manifest::fast`]).
+    /// The coarse simulation in fast mode (see [`Manifest::fast`]).
     pub fast: bool,
+    /// The fine simulation's solver mode ([`SolverMode::Data`] for training data).
+    pub fine_mode: SolverMode,
     /// The scene's files, recorded in the manifest when given.
     pub source: Option<SceneSource>,
     /// Give the coarse simulation the fine one's contact thickness d̂ (the simulator's default
@@ -370,8 +399,14 @@ pub fn generate(
 ) -> Result<Manifest> {
     let mut scene = scene.clone();
     opts.variation.apply(&mut scene);
-    let (self_collision, fast) = (opts.self_collision, opts.fast);
-    let mut fine = new_simulation(&scene, opts.fine_edge_m, self_collision, fast, None)?;
+    let self_collision = opts.self_collision;
+    let mut fine = new_simulation(
+        &scene,
+        opts.fine_edge_m,
+        self_collision,
+        opts.fine_mode,
+        None,
+    )?;
     let coarse_dhat_m = opts
         .match_contact_thickness
         .then_some(fine.sim.params.collision.dhat_m);
@@ -379,7 +414,7 @@ pub fn generate(
         &scene,
         opts.coarse_edge_m,
         self_collision,
-        fast,
+        coarse_mode(opts.fast),
         coarse_dhat_m,
     )?;
     let (cm, fm) = (&coarse.sim.model.mesh, &fine.sim.model.mesh);
@@ -410,7 +445,17 @@ pub fn generate(
         // is bit-identical to one made without the stop.
         fine.sim.forget_history();
         coarse.sim.forget_history();
-        let buf = simulate_frame(&mut fine, &mut coarse, &transfer, &mut prev_int)?;
+        let (buf, unconverged) = simulate_frame(&mut fine, &mut coarse, &transfer, &mut prev_int)?;
+        if unconverged != [0, 0] {
+            tracing::warn!(
+                "frame {k}: the fine simulation took {} linear solves at their cap and {} \
+                 sub-steps with Newton unconverged, at its smallest time step",
+                unconverged[0],
+                unconverged[1]
+            );
+        }
+        manifest.fine_unconverged[0] += unconverged[0];
+        manifest.fine_unconverged[1] += unconverged[1];
         write_frame(&frame_path(dir, k), &buf, &fine, &coarse)?;
         manifest.frames_done = k;
         crate::write_atomic(&manifest_path, &manifest_json(&manifest, dir)?)?;
@@ -466,6 +511,8 @@ fn new_manifest(
         dressed: opts.dress && !fm.seam_pairs.is_empty(),
         git_revision: env!("CLOTHSR_GIT_REVISION").to_string(),
         fast: opts.fast,
+        fine_solver: opts.fine_mode.name().to_string(),
+        fine_unconverged: [0, 0],
         self_collision: opts.self_collision,
         source: opts.source.clone(),
         coarse_dhat_m,
@@ -487,6 +534,7 @@ fn resume_point(dir: &Path, manifest: &mut Manifest) -> Result<usize> {
         frames_requested: old.frames_requested,
         git_revision: old.git_revision.clone(),
         fork: old.fork.clone(),
+        fine_unconverged: old.fine_unconverged,
         // Recorded since; a run made before still resumes.
         fabric_values: if old.fabric_values.is_empty() {
             Vec::new()
@@ -509,6 +557,7 @@ fn resume_point(dir: &Path, manifest: &mut Manifest) -> Result<usize> {
         ));
     }
     manifest.fork = old.fork;
+    manifest.fine_unconverged = old.fine_unconverged;
     Ok(old.frames_done)
 }
 
@@ -638,11 +687,14 @@ fn simulate_frame(
     coarse: &mut Simulation,
     transfer: &Transfer,
     prev_int: &mut SimState,
-) -> Result<[Vec<f32>; 4]> {
+) -> Result<([Vec<f32>; 4], [usize; 2])> {
     let (nc, s) = (coarse.sim.model.num_vertices(), fine.steps_per_frame);
     let mut buf: [Vec<f32>; 4] = std::array::from_fn(|_| Vec::with_capacity(s * nc * 3));
+    let mut unconverged = [0, 0];
     for _ in 0..s {
-        fine.step()?;
+        let st = fine.step()?;
+        unconverged[0] += st.capped_solves;
+        unconverged[1] += st.unconverged_steps;
         let int = downsample(transfer, &fine.state);
         let (c, _) = coarse.step_from(prev_int)?;
         buf[0].extend(flat32(&int.x));
@@ -651,7 +703,7 @@ fn simulate_frame(
         buf[3].extend(flat32(&c.v));
         *prev_int = int;
     }
-    Ok(buf)
+    Ok((buf, unconverged))
 }
 
 /// Writes a frame file: the frame's steps `buf` ([`simulate_frame`]), the fine state at its
@@ -833,19 +885,28 @@ const FINE_SEWING_S: f64 = 0.1;
 /// tessellation's usual choice).
 const DRESS_PHONG_ALPHA: f64 = 0.75;
 
+/// The coarse simulation's solver mode: fast (the pipeline's) or converged.
+pub fn coarse_mode(fast: bool) -> SolverMode {
+    if fast {
+        SolverMode::Fast
+    } else {
+        SolverMode::Converged
+    }
+}
+
 /// A simulation of `scene` at `edge_m` with the data tool's solver settings: self-collision
-/// on or off, the fast one-Newton-step solver or not, and optionally a contact thickness d̂
-/// (also the detection margin).
+/// on or off, a solver mode, and optionally a contact thickness d̂ (also the detection
+/// margin).
 pub fn new_simulation(
     scene: &Scene,
     edge_m: f64,
     self_collision: bool,
-    fast: bool,
+    mode: SolverMode,
     dhat_m: Option<f64>,
 ) -> Result<Simulation> {
     Simulation::new(scene, edge_m, |p| {
         p.collision.self_collision = self_collision;
-        p.newton_exact = !fast;
+        mode.apply(p);
         if let Some(d) = dhat_m {
             p.collision.dhat_m = d;
             p.detection_margin_m = d;
@@ -865,7 +926,7 @@ pub fn coarse_simulation(scene: &Scene, dir: &Path, frame: usize) -> Result<Simu
         &scene,
         m.coarse_edge_m,
         m.self_collision,
-        m.fast,
+        coarse_mode(m.fast),
         m.coarse_dhat_m,
     )?;
     let meshes_path = dir.join("meshes.safetensors");

@@ -81,6 +81,7 @@ impl Sequence {
         let (colliders, t0_s) = (&sim.colliders, sim.state.t_s);
         let gravity_dt = sim.sim.params.gravity_m_s2 * sim.sim.params.dt_s;
         let manifest = read_manifest(dir)?;
+        manifest.check_reference(dir)?;
         let frames = frames.unwrap_or(1..=manifest.frames_done);
         if frames.is_empty() || *frames.start() == 0 || *frames.end() > manifest.frames_done {
             return Err(Error::bad_input(

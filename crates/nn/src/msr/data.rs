@@ -74,6 +74,7 @@ impl IsrSequence {
         blur_px: f64,
     ) -> Result<IsrSequence> {
         let manifest = read_manifest(dir)?;
+        manifest.check_reference(dir)?;
         let coarse_mesh = read_coarse_mesh(dir, &manifest)?;
         let fine_mesh = read_fine_mesh(dir, &manifest)?;
         let range = frames.unwrap_or(1..=manifest.frames_done);

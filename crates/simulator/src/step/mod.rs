@@ -27,7 +27,7 @@ mod state;
 
 pub use friction::FrictionPoint;
 pub use line_search::FAST_CONTACT_MOVE_M;
-pub use params::{LinearSolver, SimParams};
+pub use params::{LinearSolver, SimParams, SolverMode, DATA_SUBSTEPS};
 pub use state::{ColliderFrame, PhaseTimes, Pin, PinTarget, SimState, StepStats};
 
 use nalgebra::Vector3;
@@ -274,20 +274,27 @@ impl Simulator {
     ) -> Result<(SimState, StepStats)> {
         self.model.update_wrinkle_bending(&state.x, &state.v);
         let mut stats = StepStats::default();
-        let h = self.params.dt_s;
+        let n = self.params.substeps.max(1);
+        let h = self.params.dt_s / f64::from(n);
         // On a worker of rayon's pool: the step's many short parallel passes then start from
         // inside the pool instead of each waking it from the caller's thread.
         let next = rayon::scope(|_| {
-            self.advance(
-                state,
-                colliders_start,
-                colliders_end,
-                0.0,
-                1.0,
-                h,
-                0,
-                &mut stats,
-            )
+            let mut next = None;
+            for k in 0..n {
+                let (a, b) = (f64::from(k) / f64::from(n), f64::from(k + 1) / f64::from(n));
+                let from = next.as_ref().unwrap_or(state);
+                next = Some(self.advance(
+                    from,
+                    colliders_start,
+                    colliders_end,
+                    a,
+                    b,
+                    h,
+                    0,
+                    &mut stats,
+                )?);
+            }
+            next.ok_or_else(|| Error::Invalid("a step of no sub-steps".into()))
         })?;
         Ok((next, stats))
     }

@@ -298,6 +298,10 @@ impl Simulator {
         let n = self.model.num_vertices();
         let mut contacts = Vec::new();
         let mut energy = f64::NAN;
+        // The tolerance is a velocity error: shared out among a step's sub-steps.
+        let tol = self.params.newton_tol_m / f64::from(self.params.substeps.max(1));
+        // Whether the iterations stopped on the tolerance (or, in fast mode, on a full step).
+        let mut converged = false;
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
             let since = StepStart {
@@ -321,6 +325,16 @@ impl Simulator {
             let (mut dx, cg) = self.newton_direction();
             stats.cg_iters += cg.iterations;
             stats.newton_iters += 1;
+            if cg.relative_residual > self.params.cg_rel_tol {
+                if self.params.strict_solves && !inc.last_resort {
+                    self.dx = vec![Vector3::zeros(); n];
+                    return Err(Error::Simulation(format!(
+                        "the linear solve stopped at {} iterations with residual {:.1e} at t = {:.5} s",
+                        cg.iterations, cg.relative_residual, inc.t_s
+                    )));
+                }
+                stats.capped_solves += 1;
+            }
             let t_search = std::time::Instant::now();
             stats.times.detect_s += (t_assemble - t_detect).as_secs_f64();
             stats.times.assemble_s += (t_solve - t_assemble).as_secs_f64();
@@ -335,7 +349,9 @@ impl Simulator {
                 )));
             }
             if slope >= 0.0 {
+                // No descent left at rounding level: as converged as it gets.
                 self.dx = dx;
+                converged = true;
                 break;
             }
             let potential = Potential {
@@ -343,7 +359,7 @@ impl Simulator {
                 damping: &damping,
                 contacts: &contacts,
             };
-            if longest < self.params.newton_tol_m {
+            if longest < tol {
                 // Converged: the last, short Newton step is still taken (within the move
                 // limits, if its energy decreases). Dropped, it was each step's gravity
                 // increment once air damping nearly balanced it (h²(g − αv) < tol):
@@ -354,6 +370,7 @@ impl Simulator {
                 }
                 dx.iter_mut().for_each(|d| *d = Vector3::zeros());
                 self.dx = dx;
+                converged = true;
                 break;
             }
             let Some(accepted) = self.line_search(&potential, &pairs, &x, &dx, slope, energy)
@@ -365,6 +382,8 @@ impl Simulator {
                         inc.t_s
                     )));
                 }
+                // No decrease along a descent direction: the energy is flat to rounding.
+                converged = true;
                 break;
             };
             let Accepted {
@@ -413,7 +432,8 @@ impl Simulator {
                 .zip(step.par_iter())
                 .for_each(|(d, s)| *d -= s * alpha);
             self.dx = dx;
-            if moved < self.params.newton_tol_m || fast_done {
+            if moved < tol || fast_done {
+                converged = true;
                 break;
             }
             // Out of iterations with moves still cut short: the cloth lags where it should be
@@ -427,6 +447,16 @@ impl Simulator {
                     inc.t_s
                 )));
             }
+        }
+        if !converged {
+            if self.params.strict_solves && !inc.last_resort {
+                self.dx = vec![Vector3::zeros(); n];
+                return Err(Error::Simulation(format!(
+                    "Newton's iterations ran out before the tolerance at t = {:.5} s",
+                    inc.t_s
+                )));
+            }
+            stats.unconverged_steps += 1;
         }
         Ok((x, energy, contacts))
     }

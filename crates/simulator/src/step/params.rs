@@ -56,6 +56,100 @@ pub struct SimParams {
     pub bending_hessian: BendingHessian,
     /// Linear solver of each Newton iteration.
     pub linear_solver: LinearSolver,
+    /// Each step is solved as this many equal sub-steps (at least 1), the colliders moving
+    /// linearly through them; `newton_tol_m` is shared out among them.
+    pub substeps: u32,
+    /// A (sub)step whose linear solve stopped at `cg_max_iters` above `cg_rel_tol`, or whose
+    /// Newton iterations ran out before `newton_tol_m` (exact mode), is halved instead of
+    /// accepted; at the last halving it is taken and counted in [`StepStats`](super::StepStats).
+    /// Off, such steps are only counted.
+    pub strict_solves: bool,
+}
+
+/// How accurately each step is solved: the presets behind the pipeline's coarse simulation, the
+/// fine simulation that makes data sets, and the references they are checked against
+/// (`clothsr lab converge`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SolverMode {
+    /// One Newton iteration a step when its full step is accepted, the linear solve to its
+    /// tolerance or cap (Baraff & Witkin): the pipeline's coarse simulation.
+    Fast,
+    /// The fine simulation behind data sets, fits and floors: four sub-steps a step, each
+    /// taken as in `Fast` but only when its linear solve converged (otherwise halved): stiff
+    /// fabrics at millimetre resolution stay on the converged solution at about fast mode's
+    /// cost.
+    Data,
+    /// Newton to `newton_tol_m` at the scene's time step (the simulator's default).
+    Converged,
+    /// The tight reference: Newton to a thousandth of the velocity tolerance, the linear
+    /// solve to 1e-6 with no practical cap, never accepted short.
+    Tight,
+}
+
+impl SolverMode {
+    /// Every mode, in the order of [`SolverMode::name`]'s names.
+    pub const ALL: [SolverMode; 4] = [
+        SolverMode::Fast,
+        SolverMode::Data,
+        SolverMode::Converged,
+        SolverMode::Tight,
+    ];
+
+    /// The mode's name on the command line and in manifests.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverMode::Fast => "fast",
+            SolverMode::Data => "data",
+            SolverMode::Converged => "converged",
+            SolverMode::Tight => "tight",
+        }
+    }
+
+    /// The mode named `name` ([`SolverMode::name`]).
+    pub fn from_name(name: &str) -> Option<SolverMode> {
+        SolverMode::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// Sets the solver settings of this mode in `p` (time step, gravity, contact and fabric
+    /// settings are left as they are).
+    pub fn apply(self, p: &mut SimParams) {
+        let defaults = SimParams::for_edge(1e-2);
+        p.newton_max_iters = defaults.newton_max_iters;
+        p.newton_tol_m = defaults.newton_tol_m;
+        p.cg_rel_tol = defaults.cg_rel_tol;
+        p.cg_max_iters = defaults.cg_max_iters;
+        p.max_halvings = defaults.max_halvings;
+        p.substeps = 1;
+        p.strict_solves = false;
+        match self {
+            SolverMode::Fast => p.newton_exact = false,
+            SolverMode::Data => {
+                p.newton_exact = false;
+                p.substeps = DATA_SUBSTEPS;
+                p.strict_solves = true;
+                p.max_halvings = 6;
+            }
+            SolverMode::Converged => p.newton_exact = true,
+            SolverMode::Tight => {
+                p.newton_exact = true;
+                p.newton_tol_m = 1e-3 * defaults.newton_tol_m;
+                p.newton_max_iters = 40;
+                p.cg_rel_tol = 1e-6;
+                p.cg_max_iters = 100_000;
+                p.strict_solves = true;
+                p.max_halvings = 8;
+            }
+        }
+    }
+}
+
+/// Sub-steps a step of [`SolverMode::Data`].
+pub const DATA_SUBSTEPS: u32 = 4;
+
+impl std::fmt::Display for SolverMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// How the Newton system is solved.
@@ -121,6 +215,8 @@ impl SimParams {
             // solves) costs more than the block-Jacobi iterations it saves, on small and large
             // meshes alike; a coarse one on aggregates pays off on large meshes.
             linear_solver: LinearSolver::Auto,
+            substeps: 1,
+            strict_solves: false,
         }
     }
 }

@@ -58,8 +58,13 @@ pub struct StepStats {
     pub cg_iters: usize,
     /// Contacts in the last iteration.
     pub contacts: usize,
-    /// Sub-steps taken (1 unless the step was halved).
+    /// Sub-steps taken (`SimParams::substeps` unless a sub-step was halved).
     pub substeps: usize,
+    /// Linear solves that stopped at their iteration cap above their tolerance and were taken
+    /// all the same (by a step that was not strict, or at its last halving).
+    pub capped_solves: usize,
+    /// (Sub)steps of exact Newton taken with their iterations run out before the tolerance.
+    pub unconverged_steps: usize,
     /// Incremental potential at the end, J.
     pub energy_j: f64,
     /// Deepest cloth vertex below a collider surface, m (0 when none).
