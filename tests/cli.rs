@@ -561,20 +561,29 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
         "{report}"
     );
     let text = std::fs::read_to_string(&jitter_csv).expect("csv");
-    let moved: Vec<f64> = text
-        .lines()
-        .find(|l| l.contains("@1,1,"))
-        .map(|l| {
-            l.split(',')
-                .skip(2)
-                .filter_map(|w| w.parse().ok())
-                .collect()
-        })
-        .unwrap_or_else(|| panic!("no moved run in {text}"));
-    assert!(
-        (0.09..0.13).contains(&moved[0]) && (0.09..0.13).contains(&moved[1]),
-        "the moved start's sim-alone and interleaved errors in frame 1: {moved:?}"
-    );
+    let errors = |tag: &str| -> Vec<f64> {
+        text.lines()
+            .find(|l| l.contains(tag))
+            .map(|l| {
+                l.split(',')
+                    .skip(2)
+                    .filter_map(|w| w.parse().ok())
+                    .collect()
+            })
+            .unwrap_or_else(|| panic!("no run '{tag}' in {text}"))
+    };
+    let (nominal, moved) = (errors("data,1,"), errors("@1,1,"));
+    // The coarse steps of 1/300 s fall behind the fine sub-steps (implicit Euler's lag, about
+    // g·h·t/2, vertical); the start moved 0.1 mm sideways adds to that at right angles.
+    for k in 0..2 {
+        let expected = nominal[k].hypot(0.1);
+        assert!(
+            (moved[k] - expected).abs() < 0.01 && nominal[k] < 1.0,
+            "column {k}: the moved start's error {} against {expected} from the nominal {}\n{text}",
+            moved[k],
+            nominal[k]
+        );
+    }
 
     // The data set forked at frame 1 with the sheet moved 1 mm, and the distance between the
     // two ground truths reported beside the rollout as its predictability floor.

@@ -8,8 +8,9 @@
 #      each, and the held-out shots
 #      (`--set held-out`: an unseen garment, collider, motion and fabrics), HELD_FRAMES from
 #      three starts each.
-#   2. A fine (2.5 mm) and coarse (20 mm) simulation of each (`clothsr lab dataset`), in fast
-#      mode without self-collision, as every shipped model's data.
+#   2. A fine (2.5 mm) and coarse (20 mm) simulation of each (`clothsr lab dataset`), without
+#      self-collision, as every shipped model's data: the fine one in data mode (checked
+#      against a tight reference by `clothsr lab converge`), the coarse steps in fast mode.
 #   3. The ISR network conditioned on the fabric (`--condition`).
 #   4. The coarse model calibrated over all training shots (`clothsr lab calibrate`).
 #   5. The held-out figures (`eval` stage): on every held-out start, the whole pipeline with
