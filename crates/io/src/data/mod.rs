@@ -223,7 +223,7 @@ impl Manifest {
         match SolverMode::from_name(&self.fine_solver) {
             Some(SolverMode::Data | SolverMode::Tight) => Ok(()),
             _ => Err(Error::bad_input(
-                &dir.join("manifest.json"),
+                dir.join("manifest.json"),
                 "made before the fine simulation was checked against a tight reference (its \
                  fine steps ran in fast mode, off the converged solution on stiff fabrics); \
                  make it again with `clothsr lab dataset` or `clothsr fit`",
