@@ -98,3 +98,28 @@ fn a_capped_linear_solve_is_halved_or_counted_never_silent() {
     let s = fine.step().expect("step");
     assert_eq!((s.capped_solves, s.substeps), (0, 4), "{s:?}");
 }
+
+#[test]
+fn a_stopped_run_goes_on_to_the_run_made_without_the_stop() {
+    let scene = denim_square_on_bar(4);
+    let (a, b) = (
+        tempfile::tempdir().expect("tmp"),
+        tempfile::tempdir().expect("tmp"),
+    );
+    let s = RunSpec {
+        edge_m: 1e-2,
+        ..spec("data")
+    };
+    let go = |dir: &std::path::Path, frames| {
+        run(&scene, &s, frames, dir, 0.02, |_, _, _| {}).expect("simulation")
+    };
+    let whole = go(a.path(), 4);
+    let mut frames_run = Vec::new();
+    go(b.path(), 2);
+    let resumed =
+        run(&scene, &s, 4, b.path(), 0.02, |_, f, _| frames_run.push(f)).expect("resumed");
+    assert_eq!(frames_run, [3, 4]);
+    assert_eq!(resumed.x, whole.x);
+    // A shorter request is read from the longer run.
+    assert_eq!(go(b.path(), 3).x[..], whole.x[..4]);
+}

@@ -324,8 +324,10 @@ fn start_state(
     Ok((sim.state.x.clone(), sim.sim.seam_rest().to_vec()))
 }
 
-/// Runs `spec` on `scene` for `frames` frames, or reads it from `dir` when a finished run of
-/// the same spec is there; `progress` sees each frame's index.
+/// Runs `spec` on `scene` for `frames` frames, or reads it from `dir` when a run of the same
+/// spec with at least as many frames is there; a stopped run goes on from its last frame (the
+/// file is rewritten after every frame, with the state to resume from). `progress` sees each
+/// frame's index and record.
 pub fn run(
     scene: &Scene,
     spec: &RunSpec,
@@ -338,20 +340,50 @@ pub fn run(
     let path = dir.join(format!("{}.safetensors", spec.file_stem()));
     let mut sim = simulation(scene, spec)?;
     let mesh = sim.sim.model.mesh.clone();
-    if let Some(done) = read_run(&path, spec, frames, &mesh)? {
-        return Ok(done);
-    }
-    let (x0, rest) = start_state(scene, spec.edge_m, dir, coarse_edge_m)?;
-    sim.state.x = x0;
-    sim.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
-    sim.sim.set_seam_rest(&rest)?;
-    if spec.twin_offset_m != 0.0 {
-        let up = Vector3::new(0.0, spec.twin_offset_m, 0.0);
-        sim.state.x.iter_mut().for_each(|p| *p += up);
-    }
-    let mut x = vec![sim.state.x.clone()];
-    let mut records = Vec::with_capacity(frames);
-    for f in 1..=frames {
+    let stored = read_run(&path, mesh.num_vertices())?;
+    let (mut x, mut records) = match stored {
+        Some(s) if s.records.len() >= frames => {
+            let mut x = s.x;
+            let mut records = s.records;
+            x.truncate(frames + 1);
+            records.truncate(frames);
+            return Ok(RunResult {
+                spec: *spec,
+                mesh,
+                x,
+                frames: records,
+            });
+        }
+        Some(Stored {
+            x,
+            records,
+            resume: Some(r),
+        }) => {
+            let last = x.last().cloned().unwrap_or_default();
+            sim.state.x = last;
+            sim.state.v = r.v;
+            sim.state.t_s = r.t_s;
+            sim.sim.set_seam_rest(&r.seam_rest)?;
+            sim.sim.set_obstacle_margin_m(r.margin_m);
+            tracing::info!("{}: resuming after frame {}", spec.label(), records.len());
+            (x, records)
+        }
+        _ => {
+            let (x0, rest) = start_state(scene, spec.edge_m, dir, coarse_edge_m)?;
+            sim.state.x = x0;
+            sim.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
+            sim.sim.set_seam_rest(&rest)?;
+            if spec.twin_offset_m != 0.0 {
+                let up = Vector3::new(0.0, spec.twin_offset_m, 0.0);
+                sim.state.x.iter_mut().for_each(|p| *p += up);
+            }
+            (vec![sim.state.x.clone()], Vec::with_capacity(frames))
+        }
+    };
+    for f in records.len() + 1..=frames {
+        // Every frame is a resume point: what the steps cached starts afresh, as after a
+        // resume, so that a resumed run is the one made without the stop.
+        sim.sim.forget_history();
         let t = Instant::now();
         let stats = sim
             .advance_frame(|_| {})
@@ -367,58 +399,94 @@ pub fn run(
         progress(spec, f, &rec);
         records.push(rec);
         x.push(sim.state.x.clone());
+        write_run(&path, spec, &x, &records, &sim)?;
     }
-    let result = RunResult {
+    Ok(RunResult {
         spec: *spec,
         mesh,
         x,
         frames: records,
-    };
-    write_run(&path, &result)?;
-    Ok(result)
+    })
 }
 
-fn write_run(path: &Path, r: &RunResult) -> Result<()> {
-    let n = r.mesh.num_vertices();
-    let flat: Vec<f64> = r.x.iter().flat_map(|f| crate::data::flat64(f)).collect();
-    let records = serde_json::to_string(&r.frames)
+/// What a run's file holds: positions from frame 0, records from frame 1, and the state to go
+/// on from.
+struct Stored {
+    x: Vec<Vec<Vector3<f64>>>,
+    records: Vec<FrameRecord>,
+    resume: Option<Resume>,
+}
+
+/// The simulation's state at the end of a run's last frame, besides its positions.
+struct Resume {
+    v: Vec<Vector3<f64>>,
+    t_s: f64,
+    seam_rest: Vec<f64>,
+    margin_m: f64,
+}
+
+fn write_run(
+    path: &Path,
+    spec: &RunSpec,
+    x: &[Vec<Vector3<f64>>],
+    records: &[FrameRecord],
+    sim: &Simulation,
+) -> Result<()> {
+    let n = sim.state.x.len();
+    let flat: Vec<f64> = x.iter().flat_map(|f| crate::data::flat64(f)).collect();
+    let records = serde_json::to_string(records)
         .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    let rest = sim.sim.seam_rest();
     let mut w = TensorWriter::new();
-    w.f64("x", &[r.x.len(), n, 3], &flat)
+    w.f64("x", &[x.len(), n, 3], &flat)
+        .f64("resume_v", &[n, 3], &crate::data::flat64(&sim.state.v))
+        .f64("resume_t", &[1], &[sim.state.t_s])
+        .f64("resume_seam_rest", &[rest.len()], rest)
+        .f64("resume_margin", &[1], &[sim.sim.obstacle_margin_m()])
         .meta("records", &records)
-        .meta("label", &r.spec.label());
+        .meta("label", &spec.label());
     w.write(path)
 }
 
-/// A finished run of `spec` over `frames` frames stored at `path`, if there is one.
-fn read_run(
-    path: &Path,
-    spec: &RunSpec,
-    frames: usize,
-    mesh: &ClothMesh,
-) -> Result<Option<RunResult>> {
+/// The run stored at `path` for a mesh of `n` vertices, if there is one.
+fn read_run(path: &Path, n: usize) -> Result<Option<Stored>> {
     if !path.exists() {
         return Ok(None);
     }
     let r = TensorReader::open(path)?;
     let (shape, x) = r.f64("x")?;
-    let n = mesh.num_vertices();
     let records: Vec<FrameRecord> = r
         .meta("records")
         .and_then(|s| serde_json::from_str(&s).ok())
         .unwrap_or_default();
-    if shape != [frames + 1, n, 3] || records.len() != frames {
+    if shape.len() != 3 || shape[1] != n || shape[2] != 3 || shape[0] != records.len() + 1 {
         tracing::info!(
-            "{}: another run's result (frames or mesh differ); running again",
+            "{}: another run's result (its mesh or frames differ); running again",
             path.display()
         );
         return Ok(None);
     }
-    Ok(Some(RunResult {
-        spec: *spec,
-        mesh: mesh.clone(),
+    let one = |name: &str| -> Result<f64> {
+        r.f64(name)?
+            .1
+            .first()
+            .copied()
+            .ok_or_else(|| Error::bad_input(path, format!("tensor '{name}' is empty")))
+    };
+    let resume = if r.has("resume_v") {
+        Some(Resume {
+            v: crate::data::unflat(&r.f64("resume_v")?.1),
+            t_s: one("resume_t")?,
+            seam_rest: r.f64("resume_seam_rest")?.1,
+            margin_m: one("resume_margin")?,
+        })
+    } else {
+        None
+    };
+    Ok(Some(Stored {
         x: x.chunks_exact(3 * n).map(crate::data::unflat).collect(),
-        frames: records,
+        records,
+        resume,
     }))
 }
 
@@ -542,14 +610,14 @@ impl Report {
                 .map(|(r, _)| r.wall_s())
         });
         let mut s = format!(
-            "**{}** (reference: {})\n\n| run | vertices | mean mm | worst frame mean mm | max mm | newton/step | cg/newton | capped solves | unconverged | substeps | wall s | × {} |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+            "**{}** (reference: {})\n\n| run | vertices | mean mm | worst frame mean mm | max mm | newton/frame | cg/newton | capped solves | unconverged | substeps | wall s | × {} |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             self.shot,
             self.runs[0].0.spec.label(),
             time_base.map_or("-".to_string(), |b| b.to_string()),
         );
         for (r, d) in &self.runs {
             let t = r.totals();
-            let steps = r.frames.len().max(1) as f64;
+            let frames = r.frames.len().max(1) as f64;
             let worst = d.mean_m.iter().copied().fold(0.0, f64::max);
             s.push_str(&format!(
                 "| {} | {} | {:.2} | {:.2} | {:.2} | {:.1} | {:.1} | {} | {} | {} | {:.1} | {} |\n",
@@ -558,7 +626,7 @@ impl Report {
                 d.mean_m() * 1e3,
                 worst * 1e3,
                 d.max_m() * 1e3,
-                t.newton_iters as f64 / steps,
+                t.newton_iters as f64 / frames,
                 t.cg_iters as f64 / t.newton_iters.max(1) as f64,
                 t.capped_solves,
                 t.unconverged_steps,
