@@ -237,3 +237,31 @@ fn a_run_resumed_as_the_sheet_strikes_the_ball_continues_exactly() {
         assert_eq!(a.coarse_x.1, b.coarse_x.1, "frame {k}: M_c differs");
     }
 }
+
+#[test]
+fn a_data_set_made_before_the_data_mode_is_refused_with_a_reason() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let data = dir.path().join("old");
+    let m = generate(&scene(), "test", &opts(2), &data, |_| {}).expect("data set");
+    assert_eq!(m.fine_solver, "data");
+    assert_eq!(m.fine_unconverged, [0, 0]);
+    m.check_reference(&data).expect("a data-mode data set");
+    // The same data set as an older clothsr wrote it: no fine solver recorded.
+    let path = data.join("manifest.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+    json.as_object_mut().expect("object").remove("fine_solver");
+    std::fs::write(&path, json.to_string()).expect("write");
+    let old = read_manifest(&data).expect("still readable");
+    for e in [
+        old.check_reference(&data).expect_err("old").to_string(),
+        fork(&data, 1, Vector3::zeros(), &dir.path().join("f"))
+            .expect_err("fork")
+            .to_string(),
+    ] {
+        assert!(
+            e.contains("manifest.json") && e.contains("tight reference"),
+            "{e}"
+        );
+    }
+}

@@ -756,6 +756,9 @@ fn write_frame(
 /// fork.
 pub fn fork(src: &Path, frame: usize, offset_m: Vector3<f64>, dst: &Path) -> Result<Manifest> {
     let source = read_manifest(src)?;
+    // A fork continues the fine simulation in the source's mode: one made before the data
+    // mode cannot be continued as it was made.
+    source.check_reference(src)?;
     let src_manifest = src.join("manifest.json");
     if frame == 0 || frame > source.frames_done {
         return Err(Error::bad_input(
