@@ -13,7 +13,7 @@ use clothsr::sim::bench::{
     parse_vertices, phase_columns, phase_header, sheet_on_sphere, time_steps, Timing, WARM_UP_STEPS,
 };
 use clothsr::sim::driver::Simulation;
-use clothsr::sim::step::LinearSolver;
+use clothsr::sim::step::{LinearSolver, SolverMode};
 use nalgebra::Vector3;
 
 /// Arguments of `bench`.
@@ -55,9 +55,10 @@ pub struct Args {
     /// the sheet on a sphere barely touches itself, so the default times the solvers alone.
     #[arg(long)]
     self_collision: bool,
-    /// Solver modes to time: `converged` (Newton to tolerance, the simulator's default, for
-    /// ground truth) and `fast` (one full Newton step when the line search accepts it, as in
-    /// Baraff & Witkin and Style3D; the pipeline's coarse simulation, which the corrector fixes).
+    /// Solver modes to time: `converged` (Newton to tolerance, the simulator's default),
+    /// `fast` (one full Newton step when the line search accepts it, as in Baraff & Witkin and
+    /// Style3D; the pipeline's coarse simulation, which the corrector fixes), `data` (the fine
+    /// simulation of data sets: fast sub-steps whose linear solves converged) and `tight`.
     #[arg(long, default_value = "converged,fast", value_delimiter = ',')]
     modes: Vec<String>,
     /// Relative residual of the linear solve (default: the simulator's).
@@ -105,8 +106,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     for m in &args.modes {
         anyhow::ensure!(
-            m == "converged" || m == "fast",
-            "unknown mode '{m}' (known: converged, fast)"
+            SolverMode::from_name(m).is_some(),
+            "unknown mode '{m}' (known: fast, data, converged, tight)"
         );
     }
     let cases: Vec<(&str, f64)> = args
@@ -121,7 +122,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (k, &(mode, verts)) in cases.iter().enumerate() {
             let mut sim = sheet_on_sphere(verts, |p| {
                 p.collision.self_collision = args.self_collision;
-                p.newton_exact = mode == "converged";
+                if let Some(m) = SolverMode::from_name(mode) {
+                    m.apply(p);
+                }
                 if let Some(t) = args.cg_tol {
                     p.cg_rel_tol = t;
                 }
