@@ -296,7 +296,6 @@ fn start_state(
     if edge_m >= coarse_edge_m {
         sim.dress(2.0, 0.3, 1e-3)?;
     } else {
-        // As data sets dress: at the coarse resolution, then carried onto this mesh.
         let mut coarse = simulation(
             scene,
             &RunSpec {
@@ -304,10 +303,8 @@ fn start_state(
                 ..spec
             },
         )?;
-        coarse.dress(2.0, 0.3, 1e-3)?;
         let t = Transfer::new(&coarse.sim.model.mesh, &sim.sim.model.mesh)?;
-        let x = t.upsample_phong(&coarse.state.x, &coarse.sim.model.mesh.triangles, 0.75);
-        sim.dress_from(x, 0.1, 0.3, 1e-3)?;
+        crate::data::dress_fine_from_coarse(&mut coarse, &mut sim, &t)?;
     }
     let mut w = TensorWriter::new();
     w.f64(
@@ -466,19 +463,12 @@ fn read_run(path: &Path, n: usize) -> Result<Option<Stored>> {
         );
         return Ok(None);
     }
-    let one = |name: &str| -> Result<f64> {
-        r.f64(name)?
-            .1
-            .first()
-            .copied()
-            .ok_or_else(|| Error::bad_input(path, format!("tensor '{name}' is empty")))
-    };
     let resume = if r.has("resume_v") {
         Some(Resume {
             v: crate::data::unflat(&r.f64("resume_v")?.1),
-            t_s: one("resume_t")?,
+            t_s: r.scalar_f64("resume_t")?,
             seam_rest: r.f64("resume_seam_rest")?.1,
-            margin_m: one("resume_margin")?,
+            margin_m: r.scalar_f64("resume_margin")?,
         })
     } else {
         None

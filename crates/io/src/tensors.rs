@@ -130,6 +130,15 @@ impl TensorReader {
         Ok((v.shape().to_vec(), v.data()))
     }
 
+    /// The first value of the f64 array `name` (a scalar stored as a one-element array).
+    pub fn scalar_f64(&self, name: &str) -> Result<f64> {
+        self.f64(name)?
+            .1
+            .first()
+            .copied()
+            .ok_or_else(|| Error::bad_input(&self.path, format!("tensor '{name}' is empty")))
+    }
+
     /// Whether the file holds an array named `name` (of any type).
     pub fn has(&self, name: &str) -> bool {
         SafeTensors::deserialize(&self.bytes).is_ok_and(|st| st.tensor(name).is_ok())

@@ -570,6 +570,40 @@ fn downsample(transfer: &Transfer, s: &SimState) -> SimState {
     }
 }
 
+/// Dresses the garments as data sets do: at the coarse resolution (rolled, sewn, draped), then
+/// carried onto the fine mesh (Phong-tessellated, so that it bulges with the body instead of
+/// cutting chords into it) where it sews its last millimetres and drapes again. The fine mesh
+/// dressed from its flat pattern was very slow, its steps halved under the move limits while
+/// the seams were open. `transfer` goes from `coarse`'s mesh to `fine`'s.
+pub fn dress_fine_from_coarse(
+    coarse: &mut Simulation,
+    fine: &mut Simulation,
+    transfer: &Transfer,
+) -> Result<()> {
+    let c = coarse.dress(2.0, 0.3, 1e-3)?;
+    let x = transfer.upsample_phong(
+        &coarse.state.x,
+        &coarse.sim.model.mesh.triangles,
+        DRESS_PHONG_ALPHA,
+    );
+    tracing::info!(
+        "dressed the coarse mesh ({} sewing, {} settling steps, seams {:.1} mm); dressing \
+         the fine mesh ({} vertices) from it",
+        c.sew_steps,
+        c.settle_steps,
+        c.seam_gap_m * 1e3,
+        x.len()
+    );
+    let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
+    tracing::info!(
+        "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
+        f.sew_steps,
+        f.settle_steps,
+        f.seam_gap_m * 1e3
+    );
+    Ok(())
+}
+
 /// Restores both simulations to the end of frame `start_frame` from its frame file in `dir`.
 fn restore(
     dir: &Path,
@@ -598,18 +632,11 @@ fn restore(
     // displacement is bounded by them: a run resumed without them takes a different first
     // step (millimetres on a walking skirt).
     if r.has("resume_fine_margin") || r.has("resume_coarse_margin") {
-        let margin = |name: &str| -> Result<f64> {
-            r.f64(name)?
-                .1
-                .first()
-                .copied()
-                .ok_or_else(|| Error::bad_input(&path, format!("tensor '{name}' is empty")))
-        };
         fine.sim
-            .set_obstacle_margin_m(margin("resume_fine_margin")?);
+            .set_obstacle_margin_m(r.scalar_f64("resume_fine_margin")?);
         coarse
             .sim
-            .set_obstacle_margin_m(margin("resume_coarse_margin")?);
+            .set_obstacle_margin_m(r.scalar_f64("resume_coarse_margin")?);
     } else {
         tracing::warn!(
             "{}: no detection margins (written by an older clothsr); the run continues \
@@ -631,32 +658,7 @@ fn start_new(
     coarse: &mut Simulation,
 ) -> Result<()> {
     if manifest.dressed {
-        // Dressed at the coarse resolution (rolled, sewn, draped), then carried onto the
-        // fine mesh (Phong-tessellated, so that it bulges with the body instead of cutting
-        // chords into it) where it sews its last millimetres and drapes again: the fine
-        // mesh dressed from its flat pattern was very slow, its steps halved under the move
-        // limits while the seams were open.
-        let c = coarse.dress(2.0, 0.3, 1e-3)?;
-        let x = transfer.upsample_phong(
-            &coarse.state.x,
-            &coarse.sim.model.mesh.triangles,
-            DRESS_PHONG_ALPHA,
-        );
-        tracing::info!(
-            "dressed the coarse mesh ({} sewing, {} settling steps, seams {:.1} mm); dressing \
-             the fine mesh ({} vertices) from it",
-            c.sew_steps,
-            c.settle_steps,
-            c.seam_gap_m * 1e3,
-            x.len()
-        );
-        let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
-        tracing::info!(
-            "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
-            f.sew_steps,
-            f.settle_steps,
-            f.seam_gap_m * 1e3
-        );
+        dress_fine_from_coarse(coarse, fine, transfer)?;
     }
     let rest: Vec<f64> = {
         let int = downsample(transfer, &fine.state);

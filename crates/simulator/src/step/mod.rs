@@ -278,23 +278,16 @@ impl Simulator {
         let h = self.params.dt_s / f64::from(n);
         // On a worker of rayon's pool: the step's many short parallel passes then start from
         // inside the pool instead of each waking it from the caller's thread.
+        let span = |k: u32| (f64::from(k) / f64::from(n), f64::from(k + 1) / f64::from(n));
         let next = rayon::scope(|_| {
-            let mut next = None;
-            for k in 0..n {
-                let (a, b) = (f64::from(k) / f64::from(n), f64::from(k + 1) / f64::from(n));
-                let from = next.as_ref().unwrap_or(state);
-                next = Some(self.advance(
-                    from,
-                    colliders_start,
-                    colliders_end,
-                    a,
-                    b,
-                    h,
-                    0,
-                    &mut stats,
-                )?);
+            let (c0, c1) = (colliders_start, colliders_end);
+            let (a, b) = span(0);
+            let mut next = self.advance(state, c0, c1, a, b, h, 0, &mut stats)?;
+            for k in 1..n {
+                let (a, b) = span(k);
+                next = self.advance(&next, c0, c1, a, b, h, 0, &mut stats)?;
             }
-            next.ok_or_else(|| Error::Invalid("a step of no sub-steps".into()))
+            Ok::<_, Error>(next)
         })?;
         Ok((next, stats))
     }
