@@ -197,6 +197,75 @@ fn sewing_closes_a_two_panel_tube() {
 }
 
 #[test]
+fn welded_seams_stay_closed_and_move_as_the_sewn_garment_does() {
+    // The tube dressed (sewn with gravity off, then welded), then hung by the top of its
+    // front panel alone: the back panel hangs from the welded seams, whose two sides stay on
+    // one point, and the tube moves as its twin held by closed sewing springs does (the weld
+    // is those springs made rigid, not another garment).
+    let g = clothsr::scene::samples::two_panel_tube(0.2, 0.2, 0.03, Fabric::default());
+    let scene = Scene {
+        garments: vec![g],
+        ..Scene::default()
+    };
+    let mut welded = Simulation::new(&scene, 0.02, |_| {}).expect("setup");
+    let dressed = welded.dress(2.0, 0.0, 1e-3).expect("dress");
+    assert!(welded.sim.welded(), "dressing welds the seams");
+    assert!(dressed.welded_gap_m < 5e-3, "{dressed:?}");
+    let mut sprung = Simulation::new(&scene, 0.02, |_| {}).expect("setup");
+    sprung.state = welded.state.clone();
+    sprung
+        .sim
+        .set_seam_rest(&vec![0.0; sprung.sim.model.mesh.seam_pairs.len()])
+        .expect("rest");
+    let mesh = welded.sim.model.mesh.clone();
+    let top = welded.state.x.iter().map(|p| p.y).fold(f64::MIN, f64::max);
+    let pins: Vec<Pin> = (0..mesh.num_vertices())
+        .filter(|&v| mesh.panel_of_vertex[v] == 0 && welded.state.x[v].y > top - 1e-3)
+        .map(|v| Pin {
+            v: v as u32,
+            target: PinTarget::Fixed(welded.state.x[v]),
+        })
+        .collect();
+    assert!(pins.len() >= 5);
+    welded.sim.set_pins(pins.clone());
+    sprung.sim.set_pins(pins);
+    let back_y = |s: &Simulation| {
+        let ys: Vec<f64> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.panel_of_vertex[v] == 1)
+            .map(|v| s.state.x[v].y)
+            .collect();
+        ys.iter().sum::<f64>() / ys.len() as f64
+    };
+    let back_start = back_y(&welded);
+    // A sixth of a second: after that the hanging back panel buckles, one way or the other.
+    for _ in 0..5 {
+        welded.advance_frame(|_| {}).expect("frame");
+        sprung.advance_frame(|_| {}).expect("frame");
+        for p in &mesh.seam_pairs {
+            assert_eq!(
+                welded.state.x[p[0] as usize], welded.state.x[p[1] as usize],
+                "a welded seam parted"
+            );
+        }
+    }
+    // In free fall it would have dropped 136 mm: it hangs on the seams instead.
+    let sag = back_start - back_y(&welded);
+    assert!(sag < 0.02, "the back panel fell {:.1} mm", sag * 1e3);
+    let apart = welded
+        .state
+        .x
+        .iter()
+        .zip(&sprung.state.x)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        apart < 2e-4,
+        "welded and sprung tubes {:.3} mm apart",
+        apart * 1e3
+    );
+}
+
+#[test]
 fn simulate_command_writes_a_valid_time_sampled_usd() {
     use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
     let dir = tempfile::tempdir().expect("tempdir");

@@ -377,6 +377,10 @@ pub fn run(
             (vec![sim.state.x.clone()], Vec::with_capacity(frames))
         }
     };
+    // Dressed garments run with their seams welded, as dressing leaves them.
+    if !mesh.seam_pairs.is_empty() {
+        sim.sim.weld_seams(&mut sim.state);
+    }
     for f in records.len() + 1..=frames {
         // Every frame is a resume point: what the steps cached starts afresh, as after a
         // resume, so that a resumed run is the one made without the stop.

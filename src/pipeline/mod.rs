@@ -11,7 +11,7 @@ use std::time::Instant;
 use nalgebra::Vector3;
 
 use crate::corrector::Corrector;
-use crate::data::{coarse_mode, new_simulation};
+use crate::data::{coarse_contact_thickness, coarse_mode, new_simulation};
 use crate::error::{Error, Result};
 use crate::garment::Fabric;
 use crate::mesh::ClothMesh;
@@ -176,9 +176,7 @@ impl<'a> Pipeline<'a> {
             coarse_mode(opts.fast),
             None,
         )?;
-        let dhat = opts
-            .match_contact_thickness
-            .then_some(fine_sim.sim.params.collision.dhat_m);
+        let dhat = coarse_contact_thickness(&fine_sim, opts.match_contact_thickness);
         let mut coarse = new_simulation(
             scene,
             opts.coarse_edge_m,

@@ -57,6 +57,12 @@ pub struct FrameStats {
     pub max_penetration_m: f64,
 }
 
+/// Sewing stops when the widest seam gap has not closed by 1 % for this long, s.
+const SEWING_STALL_S: f64 = 0.2;
+
+/// A seam welded from further apart than this is named in a warning, m.
+const WIDE_WELD_M: f64 = 5e-3;
+
 /// What dressing did ([`Simulation::dress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DressStats {
@@ -72,6 +78,9 @@ pub struct DressStats {
     pub seam_gap_m: f64,
     /// Deepest collider penetration in the last settling step, m.
     pub max_penetration_m: f64,
+    /// Widest seam gap when sewing stopped and the seams were welded, m (what welding
+    /// closed; [`Simulator::weld_seams`](super::step::Simulator::weld_seams)).
+    pub welded_gap_m: f64,
 }
 
 /// A mesh garment's mesh at `edge_m`: remeshed chart by chart like a pattern
@@ -344,11 +353,42 @@ impl Simulation {
         // to the cloth's speed). Uncapped, seam springs pulled tight fling the light panels
         // together and they crumple.
         let move_cap = self.sim.params.move_cap_m;
-        self.sim.params.move_cap_m = move_cap.min(0.5 * self.sim.params.collision.dhat_m);
+        // Dressing works at the mesh's own contact thickness even when the run's is thinner
+        // (a coarse mesh given the fine one's): each iteration's moves are capped at half of
+        // it, and at a fine mesh's thickness a coarse garment took minutes to close its seams.
+        // The run's thickness comes back for a last settling, where the cloth comes down
+        // the rest of the way onto the body.
+        let run_contact = (
+            self.sim.params.collision.dhat_m,
+            self.sim.params.detection_margin_m,
+        );
+        let own_dhat = SimParams::for_edge(self.edge_m)
+            .collision
+            .dhat_m
+            .max(run_contact.0);
+        let thicker = own_dhat > run_contact.0;
+        self.sim.params.collision.dhat_m = own_dhat;
+        self.sim.params.detection_margin_m = run_contact.1.max(own_dhat);
+        self.sim.params.move_cap_m = move_cap.min(0.5 * own_dhat);
+        // Sewing ends once every seam is within `gap_m`, or within the contact thickness
+        // (where a body between the two sides, an armpit, holds them that far apart), or
+        // when the widest gap has stopped closing; then the seams are welded.
+        let weld_gap = gap_m.max(own_dhat);
+        let stall_steps = ((SEWING_STALL_S / dt).ceil() as usize).max(1);
+        let mut progress = (f64::INFINITY, 0usize);
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
-                if out.seam_gap_m <= gap_m {
+                if out.seam_gap_m <= weld_gap {
+                    break;
+                }
+                if out.seam_gap_m < 0.99 * progress.0 {
+                    progress = (out.seam_gap_m, out.sew_steps);
+                } else if out.sew_steps - progress.1 >= stall_steps {
+                    tracing::info!(
+                        "dressing: the widest seam gap stopped closing at {:.1} mm",
+                        out.seam_gap_m * 1e3
+                    );
                     break;
                 }
                 let (next, st) = self.sim.step(&self.state, &frames, &frames)?;
@@ -370,9 +410,33 @@ impl Simulation {
         })();
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
+        if sewing.is_ok() {
+            out.welded_gap_m = self.sim.max_seam_gap_m(&self.state.x);
+            if out.welded_gap_m > WIDE_WELD_M {
+                self.log_widest_seam();
+            }
+            self.sim.weld_seams(&mut self.state);
+            // A welded point halfway across a gap may lie in the body.
+            let bodies: Vec<BodyMesh<'_>> = held
+                .iter()
+                .zip(&self.colliders)
+                .map(|(p, c)| (p.as_slice(), c.triangles.as_slice()))
+                .collect();
+            push_out(
+                &mut self.state.x,
+                &bodies,
+                0.5 * self.sim.params.collision.dhat_m,
+            );
+        }
         let settle_steps = (settle_s / dt).ceil() as usize;
+        let phases = if thicker { 2 } else { 1 };
         let settled = sewing.and_then(|()| {
-            for _ in 0..settle_steps {
+            for k in 0..phases * settle_steps {
+                if k == settle_steps {
+                    self.sim.params.collision.dhat_m = run_contact.0;
+                    self.sim.params.detection_margin_m = run_contact.1;
+                    self.sim.params.move_cap_m = move_cap.min(0.5 * run_contact.0);
+                }
                 let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
                 self.state = next;
                 out.settle_steps += 1;
@@ -382,8 +446,9 @@ impl Simulation {
                 if out.settle_steps.is_multiple_of(30) {
                     let speed = self.state.v.iter().map(|v| v.norm()).fold(0.0, f64::max);
                     tracing::info!(
-                        "dressing: settling step {}/{settle_steps}: fastest vertex {:.0} mm/s, newton {}, cg {}, contacts {}, penetration {:.2} mm",
+                        "dressing: settling step {}/{}: fastest vertex {:.0} mm/s, newton {}, cg {}, contacts {}, penetration {:.2} mm",
                         out.settle_steps,
+                        phases * settle_steps,
                         speed * 1e3,
                         stats.newton_iters,
                         stats.cg_iters,
@@ -395,6 +460,8 @@ impl Simulation {
             Ok(())
         });
         self.sim.params.move_cap_m = move_cap;
+        self.sim.params.collision.dhat_m = run_contact.0;
+        self.sim.params.detection_margin_m = run_contact.1;
         settled?;
         out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
         if out.seam_gap_m > gap_m {

@@ -93,6 +93,27 @@ impl BlockCsr {
         }
     }
 
+    /// A = Pᵀ A P for the map P that sends each vertex i to `master[i]` (with
+    /// `master[master[i]] == master[i]`): every block (i, j) added to (master[i], master[j]);
+    /// rows and columns of the vertices that follow another are left zero.
+    pub fn fold(&mut self, master: &[u32]) {
+        for i in 0..self.n() {
+            for k in self.row_ptr[i]..self.row_ptr[i + 1] {
+                let j = self.col[k] as usize;
+                let (mi, mj) = (master[i], master[j]);
+                if mi as usize == i && mj as usize == j {
+                    continue;
+                }
+                let b = std::mem::replace(&mut self.blocks[k], Matrix3::zeros());
+                self.add(mi, mj, &b);
+            }
+        }
+        for e in &mut self.extra {
+            e.0 = master[e.0 as usize];
+            e.1 = master[e.1 as usize];
+        }
+    }
+
     /// y = A·x, skipping rows and columns where `free` is false.
     pub fn matvec(&self, x: &[Vector3<f64>], y: &mut [Vector3<f64>], free: &[bool]) {
         self.matvec_with(&self.blocks, x, y, free, 1);
@@ -499,6 +520,61 @@ impl Pcg {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fold_is_the_projection_onto_the_welded_unknowns() {
+        // A 5-vertex chain with an extra block; vertices 3 and 4 follow 1 and 0.
+        let n = 5;
+        let pairs = [(0, 1), (1, 2), (2, 3), (3, 4)];
+        let master = [0u32, 1, 2, 1, 0];
+        let folded = pairs
+            .iter()
+            .map(|&(i, j)| (master[i as usize], master[j as usize]));
+        let mut a = BlockCsr::with_pattern(n, pairs.iter().copied().chain(folded));
+        let block = |i: u32, j: u32| {
+            Matrix3::from_fn(|r, c| 1.0 + (i * 7 + j * 3) as f64 + (r * 3 + c) as f64 * 0.1)
+        };
+        let mut dense = vec![vec![Matrix3::zeros(); n]; n];
+        for i in 0..n as u32 {
+            a.add(i, i, &block(i, i));
+            dense[i as usize][i as usize] += block(i, i);
+        }
+        for &(i, j) in pairs.iter().chain([(4u32, 2u32)].iter()) {
+            a.add(i, j, &block(i, j));
+            a.add(j, i, &block(i, j).transpose());
+            dense[i as usize][j as usize] += block(i, j);
+            dense[j as usize][i as usize] += block(i, j).transpose();
+        }
+        a.fold(&master);
+        // Pᵀ A P: every block (i, j) summed into (master i, master j).
+        let mut want = vec![vec![Matrix3::zeros(); n]; n];
+        for i in 0..n {
+            for j in 0..n {
+                want[master[i] as usize][master[j] as usize] += dense[i][j];
+            }
+        }
+        let mut got = vec![vec![Matrix3::zeros(); n]; n];
+        for i in 0..n as u32 {
+            for j in 0..n as u32 {
+                if let Some(k) = a.find(i, j) {
+                    got[i as usize][j as usize] += a.blocks[k];
+                }
+            }
+        }
+        for (i, j, m) in &a.extra {
+            got[*i as usize][*j as usize] += m;
+        }
+        for i in 0..n {
+            for j in 0..n {
+                assert!(
+                    (got[i][j] - want[i][j]).abs().max() < 1e-12,
+                    "block ({i}, {j}): {} against {}",
+                    got[i][j],
+                    want[i][j]
+                );
+            }
+        }
+    }
 
     /// A 1D chain of `n` vertices: springs `k` between neighbours plus `mass` on the diagonal.
     fn chain(n: u32, k: &Matrix3<f64>, mass: f64) -> BlockCsr {

@@ -407,9 +407,7 @@ pub fn generate(
         opts.fine_mode,
         None,
     )?;
-    let coarse_dhat_m = opts
-        .match_contact_thickness
-        .then_some(fine.sim.params.collision.dhat_m);
+    let coarse_dhat_m = coarse_contact_thickness(&fine, opts.match_contact_thickness);
     let mut coarse = new_simulation(
         &scene,
         opts.coarse_edge_m,
@@ -628,6 +626,8 @@ fn restore(
     coarse
         .sim
         .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
+    restore_welds(&r, "resume_fine_welded", fine)?;
+    restore_welds(&r, "resume_coarse_welded", coarse)?;
     // The detection margins follow the last step's largest move, and a step's Newton
     // displacement is bounded by them: a run resumed without them takes a different first
     // step (millimetres on a walking skirt).
@@ -708,6 +708,20 @@ fn simulate_frame(
     Ok((buf, unconverged))
 }
 
+/// 1 when `sim`'s seams are welded, else 0 (a frame file's `resume_*_welded`).
+fn welded(sim: &Simulation) -> f64 {
+    f64::from(u8::from(sim.sim.welded()))
+}
+
+/// Welds `sim`'s seams when the frame file `r` says they were (`key`; files written before
+/// seams were welded have no such entry).
+fn restore_welds(r: &TensorReader, key: &str, sim: &mut Simulation) -> Result<()> {
+    if r.has(key) && r.scalar_f64(key)? > 0.5 {
+        sim.sim.weld_seams(&mut sim.state);
+    }
+    Ok(())
+}
+
 /// Writes a frame file: the frame's steps `buf` ([`simulate_frame`]), the fine state at its
 /// end and what a resume needs.
 fn write_frame(
@@ -736,6 +750,8 @@ fn write_frame(
             &[coarse.sim.seam_rest().len()],
             coarse.sim.seam_rest(),
         )
+        .f64("resume_fine_welded", &[1], &[welded(fine)])
+        .f64("resume_coarse_welded", &[1], &[welded(coarse)])
         .f64("resume_fine_margin", &[1], &[fine.sim.obstacle_margin_m()])
         .f64(
             "resume_coarse_margin",
@@ -899,6 +915,20 @@ pub fn coarse_mode(fast: bool) -> SolverMode {
     }
 }
 
+/// The contact thickness of the coarse simulation beside the fine simulation `fine`, m
+/// (`None`: the coarse mesh's own, 15 % of its edge): the fine one's when `matched`, so
+/// that the levels rest at the same distance from a body, except for garments with seams.
+/// A garment wraps a body curved at the scale of the coarse edge (arms, legs, the sides of
+/// the torso), and the fine mesh made from the coarse one lies on its triangles' chords and
+/// dips between its vertices: at the fine thickness a T-shirt on the walking avatar put 8 %
+/// of its fine vertices inside the body, at its own under 0.1 %
+/// (`docs/experiments/garments.md`). Sheets on props keep the matched thickness, which
+/// brings the resolution ladder together (`docs/experiments/reference.md`).
+pub fn coarse_contact_thickness(fine: &Simulation, matched: bool) -> Option<f64> {
+    (matched && fine.sim.model.mesh.seam_pairs.is_empty())
+        .then_some(fine.sim.params.collision.dhat_m)
+}
+
 /// A simulation of `scene` at `edge_m` with the data tool's solver settings: self-collision
 /// on or off, a solver mode, and optionally a contact thickness d̂ (also the detection
 /// margin).
@@ -953,6 +983,7 @@ pub fn coarse_simulation(scene: &Scene, dir: &Path, frame: usize) -> Result<Simu
         let r = TensorReader::open(&frame_path(dir, frame))?;
         sim.sim
             .set_seam_rest(&r.f64("resume_coarse_seam_rest")?.1)?;
+        restore_welds(&r, "resume_coarse_welded", &mut sim)?;
     }
     Ok(sim)
 }

@@ -280,7 +280,8 @@ impl Simulator {
         dx: &[Vector3<f64>],
         energy: f64,
     ) -> Option<(Vec<Vector3<f64>>, f64)> {
-        let (step, _) = limit_step(dx, potential.inc.max_move, pairs);
+        let (mut step, _) = limit_step(dx, potential.inc.max_move, pairs);
+        self.tie_welds(&mut step);
         let step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
         let trial: Vec<Vector3<f64>> = x.iter().zip(&step).map(|(a, d)| a + d).collect();
         let e = potential.at(self, &trial);
@@ -305,6 +306,7 @@ impl Simulator {
         // stalled whole garments at α ≈ 0.1 for every iteration. The clipped direction is
         // still a descent direction when its slope is negative; otherwise scale uniformly.
         let (mut step, clipped) = limit_step(dx, max_move, pairs);
+        self.tie_welds(&mut step);
         let mut step_slope: f64 = self.grad.iter().zip(&step).map(|(g, d)| g.dot(d)).sum();
         if clipped && step_slope >= 0.0 {
             // Uniform scaling by the tightest ratio keeps every vertex and pair within its

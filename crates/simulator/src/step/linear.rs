@@ -34,7 +34,8 @@ impl Simulator {
         };
         let stats = match solver {
             LinearSolver::Auto | LinearSolver::JacobiPcg => {
-                self.pcg.solve(&self.matrix, rhs, dx, &self.free, tol, max)
+                self.pcg
+                    .solve(&self.matrix, rhs, dx, &self.solve_free, tol, max)
             }
             LinearSolver::TwoLevelPcg {
                 aggregate,
@@ -48,7 +49,7 @@ impl Simulator {
                     Some(coarse) => {
                         if self.last_cg_iters > refactor_above {
                             let t = std::time::Instant::now();
-                            let ok = coarse.factorize(&self.matrix, &self.free);
+                            let ok = coarse.factorize(&self.matrix, &self.solve_free);
                             tracing::trace!(
                                 ok,
                                 ms = t.elapsed().as_secs_f64() * 1e3,
@@ -59,13 +60,15 @@ impl Simulator {
                             &self.matrix,
                             rhs,
                             dx,
-                            &self.free,
+                            &self.solve_free,
                             coarse,
                             tol,
                             max,
                         )
                     }
-                    None => self.pcg.solve(&self.matrix, rhs, dx, &self.free, tol, max),
+                    None => self
+                        .pcg
+                        .solve(&self.matrix, rhs, dx, &self.solve_free, tol, max),
                 }
             }
             LinearSolver::CholeskyPcg { refactor_above } => {
@@ -79,7 +82,7 @@ impl Simulator {
                     Some(pre) => {
                         if !pre.is_factored() || self.last_cg_iters > refactor_above {
                             let t = std::time::Instant::now();
-                            let ok = pre.factorize(&self.matrix, &self.free);
+                            let ok = pre.factorize(&self.matrix, &self.solve_free);
                             tracing::trace!(
                                 ok,
                                 ms = t.elapsed().as_secs_f64() * 1e3,
@@ -94,16 +97,19 @@ impl Simulator {
                                 &self.matrix,
                                 rhs,
                                 dx,
-                                &self.free,
+                                &self.solve_free,
                                 pre,
                                 tol,
                                 max,
                             )
                         } else {
-                            self.pcg.solve(&self.matrix, rhs, dx, &self.free, tol, max)
+                            self.pcg
+                                .solve(&self.matrix, rhs, dx, &self.solve_free, tol, max)
                         }
                     }
-                    None => self.pcg.solve(&self.matrix, rhs, dx, &self.free, tol, max),
+                    None => self
+                        .pcg
+                        .solve(&self.matrix, rhs, dx, &self.solve_free, tol, max),
                 }
             }
         };

@@ -57,6 +57,11 @@ pub struct Simulator {
     matrix: BlockCsr,
     pcg: Pcg,
     free: Vec<bool>,
+    /// For each vertex, the vertex it is welded to (the first of its seam group, itself when
+    /// not sewn) once the seams are welded ([`Simulator::weld_seams`]); empty before.
+    weld: Vec<u32>,
+    /// The linear solve's unknowns: `free` less the welded vertices that follow another.
+    solve_free: Vec<bool>,
     grad: Vec<Vector3<f64>>,
     dx: Vec<Vector3<f64>>,
     rhs: Vec<Vector3<f64>>,
@@ -89,6 +94,8 @@ impl Simulator {
         let matrix = BlockCsr::with_pattern(n, model.coupled_pairs());
         Simulator {
             free: vec![true; n],
+            weld: Vec::new(),
+            solve_free: vec![true; n],
             grad: vec![Vector3::zeros(); n],
             dx: vec![Vector3::zeros(); n],
             rhs: Vec::with_capacity(n),
@@ -235,6 +242,132 @@ impl Simulator {
             self.free[p.v as usize] = false;
         }
         self.pins = pins;
+        self.update_solve_free();
+    }
+
+    fn update_solve_free(&mut self) {
+        self.solve_free.clone_from(&self.free);
+        for (i, w) in self.weld.iter().enumerate() {
+            if *w as usize != i {
+                self.solve_free[i] = false;
+            }
+        }
+    }
+
+    /// Welds the seams, as a sewing machine does once a tailor has pinned them: the vertices
+    /// of each seam pair (and of pairs sharing a vertex, where three panels meet) become one
+    /// point for the rest of the simulation, each group moved to its mass-weighted mean
+    /// position and velocity in `state`. Sewing springs only pull seams closed; under load
+    /// they stay open by force over stiffness, and where a body blocks them (an armpit, a
+    /// waistband on the hips) they stay open by the contact thickness. Welded, the two sides
+    /// are one unknown of each Newton system (their gradients and matrix rows summed) and
+    /// every step moves them together. Irreversible; a no-op without seams or when welded.
+    pub fn weld_seams(&mut self, state: &mut SimState) {
+        let n = self.model.num_vertices();
+        if self.model.mesh.seam_pairs.is_empty() || self.welded() || state.x.len() != n {
+            return;
+        }
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn root(parent: &mut [u32], i: u32) -> u32 {
+            let mut r = i;
+            while parent[r as usize] != r {
+                r = parent[r as usize];
+            }
+            let mut j = i;
+            while parent[j as usize] != r {
+                let next = parent[j as usize];
+                parent[j as usize] = r;
+                j = next;
+            }
+            r
+        }
+        for p in &self.model.mesh.seam_pairs {
+            let (a, b) = (root(&mut parent, p[0]), root(&mut parent, p[1]));
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+        let weld: Vec<u32> = (0..n as u32).map(|i| root(&mut parent, i)).collect();
+        // Each group at its centre of mass, moving with its momentum.
+        let mut sums = vec![(0.0, Vector3::zeros(), Vector3::zeros()); n];
+        for (i, w) in weld.iter().enumerate() {
+            let m = self.model.mass_kg[i];
+            let s = &mut sums[*w as usize];
+            s.0 += m;
+            s.1 += state.x[i] * m;
+            s.2 += state.v[i] * m;
+        }
+        for (i, w) in weld.iter().enumerate() {
+            let (m, x, v) = sums[*w as usize];
+            if m > 0.0 {
+                state.x[i] = x / m;
+                state.v[i] = v / m;
+            }
+        }
+        // The pattern gains the blocks the welded rows fold into.
+        let pairs = self.model.coupled_pairs();
+        let folded: Vec<(u32, u32)> = pairs
+            .iter()
+            .map(|&(i, j)| (weld[i as usize], weld[j as usize]))
+            .collect();
+        self.matrix = BlockCsr::with_pattern(n, pairs.into_iter().chain(folded));
+        self.mem_set = MembraneSet::new(
+            self.model.membranes.iter().map(|m| m.v).collect(),
+            &self.matrix,
+        );
+        self.hinge_set = HingeSet::new(
+            self.model.hinges.iter().map(|h| h.v).collect(),
+            &self.matrix,
+        );
+        self.cholesky = None;
+        self.two_level = None;
+        self.last_cg_iters = usize::MAX;
+        self.seam_rest_m.iter_mut().for_each(|r| *r = 0.0);
+        self.weld = weld;
+        self.update_solve_free();
+    }
+
+    /// Whether the seams are welded ([`Simulator::weld_seams`]).
+    pub fn welded(&self) -> bool {
+        !self.weld.is_empty()
+    }
+
+    /// Welded vertices at their group's point: each follows the vertex it is welded to.
+    pub(super) fn follow_welds(&self, x: &mut [Vector3<f64>]) {
+        for (i, w) in self.weld.iter().enumerate() {
+            if *w as usize != i {
+                x[i] = x[*w as usize];
+            }
+        }
+    }
+
+    /// A step direction (already within the move limits) that moves every welded group as
+    /// one: each group by the shortest of its members' moves (they are parallel, shortened
+    /// one by one from the same direction).
+    pub(super) fn tie_welds(&self, step: &mut [Vector3<f64>]) {
+        for (i, w) in self.weld.iter().enumerate() {
+            let w = *w as usize;
+            if w != i && step[i].norm_squared() < step[w].norm_squared() {
+                step[w] = step[i];
+            }
+        }
+        self.follow_welds(step);
+    }
+
+    /// Sums the gradient and the matrix rows of each welded vertex into those of the vertex
+    /// it follows (the chain rule for x_slave = x_master).
+    pub(super) fn fold_welds(&mut self) {
+        if self.weld.is_empty() {
+            return;
+        }
+        for i in 0..self.weld.len() {
+            let w = self.weld[i] as usize;
+            if w != i {
+                let g = std::mem::replace(&mut self.grad[i], Vector3::zeros());
+                self.grad[w] += g;
+            }
+        }
+        self.matrix.fold(&self.weld);
     }
 
     pub(super) fn pin_position(&self, pin: &Pin, colliders: &[ColliderFrame<'_>]) -> Vector3<f64> {

@@ -142,7 +142,8 @@ impl Simulator {
         self.obstacle_margin_m = (2.5 * travelled)
             .min(MAX_OBSTACLE_MARGIN_M)
             .max(self.params.detection_margin_m);
-        let v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
+        let mut v: Vec<Vector3<f64>> = (0..n).map(|i| (x[i] - x_n[i]) / h).collect();
+        self.follow_welds(&mut v);
         if let Some(i) = x
             .iter()
             .chain(&v)
@@ -226,6 +227,9 @@ impl Simulator {
             x[pin.v as usize] = p;
             x_tilde[pin.v as usize] = p;
         }
+        // A state set from outside (a corrector's, a downsampled one) may part welded vertices.
+        self.follow_welds(&mut x);
+        self.follow_welds(&mut x_tilde);
         (x_tilde, x, still)
     }
 
@@ -323,6 +327,7 @@ impl Simulator {
                 )));
             }
             let (mut dx, cg) = self.newton_direction();
+            self.follow_welds(&mut dx);
             stats.cg_iters += cg.iterations;
             stats.newton_iters += 1;
             if cg.relative_residual > self.params.cg_rel_tol {

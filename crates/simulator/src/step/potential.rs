@@ -181,6 +181,7 @@ impl Simulator {
             self.grad[i] += g;
             self.matrix.add(f.v, f.v, &hm);
         }
+        self.fold_welds();
         for (gi, f) in self.grad.iter_mut().zip(&self.free) {
             if !f {
                 *gi = Vector3::zeros();
