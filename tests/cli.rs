@@ -1094,3 +1094,63 @@ fn a_batch_goes_on_past_a_bad_shot_and_summarises_it_in_json() {
         serde_json::from_slice(&out.stdout).expect("JSON");
     assert_eq!(summary.error.expect("an error").kind, "usage");
 }
+
+/// A garment is dressed once per shot: a later run of it starts from the dressed state kept
+/// beside the output, and makes the same animation as the run that dressed it.
+#[test]
+fn a_rerun_starts_from_the_dressed_state_kept_beside_the_output() {
+    use clothsr::io::usd::{read_usd, MeshRole};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("skirt.usdc");
+    let run = |extra: &[&str]| {
+        let r = clothsr()
+            .arg("run")
+            .arg(root.join("tests/data/patterns/legacy_templates/skirts_skirt_2_panels.json"))
+            .arg("--models")
+            .arg(root.join("models/generic"))
+            .args(["--frames", "2", "-o"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .expect("run");
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let log = String::from_utf8_lossy(&r.stderr).into_owned();
+        let s = read_usd(&out).expect("read");
+        let cloth = s
+            .meshes
+            .into_iter()
+            .find(|m| m.role == MeshRole::Cloth)
+            .expect("cloth");
+        (log, cloth.frames)
+    };
+    let (first, dressed_now) = run(&[]);
+    let kept = clothsr::io::dressed::dressed_path(&out);
+    assert!(kept.exists(), "no dressed state beside the output");
+    assert!(!first.contains("dressed state kept in"), "{first}");
+    let (second, restored) = run(&["--restart"]);
+    assert!(second.contains("dressed state kept in"), "{second}");
+    assert_eq!(
+        dressed_now, restored,
+        "another animation from the kept dressing"
+    );
+    // Kept for another garment, it is not taken: dressed again.
+    std::fs::copy(&kept, dir.path().join("kept")).expect("copy");
+    let other = dir.path().join("other.usdc");
+    std::fs::copy(
+        dir.path().join("kept"),
+        clothsr::io::dressed::dressed_path(&other),
+    )
+    .expect("copy");
+    let r = clothsr()
+        .arg("run")
+        .arg(root.join("tests/data/patterns/legacy_templates/skirts_skirt_4_panels.json"))
+        .arg("--models")
+        .arg(root.join("models/generic"))
+        .args(["--frames", "1", "-o"])
+        .arg(&other)
+        .output()
+        .expect("run");
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("dressing again"));
+}

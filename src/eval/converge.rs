@@ -294,7 +294,8 @@ fn start_state(
         ));
     }
     if edge_m >= coarse_edge_m {
-        sim.dress(2.0, 0.3, 1e-3)?;
+        let (max_s, settle_s, gap_m) = crate::io::dressed::DRESSING;
+        sim.dress(max_s, settle_s, gap_m)?;
     } else {
         let mut coarse = simulation(
             scene,
@@ -379,7 +380,7 @@ pub fn run(
     };
     // Dressed garments run with their seams welded, as dressing leaves them.
     if !mesh.seam_pairs.is_empty() {
-        sim.sim.weld_seams(&mut sim.state);
+        sim.sim.weld_seams(&mut sim.state, 0.0);
     }
     for f in records.len() + 1..=frames {
         // Every frame is a resume point: what the steps cached starts afresh, as after a

@@ -160,6 +160,19 @@ impl<'a> Pipeline<'a> {
         corrector_dir: Option<&std::path::Path>,
         opts: Options,
     ) -> Result<Pipeline<'a>> {
+        Pipeline::with_dress_cache(scene, isr, corrector_dir, opts, None)
+    }
+
+    /// As [`Pipeline::new`], dressing the garments from the dressed state kept in
+    /// `dress_cache` when it was made for the same coarse simulation, else dressing them and
+    /// keeping the state there ([`crate::io::dressed`]).
+    pub fn with_dress_cache(
+        scene: &Scene,
+        isr: &'a Isr,
+        corrector_dir: Option<&std::path::Path>,
+        opts: Options,
+        dress_cache: Option<&std::path::Path>,
+    ) -> Result<Pipeline<'a>> {
         let fine_edge = isr.cfg.pixel_m;
         if opts.coarse_edge_m <= fine_edge {
             return Err(Error::Invalid(format!(
@@ -185,13 +198,21 @@ impl<'a> Pipeline<'a> {
             dhat,
         )?;
         if opts.dress && !coarse.sim.model.mesh.seam_pairs.is_empty() {
-            let d = coarse.dress(2.0, 0.3, 1e-3)?;
-            tracing::info!(
-                "dressed: {} sewing + {} settling steps, widest seam gap {:.1} mm",
-                d.sew_steps,
-                d.settle_steps,
-                d.seam_gap_m * 1e3
-            );
+            if let Some(d) = crate::io::dressed::dress_or_restore(&mut coarse, dress_cache)? {
+                tracing::info!(
+                    "dressed: {} sewing + {} settling steps, {} of {} seam pairs welded (from up \
+                     to {:.1} mm apart), widest seam gap {:.1} mm",
+                    d.sew_steps,
+                    d.settle_steps,
+                    d.welded_pairs,
+                    coarse.sim.model.mesh.seam_pairs.len(),
+                    d.welded_gap_m * 1e3,
+                    d.seam_gap_m * 1e3
+                );
+            }
+            // The first frame starts the same whether dressed now or restored.
+            coarse.sim.forget_history();
+            coarse.sim.set_obstacle_margin_m(0.0);
         }
         let push_clearance_m = opts
             .push_out

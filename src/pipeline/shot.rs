@@ -242,11 +242,12 @@ pub fn run_shot(
         ));
     }
     let t_setup = std::time::Instant::now();
-    let mut p = Pipeline::new(
+    let mut p = Pipeline::with_dress_cache(
         &scene,
         &models.isr,
         models.corrector.as_deref(),
         models.opts,
+        Some(&crate::io::dressed::dressed_path(&files.output)),
     )?;
     tracing::info!(
         "{}: coarse {} vertices, fine {} vertices ({} mm pixels), corrector {}; set up in {:.1} s",

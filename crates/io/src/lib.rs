@@ -6,6 +6,7 @@
 //! simulating a scene at both resolutions ([`data`]).
 
 pub mod data;
+pub mod dressed;
 pub mod models;
 pub mod obj;
 pub mod python;

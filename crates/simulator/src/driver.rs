@@ -60,8 +60,9 @@ pub struct FrameStats {
 /// Sewing stops when the widest seam gap has not closed by 1 % for this long, s.
 const SEWING_STALL_S: f64 = 0.2;
 
-/// A seam welded from further apart than this is named in a warning, m.
-const WIDE_WELD_M: f64 = 5e-3;
+/// Seam pairs are welded within this many contact thicknesses; sewing stops on a stall only
+/// within it (a garment's widest gap may pause for a while as panels slide around a body).
+const WELD_MAX_DHAT: f64 = 3.0;
 
 /// What dressing did ([`Simulation::dress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -78,9 +79,11 @@ pub struct DressStats {
     pub seam_gap_m: f64,
     /// Deepest collider penetration in the last settling step, m.
     pub max_penetration_m: f64,
-    /// Widest seam gap when sewing stopped and the seams were welded, m (what welding
-    /// closed; [`Simulator::weld_seams`](super::step::Simulator::weld_seams)).
+    /// Widest gap of the seam pairs welded when sewing stopped, m (what welding closed;
+    /// [`Simulator::weld_seams`](super::step::Simulator::weld_seams)).
     pub welded_gap_m: f64,
+    /// Seam pairs welded (the others, still open, stay on their sewing springs).
+    pub welded_pairs: usize,
 }
 
 /// A mesh garment's mesh at `edge_m`: remeshed chart by chart like a pattern
@@ -372,8 +375,10 @@ impl Simulation {
         self.sim.params.move_cap_m = move_cap.min(0.5 * own_dhat);
         // Sewing ends once every seam is within `gap_m`, or within the contact thickness
         // (where a body between the two sides, an armpit, holds them that far apart), or
-        // when the widest gap has stopped closing; then the seams are welded.
+        // when the widest gap, within a few thicknesses, has stopped closing; then the seams
+        // are welded, those within a few thicknesses.
         let weld_gap = gap_m.max(own_dhat);
+        let weld_max = WELD_MAX_DHAT * own_dhat;
         let stall_steps = ((SEWING_STALL_S / dt).ceil() as usize).max(1);
         let mut progress = (f64::INFINITY, 0usize);
         let sewing: Result<()> = (|| {
@@ -384,7 +389,7 @@ impl Simulation {
                 }
                 if out.seam_gap_m < 0.99 * progress.0 {
                     progress = (out.seam_gap_m, out.sew_steps);
-                } else if out.sew_steps - progress.1 >= stall_steps {
+                } else if out.seam_gap_m <= weld_max && out.sew_steps - progress.1 >= stall_steps {
                     tracing::info!(
                         "dressing: the widest seam gap stopped closing at {:.1} mm",
                         out.seam_gap_m * 1e3
@@ -411,11 +416,8 @@ impl Simulation {
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
         if sewing.is_ok() {
-            out.welded_gap_m = self.sim.max_seam_gap_m(&self.state.x);
-            if out.welded_gap_m > WIDE_WELD_M {
-                self.log_widest_seam();
-            }
-            self.sim.weld_seams(&mut self.state);
+            out.welded_gap_m = self.sim.max_seam_gap_m(&self.state.x).min(weld_max);
+            out.welded_pairs = self.sim.weld_seams(&mut self.state, weld_max);
             // A welded point halfway across a gap may lie in the body.
             let bodies: Vec<BodyMesh<'_>> = held
                 .iter()

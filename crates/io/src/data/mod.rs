@@ -578,7 +578,8 @@ pub fn dress_fine_from_coarse(
     fine: &mut Simulation,
     transfer: &Transfer,
 ) -> Result<()> {
-    let c = coarse.dress(2.0, 0.3, 1e-3)?;
+    let (max_s, settle_s, gap_m) = crate::dressed::DRESSING;
+    let c = coarse.dress(max_s, settle_s, gap_m)?;
     let x = transfer.upsample_phong(
         &coarse.state.x,
         &coarse.sim.model.mesh.triangles,
@@ -717,7 +718,7 @@ fn welded(sim: &Simulation) -> f64 {
 /// seams were welded have no such entry).
 fn restore_welds(r: &TensorReader, key: &str, sim: &mut Simulation) -> Result<()> {
     if r.has(key) && r.scalar_f64(key)? > 0.5 {
-        sim.sim.weld_seams(&mut sim.state);
+        sim.sim.weld_seams(&mut sim.state, 0.0);
     }
     Ok(())
 }

@@ -255,17 +255,31 @@ impl Simulator {
     }
 
     /// Welds the seams, as a sewing machine does once a tailor has pinned them: the vertices
-    /// of each seam pair (and of pairs sharing a vertex, where three panels meet) become one
-    /// point for the rest of the simulation, each group moved to its mass-weighted mean
-    /// position and velocity in `state`. Sewing springs only pull seams closed; under load
-    /// they stay open by force over stiffness, and where a body blocks them (an armpit, a
-    /// waistband on the hips) they stay open by the contact thickness. Welded, the two sides
-    /// are one unknown of each Newton system (their gradients and matrix rows summed) and
-    /// every step moves them together. Irreversible; a no-op without seams or when welded.
-    pub fn weld_seams(&mut self, state: &mut SimState) {
+    /// of each seam pair no more than `max_gap_m` apart in `state` (and of pairs sharing a
+    /// vertex with one, where three panels meet) become one point for the rest of the
+    /// simulation, each group moved to its mass-weighted mean position and velocity. Sewing
+    /// springs only pull seams closed; under load they stay open by force over stiffness,
+    /// and where a body blocks them (an armpit, a waistband on the hips) they stay open by the
+    /// contact thickness. Welded, the two sides are one unknown of each Newton system (their
+    /// gradients and matrix rows summed) and every step moves them together; wider pairs stay
+    /// on their springs. Once only (a no-op when welded, or without seams); `max_gap_m` 0
+    /// finds the welds of a state saved from a welded run (their sides coincide exactly).
+    /// Returns the number of seam pairs welded.
+    pub fn weld_seams(&mut self, state: &mut SimState, max_gap_m: f64) -> usize {
         let n = self.model.num_vertices();
         if self.model.mesh.seam_pairs.is_empty() || self.welded() || state.x.len() != n {
-            return;
+            return 0;
+        }
+        let close: Vec<[u32; 2]> = self
+            .model
+            .mesh
+            .seam_pairs
+            .iter()
+            .filter(|p| (state.x[p[0] as usize] - state.x[p[1] as usize]).norm() <= max_gap_m)
+            .copied()
+            .collect();
+        if close.is_empty() {
+            return 0;
         }
         let mut parent: Vec<u32> = (0..n as u32).collect();
         fn root(parent: &mut [u32], i: u32) -> u32 {
@@ -281,7 +295,7 @@ impl Simulator {
             }
             r
         }
-        for p in &self.model.mesh.seam_pairs {
+        for p in &close {
             let (a, b) = (root(&mut parent, p[0]), root(&mut parent, p[1]));
             if a != b {
                 parent[a.max(b) as usize] = a.min(b);
@@ -297,9 +311,15 @@ impl Simulator {
             s.1 += state.x[i] * m;
             s.2 += state.v[i] * m;
         }
+        // Groups already on one point (a state saved from a welded run) keep its exact bits.
+        let mut apart = vec![false; n];
+        for (i, w) in weld.iter().enumerate() {
+            let w = *w as usize;
+            apart[w] |= state.x[i] != state.x[w] || state.v[i] != state.v[w];
+        }
         for (i, w) in weld.iter().enumerate() {
             let (m, x, v) = sums[*w as usize];
-            if m > 0.0 {
+            if apart[*w as usize] && m > 0.0 {
                 state.x[i] = x / m;
                 state.v[i] = v / m;
             }
@@ -322,9 +342,14 @@ impl Simulator {
         self.cholesky = None;
         self.two_level = None;
         self.last_cg_iters = usize::MAX;
-        self.seam_rest_m.iter_mut().for_each(|r| *r = 0.0);
+        for (r, p) in self.seam_rest_m.iter_mut().zip(&self.model.mesh.seam_pairs) {
+            if weld[p[0] as usize] == weld[p[1] as usize] {
+                *r = 0.0;
+            }
+        }
         self.weld = weld;
         self.update_solve_free();
+        close.len()
     }
 
     /// Whether the seams are welded ([`Simulator::weld_seams`]).

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Regenerates docs/gallery/ (this folder): every MakeHuman garment of tests/data/patterns
+# (mh_*/) dressed on the walking avatar and run through `clothsr run` with the generic models,
+# rendered at three frames by tools/render.py (Blender, Cycles on the CPU), and the table of
+# what each run did (README.md, written by table.py from the runs' logs).
+#
+#   CLOTHSR=path/to/clothsr bash docs/gallery/make.sh
+#
+# The runs go to $OUT (default out/gallery, outside version control); a garment whose output
+# is there is not run again. About a minute a garment to run and one to render, on 2 cores.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+BIN=${CLOTHSR:-clothsr}
+OUT=${OUT:-out/gallery}
+FRAMES=${FRAMES:-60}
+BPY=${BPY_PYTHON:-.venv-bpy/bin/python}
+AVATAR=tests/data/avatars/mh_walk_train_baked_2s.usdc
+mkdir -p "$OUT"
+for spec in tests/data/patterns/mh_*/mh_*_specification.json; do
+  g=$(basename "$(dirname "$spec")")
+  if [ ! -f "$OUT/$g.usdc" ]; then
+    echo "$(date +%T) $g"
+    "$BIN" run "$spec" --avatar "$AVATAR" --frames "$FRAMES" -o "$OUT/$g.usdc" > "$OUT/$g.log" 2>&1
+  fi
+  "$BPY" tools/render.py "$OUT/$g.usdc" --frames "1,$((FRAMES / 2)),$FRAMES" --view three-quarter \
+    --size 280x350 --samples 16 --fit all -o docs/gallery
+done
+python3 docs/gallery/table.py "$OUT" "$FRAMES" > docs/gallery/README.md
