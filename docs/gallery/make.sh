@@ -25,4 +25,4 @@ for spec in tests/data/patterns/mh_*/mh_*_specification.json; do
   "$BPY" tools/render.py "$OUT/$g.usdc" --frames "1,$((FRAMES / 2)),$FRAMES" --view three-quarter \
     --size 280x350 --samples 16 --fit all -o docs/gallery
 done
-python3 docs/gallery/table.py "$OUT" "$FRAMES" > docs/gallery/README.md
+.venv/bin/python docs/gallery/table.py "$OUT" "$FRAMES" > docs/gallery/README.md
