@@ -7,7 +7,8 @@
 #   CLOTHSR=path/to/clothsr bash docs/gallery/make.sh
 #
 # The runs go to $OUT (default out/gallery, outside version control); a garment whose output
-# is there is not run again. About a minute a garment to run and one to render, on 2 cores.
+# is there is not run again, nor one that failed or ran out of RUN_TIMEOUT seconds (its .failed
+# marker). About a minute a garment to run and one to render, on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${CLOTHSR:-clothsr}
@@ -18,10 +19,15 @@ AVATAR=tests/data/avatars/mh_walk_train_baked_2s.usdc
 mkdir -p "$OUT"
 for spec in tests/data/patterns/mh_*/mh_*_specification.json; do
   g=$(basename "$(dirname "$spec")")
-  if [ ! -f "$OUT/$g.usdc" ]; then
+  if [ ! -f "$OUT/$g.usdc" ] && [ ! -f "$OUT/$g.failed" ]; then
     echo "$(date +%T) $g"
-    "$BIN" run "$spec" --avatar "$AVATAR" --frames "$FRAMES" -o "$OUT/$g.usdc" > "$OUT/$g.log" 2>&1
+    # A garment that does not dress within the time limit is a row of the table, not the end.
+    if ! timeout "${RUN_TIMEOUT:-900}" "$BIN" run "$spec" --avatar "$AVATAR" --frames "$FRAMES" \
+      -o "$OUT/$g.usdc" > "$OUT/$g.log" 2>&1; then
+      touch "$OUT/$g.failed"
+    fi
   fi
+  [ -f "$OUT/$g.usdc" ] || continue
   "$BPY" tools/render.py "$OUT/$g.usdc" --frames "1,$((FRAMES / 2)),$FRAMES" --view three-quarter \
     --size 280x350 --samples 16 --fit all -o docs/gallery
 done

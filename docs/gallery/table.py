@@ -60,7 +60,9 @@ def main(out, frames):
         t = log.read_text(errors="replace")
         t = re.sub(r"\x1b\[[0-9;]*m", "", t)
         if "fine vertices pushed out" not in t:
-            rows.append(f"| `{g}` | did not finish: see its log ||||||||")
+            last = [line for line in t.splitlines() if "dressing:" in line][-1:]
+            why = last[0].split("INFO ")[-1].strip() if last else "see its log"
+            rows.append(f"| `{g}` | did not finish in the time limit; last: {why} ||||||||")
             continue
         setup = field(r"set up in ([0-9.]+) s", t)
         coarse = field(r"coarse (\d+) vertices", t, int)
