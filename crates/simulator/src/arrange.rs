@@ -186,17 +186,7 @@ fn limb_under(
     x: &[Vector3<f64>],
     body: &[ColliderFrame<'_>],
 ) -> Option<(Axis, Vec<Vector3<f64>>)> {
-    let c = verts.iter().map(|&i| x[i]).sum::<Vector3<f64>>() / verts.len() as f64;
-    let n = mesh
-        .triangles
-        .iter()
-        .filter(|t| mesh.panel_of_vertex[t[0] as usize] as usize == panel)
-        .map(|t| {
-            let [a, b, d] = t.map(|v| x[v as usize]);
-            (b - a).cross(&(d - a))
-        })
-        .sum::<Vector3<f64>>()
-        .try_normalize(1e-12)?;
+    let (c, n) = centre_and_normal(mesh, panel, verts, x)?;
     // The panel's long direction in its plane, and across it.
     let (e1, _) = principal(verts.iter().map(|&i| x[i]))?;
     let e1 = (e1 - n * e1.dot(&n)).try_normalize(1e-9)?;
@@ -245,6 +235,28 @@ fn limb_under(
         axis = Some(a);
     }
     axis.map(|a| (a, points))
+}
+
+/// A panel's centroid (of its vertices `verts`) and the area-weighted normal of its triangles;
+/// `None` for a panel without area.
+fn centre_and_normal(
+    mesh: &ClothMesh,
+    panel: usize,
+    verts: &[usize],
+    x: &[Vector3<f64>],
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let c = verts.iter().map(|&i| x[i]).sum::<Vector3<f64>>() / verts.len().max(1) as f64;
+    let n = mesh
+        .triangles
+        .iter()
+        .filter(|t| mesh.panel_of_vertex[t[0] as usize] as usize == panel)
+        .map(|t| {
+            let [a, b, d] = t.map(|v| x[v as usize]);
+            (b - a).cross(&(d - a))
+        })
+        .sum::<Vector3<f64>>()
+        .try_normalize(1e-12)?;
+    Some((c, n))
 }
 
 /// The principal direction of `points` and how elongated they are along it (the largest
@@ -300,19 +312,7 @@ fn wrap_panel(
     if verts.len() < 3 {
         return Err("fewer than 3 vertices".into());
     }
-    let c = verts.iter().map(|&i| x[i]).sum::<Vector3<f64>>() / verts.len() as f64;
-    // Area-weighted normal of the panel's triangles.
-    let n = mesh
-        .triangles
-        .iter()
-        .filter(|t| mesh.panel_of_vertex[t[0] as usize] as usize == panel)
-        .map(|t| {
-            let [a, b, d] = t.map(|v| x[v as usize]);
-            (b - a).cross(&(d - a))
-        })
-        .sum::<Vector3<f64>>()
-        .try_normalize(1e-12)
-        .ok_or("no area")?;
+    let (c, n) = centre_and_normal(mesh, panel, verts, x).ok_or("no area")?;
     if verts
         .iter()
         .any(|&i| (x[i] - c).dot(&n).abs() > opts.flatness_m)
