@@ -42,7 +42,8 @@ pub struct Options {
     /// Cloth self-collision.
     pub self_collision: bool,
     /// Give the coarse simulation the fine one's contact thickness (as `clothsr lab dataset` does
-    /// by default).
+    /// by default), for cloth without seams: garments keep the coarse mesh's own
+    /// ([`crate::data::coarse_contact_thickness`]).
     pub match_contact_thickness: bool,
     /// Sew and settle garments with seams before the first frame (as `clothsr lab dataset` does).
     pub dress: bool,

@@ -45,7 +45,7 @@ pub struct Args {
     #[arg(long, default_value = "data", value_parser = fine_mode)]
     fine_mode: clothsr::sim::step::SolverMode,
     /// Keep the coarse mesh's own contact thickness d̂ (15 % of its edge) instead of the fine
-    /// simulation's.
+    /// simulation's (garments with seams always keep their own).
     #[arg(long)]
     coarse_contact_thickness: bool,
 }

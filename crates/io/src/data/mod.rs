@@ -329,7 +329,8 @@ pub struct Options {
     /// scales d̂ with the edge length: 3 mm at 20 mm against 0.75 mm at 5 mm). A thickness is
     /// a property of the cloth, not of its mesh; with the default, the coarse cloth rests a
     /// few millimetres further from every body than the fine one and the corrector has to
-    /// pull it back through the repulsion at every step.
+    /// pull it back through the repulsion at every step. Garments with seams keep the coarse
+    /// mesh's own ([`coarse_contact_thickness`]).
     pub match_contact_thickness: bool,
 }
 
