@@ -445,7 +445,11 @@ def dress(bpy, scene, args, ground_z, extent):
             scale = max(abs(v) for v in o.matrix_world.to_scale()) or 1.0
             sol.thickness = args.thickness * 1e-3 / scale
             sol.offset = 0.0
-            sol.use_even_offset = True
+            # Even offset divides by the angle between faces, and clamped to the edges' length
+            # it stays short where cloth folds back on itself: unclamped, a fold of a walked
+            # garment threw metre-long shards across the picture.
+            sol.use_even_offset = False
+            sol.thickness_clamp = 1.0
             sol.use_quality_normals = True
     skin = material(bpy, "clay", SKIN, cloth=False)
     grey = material(bpy, "grey", GREY, cloth=False)
