@@ -92,7 +92,8 @@ def main(out, frames):
         "Every MakeHuman garment of `tests/data/patterns` on the walking avatar "
         "(`tests/data/avatars`), through `clothsr run` with the generic models; frames 1, "
         f"{frames // 2} and {frames} rendered by `tools/render.py`. Made by `make.sh` in this "
-        "folder.\n"
+        "folder. Times are wall times as `make.sh` ran, beside whatever else the machine ran; "
+        "`docs/experiments/garments.md` has times measured alone.\n"
     )
     print(
         "| garment | vertices coarse / fine | set-up s | sewing steps | seam pairs welded | "
