@@ -227,6 +227,24 @@ fn welded_seams_stay_closed_and_move_as_the_sewn_garment_does() {
         })
         .collect();
     assert!(pins.len() >= 5);
+    // And one seam vertex of the back panel halfway down: a pin on a welded vertex holds its
+    // whole group, whichever side the group follows.
+    let mut pins = pins;
+    let mid = mesh
+        .seam_pairs
+        .iter()
+        .flat_map(|p| p.iter().copied())
+        .filter(|&v| mesh.panel_of_vertex[v as usize] == 1)
+        .min_by(|&a, &b| {
+            let h = |v: u32| (welded.state.x[v as usize].y - (top - 0.1)).abs();
+            h(a).total_cmp(&h(b))
+        })
+        .expect("a seam vertex");
+    let held = welded.state.x[mid as usize];
+    pins.push(Pin {
+        v: mid,
+        target: PinTarget::Fixed(held),
+    });
     welded.sim.set_pins(pins.clone());
     sprung.sim.set_pins(pins);
     let back_y = |s: &Simulation| {
@@ -248,6 +266,23 @@ fn welded_seams_stay_closed_and_move_as_the_sewn_garment_does() {
             );
         }
     }
+    let partner = mesh
+        .seam_pairs
+        .iter()
+        .find_map(|p| match *p {
+            [a, b] if a == mid => Some(b),
+            [a, b] if b == mid => Some(a),
+            _ => None,
+        })
+        .expect("sewn");
+    assert_eq!(
+        welded.state.x[mid as usize], held,
+        "the pinned seam vertex moved"
+    );
+    assert_eq!(
+        welded.state.x[partner as usize], held,
+        "its welded partner moved"
+    );
     // In free fall it would have dropped 136 mm: it hangs on the seams instead.
     let sag = back_start - back_y(&welded);
     assert!(sag < 0.02, "the back panel fell {:.1} mm", sag * 1e3);

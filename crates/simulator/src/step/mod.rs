@@ -245,7 +245,25 @@ impl Simulator {
         self.update_solve_free();
     }
 
+    /// Welded groups follow a pinned member when they have one (else the group's first
+    /// vertex), so that a pin on a sewn vertex holds its whole group.
+    fn weld_to_pins(&mut self) {
+        if self.weld.is_empty() {
+            return;
+        }
+        let mut lead: Vec<u32> = (0..self.weld.len() as u32).collect();
+        for (i, w) in self.weld.iter().enumerate() {
+            if !self.free[i] {
+                lead[*w as usize] = i as u32;
+            }
+        }
+        for w in &mut self.weld {
+            *w = lead[*w as usize];
+        }
+    }
+
     fn update_solve_free(&mut self) {
+        self.weld_to_pins();
         self.solve_free.clone_from(&self.free);
         for (i, w) in self.weld.iter().enumerate() {
             if *w as usize != i {
