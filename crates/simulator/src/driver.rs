@@ -12,6 +12,22 @@ use crate::garment::Fabric;
 use crate::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
 use crate::scene::{ClothPiece, Collider, Scene};
 
+/// Moves the vertices of `x` inside `colliders` (at `points`, one list per collider), or
+/// nearer one than `clearance_m`, out to that distance ([`push_out`]).
+fn push_out_of(
+    colliders: &[Collider],
+    points: &[Vec<Vector3<f64>>],
+    x: &mut [Vector3<f64>],
+    clearance_m: f64,
+) -> PushOut {
+    let bodies: Vec<BodyMesh<'_>> = points
+        .iter()
+        .zip(colliders)
+        .map(|(p, c)| (p.as_slice(), c.triangles.as_slice()))
+        .collect();
+    push_out(x, &bodies, clearance_m)
+}
+
 /// The colliders' triangles with their points `points` (one point list per collider).
 fn collider_frames<'a>(
     colliders: &'a [Collider],
@@ -163,14 +179,9 @@ impl Simulation {
     /// left as it is. Vertices deeper than [`crate::collide::OBSTACLE_SEARCH_M`] are not found.
     pub fn start_outside_bodies(&mut self) -> PushOut {
         let points = self.collider_points();
-        let bodies: Vec<BodyMesh<'_>> = points
-            .iter()
-            .zip(&self.colliders)
-            .map(|(p, c)| (p.as_slice(), c.triangles.as_slice()))
-            .collect();
         let mut x = self.state.x.clone();
         let clearance = 0.5 * self.sim.params.collision.dhat_m;
-        let pushed = push_out(&mut x, &bodies, clearance);
+        let pushed = push_out_of(&self.colliders, &points, &mut x, clearance);
         if pushed.inside > 0 {
             tracing::info!(
                 "{} cloth vertices started inside a body (deepest {:.1} mm): moved out to {:.2} mm \
@@ -416,19 +427,11 @@ impl Simulation {
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
         if sewing.is_ok() {
-            out.welded_gap_m = self.sim.max_seam_gap_m(&self.state.x).min(weld_max);
-            out.welded_pairs = self.sim.weld_seams(&mut self.state, weld_max);
+            let welded = self.sim.weld_seams(&mut self.state, weld_max);
+            (out.welded_pairs, out.welded_gap_m) = (welded.pairs, welded.widest_gap_m);
             // A welded point halfway across a gap may lie in the body.
-            let bodies: Vec<BodyMesh<'_>> = held
-                .iter()
-                .zip(&self.colliders)
-                .map(|(p, c)| (p.as_slice(), c.triangles.as_slice()))
-                .collect();
-            push_out(
-                &mut self.state.x,
-                &bodies,
-                0.5 * self.sim.params.collision.dhat_m,
-            );
+            let clearance = 0.5 * self.sim.params.collision.dhat_m;
+            push_out_of(&self.colliders, held, &mut self.state.x, clearance);
         }
         let settle_steps = (settle_s / dt).ceil() as usize;
         let phases = if thicker { 2 } else { 1 };

@@ -85,6 +85,15 @@ pub struct Simulator {
     /// Upper bound of the cloth–cloth detection margin, m (see [`Simulator::self_margin_m`]).
     self_margin_cap_m: f64,
 }
+/// What [`Simulator::weld_seams`] welded.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Welded {
+    /// Seam pairs welded.
+    pub pairs: usize,
+    /// The widest gap among them before welding, m.
+    pub widest_gap_m: f64,
+}
+
 /// Upper bound of the adaptive cloth–collider detection margin, m.
 const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
 impl Simulator {
@@ -282,23 +291,27 @@ impl Simulator {
     /// gradients and matrix rows summed) and every step moves them together; wider pairs stay
     /// on their springs. Once only (a no-op when welded, or without seams); `max_gap_m` 0
     /// finds the welds of a state saved from a welded run (their sides coincide exactly).
-    /// Returns the number of seam pairs welded.
-    pub fn weld_seams(&mut self, state: &mut SimState, max_gap_m: f64) -> usize {
+    /// Returns how many pairs were welded, from how far apart.
+    pub fn weld_seams(&mut self, state: &mut SimState, max_gap_m: f64) -> Welded {
         let n = self.model.num_vertices();
+        let mut welded = Welded::default();
         if self.model.mesh.seam_pairs.is_empty() || self.welded() || state.x.len() != n {
-            return 0;
+            return welded;
         }
+        let gap = |p: &[u32; 2]| (state.x[p[0] as usize] - state.x[p[1] as usize]).norm();
         let close: Vec<[u32; 2]> = self
             .model
             .mesh
             .seam_pairs
             .iter()
-            .filter(|p| (state.x[p[0] as usize] - state.x[p[1] as usize]).norm() <= max_gap_m)
+            .filter(|p| gap(p) <= max_gap_m)
             .copied()
             .collect();
         if close.is_empty() {
-            return 0;
+            return welded;
         }
+        welded.pairs = close.len();
+        welded.widest_gap_m = close.iter().map(gap).fold(0.0, f64::max);
         let mut parent: Vec<u32> = (0..n as u32).collect();
         fn root(parent: &mut [u32], i: u32) -> u32 {
             let mut r = i;
@@ -367,7 +380,7 @@ impl Simulator {
         }
         self.weld = weld;
         self.update_solve_free();
-        close.len()
+        welded
     }
 
     /// Whether the seams are welded ([`Simulator::weld_seams`]).
