@@ -168,7 +168,7 @@ fn blender_reads_the_fine_output_as_pxr_does() {
     assert!(compared > frames, "compared {compared} frames");
 }
 
-/// The layered output composed over a z-up, centimetre shot, as a TD sublayers it: Blender
+/// The layered output composed over a z-up, centimetre shot, as the run writes it: Blender
 /// places the fine skirt where pxr does (Blender's own unit and axis conversion included).
 #[test]
 #[ignore = "heavy: dresses a skirt on the walking avatar and starts Blender (run by .ci/run)"]
@@ -181,8 +181,8 @@ fn blender_reads_the_layered_shot_as_pxr_does() {
     let layer = dir.path().join("cloth.usda");
     let frames = 2;
     shot::run(&shot_file, &layer, frames, &[]);
-    let composed = dir.path().join("composed.usda");
-    shot::compose(&shot_file, &layer, &composed);
+    // The composed shot the run writes beside its layer, as a TD opens it.
+    let composed = clothsr::io::usd::composed_path(&layer);
     let stage = read_usd(&composed).expect("pxr reads the composed shot");
     let skirt = stage
         .meshes

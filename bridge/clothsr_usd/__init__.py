@@ -18,19 +18,19 @@ try:
     from pxr import Usd  # noqa: F401
 except ImportError as exc:  # pragma: no cover - the message is the point
     raise ImportError(
-        "usd-core (the 'pxr' module) is not installed in this Python environment: "
-        "run `bash .ci/setup` in the clothsr repository (it creates .venv with "
-        "usd-core==26.11 and numpy)"
+        "clothsr reads and writes USD through the host's own USD Python modules ('pxr'), and "
+        "this Python has none: run clothsr inside a DCC's Python (Houdini, Maya, Omniverse, "
+        "Blender), or install them with `pip install 'clothsr[usd]'` (usd-core)"
     ) from exc
 
-from .common import PANEL, SCHEMA_VERSION  # noqa: E402
+from .common import PANEL, SCHEMA_VERSION, composed_path, write_composed  # noqa: E402
 from .plot import plot_errors  # noqa: E402
 from .read import inspect_stage, read_stage  # noqa: E402
 from .validate import validate  # noqa: E402
 from .write import AnimationWriter, write_stage  # noqa: E402
 from .layer import LayerWriter  # noqa: E402
 
-__all__ = ["SCHEMA_VERSION", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "LayerWriter", "schema_registered"]
+__all__ = ["SCHEMA_VERSION", "composed_path", "write_composed", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "LayerWriter", "schema_registered"]
 
 
 def schema_registered() -> bool:

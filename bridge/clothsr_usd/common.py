@@ -1,4 +1,5 @@
 """Units, axes and prim naming shared by the reader and the writer."""
+import pathlib
 import re
 
 import numpy as np
@@ -13,6 +14,8 @@ SCHEMA_VERSION = 1
 SCHEMA_VERSION_KEY = "clothsr:schemaVersion"
 # An override layer's customLayerData: the shot it is for, relative to the layer's folder.
 LAYER_FOR_KEY = "clothsr:layerFor"
+# The shot composed with an override layer, beside the layer: NAME.composed.usda.
+COMPOSED_SUFFIX = ".composed.usda"
 # Type names, newest first: schema version 0 had them unprefixed; both are read.
 GARMENT_API = ("ClothsrGarmentAPI", "ClothGarmentAPI")
 PANEL = ("ClothsrPanel", "ClothPanel")
@@ -58,16 +61,19 @@ def _referenced_by(stage: Usd.Stage, asset: str) -> str:
     return ""
 
 
-def compose(layer_path, shot_path, root=None) -> "Sdf.Layer":
+def compose(layer_path, shot_path, root=None, sublayers=None, over=None) -> "Sdf.Layer":
     """A root layer (``root``, else an anonymous one) holding the override layer at
-    ``layer_path`` sublayered over the shot at ``shot_path``, with the layer's stage metadata."""
+    ``layer_path`` sublayered over the shot at ``shot_path``, with the layer's stage metadata.
+    ``sublayers``: the two paths as written into the root (default: as given); ``over``: the
+    override layer's content, where it is open and newer than its file."""
     from pxr import Sdf
 
-    over = Sdf.Layer.FindOrOpen(str(layer_path))
+    if over is None:
+        over = Sdf.Layer.FindOrOpen(str(layer_path))
     if root is None:
         root = Sdf.Layer.CreateAnonymous("composed.usda")
-    root.subLayerPaths.append(str(layer_path))
-    root.subLayerPaths.append(str(shot_path))
+    for path in sublayers or (layer_path, shot_path):
+        root.subLayerPaths.append(str(path))
     for key in ("metersPerUnit", "upAxis", "timeCodesPerSecond", "framesPerSecond", "startTimeCode", "endTimeCode"):
         if over.pseudoRoot.HasInfo(key):
             root.pseudoRoot.SetInfo(key, over.pseudoRoot.GetInfo(key))
@@ -77,13 +83,48 @@ def compose(layer_path, shot_path, root=None) -> "Sdf.Layer":
     return root
 
 
+def composed_path(layer_path) -> pathlib.Path:
+    """Where ``write_composed`` puts the shot composed with the override layer at
+    ``layer_path``: ``NAME.composed.usda`` beside it."""
+    p = pathlib.Path(layer_path)
+    return p.with_name(f"{p.stem}{COMPOSED_SUFFIX}")
+
+
+def write_composed(layer_path, shot_path, over=None) -> pathlib.Path:
+    """Writes the shot with the override layer over it, to open or import as the shot with
+    its fine cloth: a root layer whose sublayers are the layer (strongest) and the shot, both
+    relative to it, with the layer's stage metadata. Every opinion of the shot, its root
+    layer's own included, is weaker than the layer's, so a garment defined, referenced, under
+    a payload or in a sublayer of the shot becomes the fine mesh. Published by rename; returns
+    its path."""
+    import os
+
+    layer_path = pathlib.Path(layer_path).resolve()
+    out = composed_path(layer_path)
+    here = out.parent
+    rel = [f"./{layer_path.name}", os.path.relpath(pathlib.Path(shot_path).resolve(), here)]
+    if not rel[1].startswith("."):
+        rel[1] = f"./{rel[1]}"
+    tmp = out.with_name(f".{out.stem}.clothsr-pub-{os.getpid()}.usda")
+    from pxr import Sdf
+
+    layer = Sdf.Layer.CreateNew(str(tmp))
+    compose(layer_path, shot_path, root=layer, sublayers=rel, over=over)
+    data = dict(layer.customLayerData)
+    data.pop(LAYER_FOR_KEY, None)
+    layer.customLayerData = data
+    layer.documentation = f"{rel[1]} with clothsr's fine cloth ({rel[0]}) over it"
+    layer.Save()
+    layer = None
+    os.replace(tmp, out)
+    return out
+
+
 def open_stage(path: str) -> Usd.Stage:
     """The stage at ``path``; an override layer clothsr wrote, composed over its shot."""
     stage = _open(path)
     shot = stage.GetRootLayer().customLayerData.get(LAYER_FOR_KEY)
     if shot:
-        import pathlib
-
         shot_path = (pathlib.Path(stage.GetRootLayer().realPath).parent / shot).resolve()
         if not shot_path.exists():
             raise BadInput(f"{path}: an override layer for {shot_path}, which is missing")

@@ -32,6 +32,7 @@ from .common import (
     compose,
     open_stage,
     stage_frame,
+    write_composed,
 )
 from .validate import validate
 from .write import _extent, _format_args, _temp_path
@@ -405,6 +406,8 @@ class LayerWriter:
             self.top.layer.Save()
             warnings = self._validate()
         self.top.publish()
+        if final:
+            write_composed(self.target, self.input, over=self.top.layer)
         return warnings
 
     def _validate(self) -> list:
@@ -419,6 +422,8 @@ class LayerWriter:
         finally:
             layer = None
             check.unlink(missing_ok=True)
+        # A finding about the stage's root layer names the check file: say the shot instead.
+        issues = [(s, i, m.replace(str(check), str(self.input))) for s, i, m in issues]
         errors = [(i, m) for s, i, m in issues if s == "error" and (i, m) not in base]
         if errors:
             text = "; ".join(f"{i}: {m}" for i, m in errors[:5])

@@ -6,7 +6,9 @@ USD goes through this interpreter's own ``pxr`` (a DCC's, or ``pip install cloth
 The GIL is free while clothsr works, so a host's other threads keep running.
 
     import clothsr
-    layer = clothsr.run("shot.usda", "shot_fine.usdc", progress=lambda done, total: print(done, total))
+    layer = clothsr.run("shot.usda", "shot_cloth.usdc", progress=lambda done, total: print(done, total))
+    # shot_cloth.composed.usda beside it is the shot with its fine cloth; for an open stage:
+    clothsr.compose(stage, layer)
 
 Every function takes file paths; ``run``, ``inspect`` and ``fit`` also take an open
 ``Usd.Stage`` (its composed state, unsaved edits included). Errors raise a ``ClothsrError``
@@ -40,6 +42,7 @@ __all__ = [
     "RunError",
     "UsageError",
     "__version__",
+    "compose",
     "convert",
     "eval",
     "fit",
@@ -69,20 +72,46 @@ def _is_stage(x: Any) -> bool:
 
 def _name_the_shot(layer, scene: Any) -> None:
     """An override layer made from an exported ``Usd.Stage`` names the stage's own root layer
-    as its shot (none for an in-memory stage), not the temporary export."""
+    as its shot (none for an in-memory stage), not the temporary export; so does the composed
+    shot beside it (none for an in-memory stage)."""
     key = "clothsr:layerFor"
     if not _is_stage(scene) or key not in layer.customLayerData:
         return
     root = scene.GetRootLayer()
     data = dict(layer.customLayerData)
-    if root.anonymous or not root.realPath:
-        del data[key]
-    else:
+    saved = not root.anonymous and bool(root.realPath)
+    if saved:
         base = pathlib.Path(layer.realPath).parent if layer.realPath else pathlib.Path.cwd()
         data[key] = os.path.relpath(root.realPath, base)
+    else:
+        del data[key]
     layer.customLayerData = data
-    if not layer.anonymous:
-        layer.Save()
+    if layer.anonymous:
+        return
+    layer.Save()
+    import clothsr_usd
+
+    if saved:
+        clothsr_usd.write_composed(layer.realPath, root.realPath, over=layer)
+    else:
+        clothsr_usd.composed_path(layer.realPath).unlink(missing_ok=True)
+
+
+def compose(stage: Any, layer: Any) -> None:
+    """Applies a run's override layer to the open ``Usd.Stage`` of its shot, as the composed
+    shot ``NAME.composed.usda`` written beside the layer does for files: the layer (an
+    ``Sdf.Layer`` or a path) goes first among the sublayers of the stage's session layer, so
+    its opinions are stronger than every layer of the shot, the root layer's own included.
+    Each garment then reads as its fine animated mesh at its own prim path, wherever the shot
+    defines it. Nothing of the shot's own layers changes and nothing is saved; composing the
+    same layer again moves it back to the front."""
+    if not _is_stage(stage):
+        raise UsageError(f"compose: expected an open Usd.Stage, got {type(stage).__name__}")
+    identifier = layer if isinstance(layer, (str, os.PathLike)) else layer.identifier
+    identifier = os.fspath(identifier)
+    session = stage.GetSessionLayer()
+    paths = [p for p in session.subLayerPaths if p != identifier]
+    session.subLayerPaths = [identifier, *paths]
 
 
 @contextlib.contextmanager
@@ -164,9 +193,9 @@ def run(
     ``avatar``/``colliders``: extra collider files. ``corrector``: ``auto``, ``on`` or
     ``off``. An interrupted run of the same settings resumes from its last published frame
     unless ``restart``. ``rrd``: also save a Rerun recording. ``layer``: ``True`` writes an
-    override layer for the USD shot (the default for USD input; sublayer it over the shot:
-    each garment becomes its fine animated mesh at its own prim, in the shot's units, axis and
-    time codes), ``False`` a standalone stage (garments under ``/World/Garments``, colliders,
+    override layer for the USD shot (the default for USD input: each garment becomes its fine
+    animated mesh at its own prim, in the shot's units, axis and time codes; apply it to an
+    open stage with :func:`compose`, or open ``NAME.composed.usda`` written beside it), ``False`` a standalone stage (garments under ``/World/Garments``, colliders,
     metres, y up); a layered shot longer than ``clip_frames`` frames goes to value clips.
     ``publish_every_s``: seconds between publishing the files and the resume point while
     running (default 10; 0: every frame). ``progress(done, total)`` is

@@ -38,9 +38,10 @@ pub struct Args {
     /// Write text USD even for a .usd file.
     #[arg(long, help_heading = "Output")]
     ascii: bool,
-    /// `on`: an override layer for the USD shot: sublayered over the shot, it replaces each
-    /// garment with its fine animated mesh at the garment's own prim, in the shot's units, up
-    /// axis and time codes, copying nothing else. `off`: a standalone stage, the fine garments
+    /// `on`: an override layer for the USD shot: over the shot, it replaces each garment with
+    /// its fine animated mesh at the garment's own prim, in the shot's units, up axis and time
+    /// codes, copying nothing else; <output stem>.composed.usda beside it is the shot with the
+    /// layer over it, to open or import. `off`: a standalone stage, the fine garments
     /// under /World/Garments and the colliders, in metres with y up. `auto`: on for USD input.
     #[arg(
         long,
@@ -504,6 +505,12 @@ fn run_one(
     };
     bar.finish();
     log_report(&job.output, &report.run);
+    // Written after the layer: one older than the output is another run's.
+    let composed = clothsr::io::usd::composed_path(&job.output);
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if modified(&composed).is_some() && modified(&composed) >= modified(&job.output) {
+        tracing::info!("the shot with its fine cloth: {}", composed.display());
+    }
     Ok(report.run)
 }
 

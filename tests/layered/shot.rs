@@ -71,30 +71,6 @@ pub fn run(shot: &Path, out: &Path, frames: usize, extra: &[&str]) {
     );
 }
 
-/// Writes the shot with the layer sublayered over it, as a TD composes them, to `out`.
-#[allow(dead_code)]
-pub fn compose(shot: &Path, layer: &Path, out: &Path) {
-    ok(
-        "compose",
-        python()
-            .arg("-c")
-            .arg(
-                "import sys; from pxr import Sdf\n\
-                 shot, layer, out = sys.argv[1:4]\n\
-                 s = Sdf.Layer.FindOrOpen(shot); r = Sdf.Layer.CreateNew(out)\n\
-                 r.subLayerPaths.append(layer); r.subLayerPaths.append(shot)\n\
-                 [r.pseudoRoot.SetInfo(k, s.pseudoRoot.GetInfo(k)) for k in ('metersPerUnit', \
-                 'upAxis', 'timeCodesPerSecond', 'framesPerSecond', 'startTimeCode', 'endTimeCode')]\n\
-                 r.defaultPrim = s.defaultPrim; r.Save()",
-            )
-            .arg(shot)
-            .arg(layer)
-            .arg(out)
-            .output()
-            .expect("python"),
-    );
-}
-
 /// Runs `check_layered.py` on the shot and its layer; returns its report.
 #[allow(dead_code)]
 pub fn check(shot: &Path, layer: &Path, frames: usize) -> String {

@@ -711,6 +711,13 @@ pub struct OverLayer {
     pub clip_frames: usize,
 }
 
+/// The shot composed with the override layer at `layer`, which a layered run writes beside
+/// it: `NAME.composed.usda` (the bridge's `composed_path`).
+pub fn composed_path(layer: &Path) -> PathBuf {
+    let stem = layer.file_stem().unwrap_or_default().to_string_lossy();
+    layer.with_file_name(format!("{stem}.composed.usda"))
+}
+
 /// Checks that `path` names a USD file clothsr can write (.usd, .usda, .usdc).
 pub fn check_extension(path: &Path) -> Result<()> {
     match path.extension().and_then(|e| e.to_str()) {
