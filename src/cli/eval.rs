@@ -140,6 +140,14 @@ fn check(args: &Args) -> anyhow::Result<()> {
         );
     }
     println!(
+        "cloth through cloth: {:.1} edge-triangle crossings a frame ({:.1} between garments), \
+         {} frames with any, at most {} in one",
+        h.crossings as f64 / h.frames.max(1) as f64,
+        h.crossings_between as f64 / h.frames.max(1) as f64,
+        h.frames_crossing,
+        h.max_crossings
+    );
+    println!(
         "largest move of a vertex in one frame: {:.2} mm (at time code {})",
         h.max_move_m * 1e3,
         h.max_move_time

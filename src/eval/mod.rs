@@ -238,7 +238,8 @@ impl Bodies {
 }
 
 /// What an output holds that no ground truth is needed to judge ([`health`]): points that are
-/// not finite, cloth inside the bodies, and how far any vertex moved in one frame.
+/// not finite, cloth inside the bodies, cloth through cloth, and how far any vertex moved in
+/// one frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Health {
     /// Frames read.
@@ -255,6 +256,46 @@ pub struct Health {
     pub max_move_m: f64,
     /// The time code of the frame that move ended at.
     pub max_move_time: f64,
+    /// Cloth through cloth: edges passing through a triangle they share no vertex (nor a
+    /// coincident one, as across a welded seam) with, summed over the frames.
+    pub crossings: usize,
+    /// Of those, an edge of one garment through a triangle of another: a layer through a layer.
+    pub crossings_between: usize,
+    /// Frames with any crossing.
+    pub frames_crossing: usize,
+    /// The most crossings in one frame.
+    pub max_crossings: usize,
+}
+
+/// Positions closer than this are one point (a welded seam's two vertices), m.
+const COINCIDENT_M: f64 = 1e-7;
+
+/// Edges of `anim`'s cloth through its triangles at positions `x` ([`Health::crossings`]):
+/// (all, between two garments).
+pub fn crossings(anim: &Animation, x: &[Vector3<f64>]) -> (usize, usize) {
+    let mut edges: Vec<[u32; 2]> = anim
+        .triangles
+        .iter()
+        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+        .map(|[a, b]| if a < b { [a, b] } else { [b, a] })
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    let near =
+        |a: u32, b: u32| (x[a as usize] - x[b as usize]).norm_squared() < COINCIDENT_M.powi(2);
+    let found = crate::sim::collide::edge_triangle_crossings(x, &anim.triangles, &edges, |e, t| {
+        !e.iter().any(|&a| t.iter().any(|&b| near(a, b)))
+    });
+    let part = |v: u32| {
+        anim.parts
+            .iter()
+            .position(|(_, r)| r.contains(&(v as usize)))
+    };
+    let between = found
+        .iter()
+        .filter(|(e, t)| part(e[0]) != part(t[0]))
+        .count();
+    (found.len(), between)
 }
 
 /// The [`Health`] of `anim` against the bodies of its scene.
@@ -273,6 +314,13 @@ pub fn health(anim: &Animation, bodies: &Bodies) -> Health {
             h.inside += inside;
             h.frames_inside += usize::from(inside > 0);
             h.deepest_m = h.deepest_m.max(depth);
+        }
+        if !anim.triangles.is_empty() {
+            let (all, between) = crossings(anim, x);
+            h.crossings += all;
+            h.crossings_between += between;
+            h.frames_crossing += usize::from(all > 0);
+            h.max_crossings = h.max_crossings.max(all);
         }
         if let Some(prev) = k.checked_sub(1).map(|j| &anim.frames[j]) {
             let moved = x
@@ -595,6 +643,42 @@ mod tests {
         assert!(h.deepest_m > 0.004 && h.deepest_m < 0.0051, "{h:?}");
         assert!((h.max_move_m - 0.03).abs() < 1e-12, "{h:?}");
         assert_eq!(h.max_move_time, 2.0);
+    }
+
+    /// Two garments of one triangle each, crossed in the second frame only; a third triangle
+    /// welded to the first along a seam (coincident vertices) is not a crossing.
+    #[test]
+    fn health_counts_cloth_through_cloth_and_layers_through_layers() {
+        let v = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
+        let flat = [v(0.0, 0.0, 0.0), v(1.0, 0.0, 0.0), v(0.0, 0.0, 1.0)];
+        // Shares the seam 0–2 of the first (its own coincident vertices 6, 7), folded up.
+        let seam = [v(0.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(-0.5, 0.5, 0.5)];
+        let frame = |lift: f64| -> Vec<Vector3<f64>> {
+            let upright = [
+                v(0.2, lift, 0.2),
+                v(0.3, lift + 1.0, 0.2),
+                v(0.2, lift + 1.0, 0.3),
+            ];
+            flat.iter().chain(&upright).chain(&seam).copied().collect()
+        };
+        let anim = Animation {
+            parts: vec![
+                ("/a".into(), 0..3),
+                ("/b".into(), 3..6),
+                ("/a2".into(), 6..9),
+            ],
+            triangles: vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]],
+            time_codes: vec![0.0, 1.0],
+            frames: vec![frame(0.1), frame(-0.5)],
+        };
+        let h = health(&anim, &Bodies { bodies: Vec::new() });
+        // Edges 3–4 and 3–5 of the upright triangle pass through the flat one.
+        assert_eq!((h.crossings, h.crossings_between), (2, 2), "{h:?}");
+        assert_eq!((h.frames_crossing, h.max_crossings), (1, 2));
+        // One garment folded through itself: a crossing, not between garments.
+        let mut one = anim.clone();
+        one.parts = vec![("/a".into(), 0..9)];
+        assert_eq!(crossings(&one, &one.frames[1]), (2, 0));
     }
 
     #[test]
