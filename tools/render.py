@@ -276,6 +276,11 @@ class Scene:
     def __init__(self, bpy, path, verbose, shown=None):
         self.bpy = bpy
         self.path = shown or path  # as the user gave it, for messages
+        # An override layer (`run --layer on`) holds only overs: the shot composed with it,
+        # written beside it, is what to draw.
+        stem, _ = os.path.splitext(path)
+        if not stem.endswith(".composed") and os.path.exists(stem + ".composed.usda"):
+            path = stem + ".composed.usda"
         bpy.ops.wm.read_factory_settings(use_empty=True)
         with captured(verbose) as out:
             try:
@@ -302,7 +307,7 @@ class Scene:
             raise UserError(
                 f"{self.path}: no mesh in the file (clothsr output has its garments as Mesh prims under "
                 "/World/Garments; an override layer written with --layer on holds only overs: render "
-                "the shot it layers over, or write a standalone stage with --layer off)"
+                "NAME.composed.usda written beside it, or write a standalone stage with --layer off)"
             )
         self.garments = [o for o in self.meshes if role_of(o) == "garment"]
         self.colliders = [o for o in self.meshes if role_of(o) != "garment"]
