@@ -55,14 +55,15 @@ def slide_mm(usd):
 
 def main(out, frames):
     rows = []
-    for log in sorted(pathlib.Path(out).glob("mh_*.log")):
+    logs = sorted(pathlib.Path(out).glob("mh_*.log")) + sorted(pathlib.Path(out).glob("outfit_*.log"))
+    for log in logs:
         g = log.stem
         t = log.read_text(errors="replace")
         t = re.sub(r"\x1b\[[0-9;]*m", "", t)
         if "fine vertices pushed out" not in t:
             last = [line for line in t.splitlines() if "dressing:" in line][-1:]
             why = last[0].split("INFO ")[-1].strip() if last else "see its log"
-            rows.append(f"| `{g}` | did not finish in the time limit; last: {why} ||||||||")
+            rows.append(f"| `{g}` | did not finish in the time limit; last: {why} |||||||||")
             continue
         setup = field(r"set up in ([0-9.]+) s", t)
         coarse = field(r"coarse (\d+) vertices", t, int)
@@ -77,6 +78,13 @@ def main(out, frames):
         share = 100.0 * inside / fine if fine else float("nan")
         pace = f"{per_frame + msr:.2f}" if per_frame is not None and msr is not None else "–"
         usd = pathlib.Path(out) / f"{g}.usdc"
+        check = pathlib.Path(out) / f"{g}.eval.txt"
+        check = check.read_text() if check.exists() else ""
+        crossings = field(r"cloth through cloth: ([0-9.]+) edge", check)
+        between = field(r"\(([0-9.]+) between garments\)", check)
+        through = "–" if crossings is None else f"{crossings:.0f}"
+        if between:
+            through += f" ({between:.0f} between garments)"
         slide = slide_mm(usd) if usd.exists() else float("nan")
         imgs = " ".join(
             f"![{g} frame {f}]({g}_f{f}_three-quarter.png)"
@@ -84,24 +92,26 @@ def main(out, frames):
         )
         rows.append(
             f"| `{g}` | {coarse} / {fine} | {setup:.1f} | {sew} | {welded} | {gap:.1f} | "
-            f"{inside:.0f} ({share:.2f} %, {deepest:.1f} mm) | {slide:.0f} | {pace} |"
+            f"{inside:.0f} ({share:.2f} %, {deepest:.1f} mm) | {through} | {slide:.0f} | {pace} |"
         )
-        rows.append(f"| {imgs} |||||||||")
+        rows.append(f"| {imgs} ||||||||||")
     print("# Garments people wear\n")
     print(
-        "Every MakeHuman garment of `tests/data/patterns` on the walking avatar "
+        "Every MakeHuman garment of `tests/data/patterns`, and an outfit of two, on the walking avatar "
         "(`tests/data/avatars`), through `clothsr run` with the generic models; frames 1, "
         f"{frames // 2} and {frames} rendered by `tools/render.py`. Made by `make.sh` in this "
         "folder. Times are wall times as `make.sh` ran, beside whatever else the machine ran; "
-        "`docs/experiments/garments.md` has times measured alone.\n"
+        "`docs/experiments/garments.md` has times measured alone. Edges through cloth: "
+        "`clothsr eval --pred`'s count of fine edges passing through a fine triangle of the "
+        "same garment or another (a layer through a layer).\n"
     )
     print(
         "| garment | vertices coarse / fine | set-up s | sewing steps | seam pairs welded | "
         "widest open seam mm | "
         "fine vertices inside the body a frame, before the push-out (share, deepest) | "
-        "top edge slid mm | s a frame |"
+        "fine edges through fine cloth a frame | top edge slid mm | s a frame |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 

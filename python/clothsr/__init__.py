@@ -23,7 +23,7 @@ import contextlib
 import os
 import pathlib
 import tempfile
-from typing import Any, Callable, Dict, Iterator, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, Literal, Optional, Sequence, Tuple, Union
 
 from . import _clothsr
 from ._clothsr import BadInputError, Cancelled, ClothsrError, RunError, UsageError, __version__
@@ -44,14 +44,25 @@ __all__ = [
     "__version__",
     "compose",
     "convert",
-    "eval",
+    "evaluate",
     "fit",
     "generic_models",
     "inspect",
     "run",
 ]
 
+if TYPE_CHECKING:
+    from pxr import Sdf, Usd  # noqa: F401
+
 PathLike = Union[str, "os.PathLike[str]"]
+#: A fabric preset, for garments that name none.
+Fabric = Literal["silk", "cotton", "denim", "leather"]
+#: Whether a run uses the models folder's corrector: as its ``models.json`` says, or forced.
+CorrectorChoice = Literal["auto", "on", "off"]
+#: What a run writes: an override layer for a USD shot (``"auto"`` for USD input, or ``"on"``),
+#: or a standalone stage (``"off"``); ``True``/``False``/``None`` as ``"on"``/``"off"``/``"auto"``.
+LayerChoice = Union[Literal["auto", "on", "off"], bool, None]
+Quality = Literal["preview", "final"]
 #: ``progress(done, total)``; returning ``False`` stops the work.
 Progress = Callable[[int, int], Optional[bool]]
 
@@ -166,24 +177,31 @@ def _paths(xs: Sequence[PathLike]) -> list:
     return [os.fspath(x) for x in xs]
 
 
+def _layer_word(layer: LayerChoice) -> str:
+    words = {None: "auto", True: "on", False: "off", "auto": "auto", "on": "on", "off": "off"}
+    if isinstance(layer, (bool, str, type(None))) and layer in words:
+        return words[layer]
+    raise UsageError(f"layer={layer!r}: expected 'auto', 'on' or 'off' (or None, True, False)")
+
+
 def run(
     scene: Any,
     output: Optional[PathLike] = None,
     *,
     models: Optional[PathLike] = None,
     frames: Optional[int] = None,
-    fabric: str = "cotton",
+    fabric: Fabric = "cotton",
     avatar: Optional[PathLike] = None,
     colliders: Sequence[PathLike] = (),
-    corrector: str = "auto",
+    corrector: CorrectorChoice = "auto",
     restart: bool = False,
     ascii: bool = False,
     rrd: Optional[PathLike] = None,
-    layer: Optional[bool] = None,
+    layer: LayerChoice = None,
     clip_frames: int = 100,
     publish_every_s: Optional[float] = None,
     progress: Optional[Progress] = None,
-):
+) -> "Sdf.Layer":
     """Runs the whole pipeline on a shot and returns the output layer (``Sdf.Layer``).
 
     ``scene``: a USD, GarmentCode JSON or OBJ file, or an open ``Usd.Stage``. ``output``: the
@@ -192,10 +210,10 @@ def run(
     (default: the scene's range). ``fabric``: the preset for garments without one;
     ``avatar``/``colliders``: extra collider files. ``corrector``: ``auto``, ``on`` or
     ``off``. An interrupted run of the same settings resumes from its last published frame
-    unless ``restart``. ``rrd``: also save a Rerun recording. ``layer``: ``True`` writes an
+    unless ``restart``. ``rrd``: also save a Rerun recording. ``layer``: ``"on"`` writes an
     override layer for the USD shot (the default for USD input: each garment becomes its fine
     animated mesh at its own prim, in the shot's units, axis and time codes; apply it to an
-    open stage with :func:`compose`, or open ``NAME.composed.usda`` written beside it), ``False`` a standalone stage (garments under ``/World/Garments``, colliders,
+    open stage with :func:`compose`, or open ``NAME.composed.usda`` written beside it), ``"off"`` a standalone stage (garments under ``/World/Garments``, colliders,
     metres, y up); a layered shot longer than ``clip_frames`` frames goes to value clips.
     ``publish_every_s``: seconds between publishing the files and the resume point while
     running (default 10; 0: every frame). ``progress(done, total)`` is
@@ -216,7 +234,7 @@ def run(
             restart=restart,
             ascii=ascii,
             rrd=_path(rrd),
-            layer={None: "auto", True: "on", False: "off"}[layer],
+            layer=_layer_word(layer),
             clip_frames=clip_frames,
             publish_every_s=publish_every_s,
             progress=progress,
@@ -232,11 +250,11 @@ def convert(
     *,
     avatar: Optional[PathLike] = None,
     colliders: Sequence[PathLike] = (),
-    fabric: str = "cotton",
+    fabric: Fabric = "cotton",
     fps: Optional[float] = None,
     frames: Optional[int] = None,
     ascii: bool = False,
-):
+) -> "Sdf.Layer":
     """Makes a USD scene with clothsr's schema from garments (GarmentCode JSON, OBJ, USD;
     several go onto one avatar) and colliders; returns its layer (``Sdf.Layer``). ``output``
     ``None`` returns an anonymous layer."""
@@ -258,7 +276,7 @@ def convert(
         return _open_layer(out, keep)
 
 
-def inspect(scene: Any, *, fabric: str = "cotton") -> Dict[str, Any]:
+def inspect(scene: Any, *, fabric: Fabric = "cotton") -> Dict[str, Any]:
     """What a garment, mesh or scene file (or an open ``Usd.Stage``) holds: garments (panels,
     seams, area, fabric), cloth meshes (vertices, triangles), colliders (frames), frame rate
     and range, as a dict."""
@@ -266,7 +284,7 @@ def inspect(scene: Any, *, fabric: str = "cotton") -> Dict[str, Any]:
         return _clothsr.inspect(os.fspath(path), fabric=fabric)
 
 
-def eval(
+def evaluate(
     prediction: PathLike,
     ground_truth: PathLike,
     *,
@@ -287,8 +305,8 @@ def fit(
     shot: Any,
     output: PathLike,
     *,
-    quality: str = "preview",
-    fabric: str = "cotton",
+    quality: Quality = "preview",
+    fabric: Fabric = "cotton",
     avatar: Optional[PathLike] = None,
     colliders: Sequence[PathLike] = (),
     frames: Optional[int] = None,

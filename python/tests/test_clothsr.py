@@ -157,7 +157,7 @@ def test_convert_and_inspect(tmp_path):
 def test_eval_measures_a_run_against_itself_as_zero(tmp_path):
     out = tmp_path / "out.usdc"
     clothsr.run(SAMPLE, out, frames=2)
-    e = clothsr.eval(out, out)
+    e = clothsr.evaluate(out, out)
     assert e["prediction"]["frames"] >= 2 and e["prediction"]["mean_mm"] == 0.0
 
 
@@ -186,13 +186,18 @@ def test_usd_shots_get_an_override_layer_and_standalone_on_request(tmp_path):
     specs = []
     layer.Traverse("/", lambda p: specs.append(str(p)) if p.IsPrimPath() else None)
     assert "/World/Colliders/sphere" not in specs and GARMENT in specs
-    # Sublayered over the shot, as a TD does: the garment is the fine mesh, the sphere is there.
+    # Composed over the shot: the garment is the fine mesh, the sphere is there.
     stage = Usd.Stage.Open(str(SAMPLE))
-    stage.GetSessionLayer().subLayerPaths.append(layer.identifier)
+    clothsr.compose(stage, layer)
     assert stage.GetPrimAtPath(GARMENT).GetTypeName() == "Mesh"
     assert stage.GetPrimAtPath("/World/Colliders/sphere").IsValid()
-    standalone = clothsr.run(SAMPLE, tmp_path / "standalone.usdc", frames=1, layer=False)
-    assert Usd.Stage.Open(standalone).GetPrimAtPath("/World/Colliders/sphere").IsValid()
+    # The CLI's words and booleans alike.
+    for off in (False, "off"):
+        standalone = clothsr.run(SAMPLE, tmp_path / "standalone.usdc", frames=1, layer=off)
+        assert Usd.Stage.Open(standalone).GetPrimAtPath("/World/Colliders/sphere").IsValid()
+    assert "clothsr:layerFor" in clothsr.run(SAMPLE, tmp_path / "on.usda", frames=1, layer="on").customLayerData
+    with pytest.raises(clothsr.UsageError, match="layer='of'"):
+        clothsr.run(SAMPLE, tmp_path / "bad.usda", frames=1, layer="of")
 
 
 def test_a_cancelled_run_into_value_clips_resumes_to_the_same_frames(tmp_path):
