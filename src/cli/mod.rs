@@ -149,12 +149,13 @@ pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBu
     Ok(output.to_path_buf())
 }
 
-/// Three numbers x,y,z from a comma-separated option; zero when absent.
-pub(crate) fn triple(v: &Option<Vec<f64>>) -> anyhow::Result<[f64; 3]> {
-    match v {
-        None => Ok([0.0; 3]),
-        Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
-        Some(v) => anyhow::bail!("expected three finite numbers x,y,z, got {v:?}"),
+/// Clap's parser of an `x,y,z` option: three finite numbers.
+pub(crate) fn triple(s: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+    match values[..] {
+        [x, y, z] if parts.len() == 3 && values.iter().all(|v| v.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("'{s}': expected three finite numbers x,y,z")),
     }
 }
 
@@ -199,11 +200,11 @@ impl SceneInputs {
 #[derive(Debug, Default, clap::Args)]
 pub(crate) struct VariationArgs {
     /// Variation: move the garments by x,y,z metres (e.g. a drop height).
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    garment_offset: Option<Vec<f64>>,
+    #[arg(long, value_parser = triple, allow_hyphen_values = true)]
+    garment_offset: Option<[f64; 3]>,
     /// Variation: move the colliders by x,y,z metres.
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    collider_offset: Option<Vec<f64>>,
+    #[arg(long, value_parser = triple, allow_hyphen_values = true)]
+    collider_offset: Option<[f64; 3]>,
     /// Variation: turn the garments about the vertical axis, degrees.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     garment_yaw_deg: f64,
@@ -222,8 +223,8 @@ impl VariationArgs {
             "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
         );
         Ok(clothsr::data::Variation {
-            garment_offset_m: triple(&self.garment_offset)?,
-            collider_offset_m: triple(&self.collider_offset)?,
+            garment_offset_m: self.garment_offset.unwrap_or_default(),
+            collider_offset_m: self.collider_offset.unwrap_or_default(),
             garment_yaw_deg: self.garment_yaw_deg,
             clip_start_s: self.clip_start_s,
         })

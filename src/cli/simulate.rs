@@ -32,8 +32,8 @@ pub struct Args {
     #[arg(long, default_value_t = 1.0)]
     collider_scale: f64,
     /// Offset (x,y,z metres) applied to the --collider files after scaling.
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
-    collider_offset: Option<Vec<f64>>,
+    #[arg(long, value_parser = super::triple, allow_hyphen_values = true)]
+    collider_offset: Option<[f64; 3]>,
     /// Avatar (USD, UsdSkel or point cache).
     #[arg(long)]
     avatar: Option<PathBuf>,
@@ -126,9 +126,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The scene with the extra colliders, the avatar and the time step given.
 fn load_scene(args: &Args) -> anyhow::Result<Scene> {
-    let [x, y, z] = super::triple(&args.collider_offset)
-        .map_err(|e| anyhow::anyhow!("--collider-offset: {e}"))?;
-    let offset = nalgebra::Vector3::new(x, y, z);
+    let offset = nalgebra::Vector3::from(args.collider_offset.unwrap_or_default());
     let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
     for c in &args.collider {
         scene.add_collider_file_transformed(c, args.collider_scale, offset)?;

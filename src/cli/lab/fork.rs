@@ -17,12 +17,11 @@ pub struct Args {
     /// Move the fine garment by x,y,z metres.
     #[arg(
         long,
-        value_delimiter = ',',
-        num_args = 1,
+        value_parser = crate::cli::triple,
         allow_hyphen_values = true,
         default_value = "0.0001,0,0"
     )]
-    offset: Vec<f64>,
+    offset: [f64; 3],
     /// Frames in all, the shared ones included (default: as many as the data set has).
     #[arg(long)]
     frames: Option<usize>,
@@ -33,7 +32,7 @@ pub struct Args {
 
 /// Runs `fork`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let offset = crate::cli::triple(&Some(args.offset))?;
+    let offset = args.offset;
     let source = clothsr::data::read_manifest(&args.data)?;
     let frames = args.frames.unwrap_or(source.frames_done);
     anyhow::ensure!(
