@@ -16,6 +16,7 @@ use clap::{Parser, Subcommand};
 use clothsr::garment::{Fabric, PRESET_NAMES};
 use clothsr::io::SceneFiles;
 use clothsr::pipeline::shot::RunSummary;
+use clothsr::pipeline::CoarseCalibration;
 use clothsr::ErrorKind;
 
 /// Super-resolution cloth animation: coarse simulation, learned correction, fine wrinkles.
@@ -126,7 +127,59 @@ pub(crate) fn error_kind(err: &anyhow::Error) -> ErrorKind {
     ErrorKind::Usage
 }
 
-pub(crate) use clothsr::sim::coarse::on_off;
+/// `on` or `off` (a value parser).
+pub(crate) fn on_off(v: &str) -> Result<bool, String> {
+    match v.trim() {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        t => Err(format!("{t}: 'on' or 'off'")),
+    }
+}
+
+/// The coarse model's settings on the command line (`--coarse-*`); each unset is the
+/// simulator's own. See [`CoarseCalibration`].
+#[derive(Debug, Clone, Copy, Default, clap::Args)]
+pub(crate) struct CoarseArgs {
+    /// The coarse membrane's stiffness under compression, as a factor in (0, 1] of its stretch
+    /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
+    /// in wrinkles.
+    #[arg(long = "coarse-compression", value_name = "FACTOR")]
+    compression: Option<f64>,
+    /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
+    /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none).
+    #[arg(long = "coarse-compression-knee", value_name = "SHORTENING")]
+    compression_knee: Option<f64>,
+    /// The coarse simulation's Coulomb friction coefficient against bodies, ≥ 0.
+    #[arg(long = "coarse-friction", value_name = "MU")]
+    friction: Option<f64>,
+    /// The wrinkle bending gain: extra bending stiffness where the coarse membrane is
+    /// shortened, up to this multiple of the fabric's, fading in as the cloth's mean speed
+    /// falls from 6 cm/s to rest (0: off).
+    #[arg(long = "coarse-wrinkle-bending", value_name = "GAIN")]
+    wrinkle_bending: Option<f64>,
+    /// The coarse hinges' bending stiffness as a factor of the fabric's, > 0 (1: the
+    /// fabric's).
+    #[arg(long = "coarse-bending", value_name = "FACTOR")]
+    bending: Option<f64>,
+    /// Whether coarse cloth edges meet the colliders' sharp edges, `on` or `off`; off, a 20 mm
+    /// edge may cut a table's corner as the downsampled fine cloth's do.
+    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = on_off)]
+    crease_contacts: Option<bool>,
+}
+
+impl CoarseArgs {
+    /// The settings given.
+    pub(crate) fn calibration(&self) -> CoarseCalibration {
+        CoarseCalibration {
+            compression: self.compression,
+            compression_knee: self.compression_knee,
+            friction: self.friction,
+            wrinkle_bending: self.wrinkle_bending,
+            bending: self.bending,
+            crease_contacts: self.crease_contacts,
+        }
+    }
+}
 
 /// The fabric named on the command line.
 pub(crate) fn fabric(name: &str) -> anyhow::Result<Fabric> {

@@ -131,7 +131,7 @@ pub struct Knobs {
     // The coarse model (unset: the corrector's, else the models folder's `coarse.json`'s, else
     // the simulator's; a corrector trained beside another is an error).
     #[command(flatten)]
-    coarse: CoarseCalibration,
+    coarse: super::CoarseArgs,
     /// Seconds between publishing the output and the resume point while running (0: every
     /// frame, as the fault tests kill runs).
     #[arg(long)]
@@ -156,7 +156,7 @@ impl Default for Knobs {
             no_dress: false,
             converged: false,
             self_collision: false,
-            coarse: CoarseCalibration::default(),
+            coarse: super::CoarseArgs::default(),
             no_push_out: false,
             publish_every_s: None,
         }
@@ -252,7 +252,7 @@ impl Knobs {
             dress: !self.no_dress,
             converged: self.converged,
             self_collision: self.self_collision,
-            coarse: self.coarse,
+            coarse: self.coarse.calibration(),
             push_out: !self.no_push_out,
             heat_max_m: self.heat_max_mm * 1e-3,
         })

@@ -11,53 +11,36 @@ use crate::error::{Error, Result};
 /// corrector, since the best coarse model differs from scene to scene; a corrector carries the
 /// one it was trained beside. `{"compression": 0.03}` sets the membrane's compression factor
 /// alone; likewise `compression_knee`, `friction`, `wrinkle_bending` (0: off), `bending` and
-/// `crease_contacts`. On a command line the same settings are the `--coarse-*` options
-/// (flatten this type); [`CoarseCalibration::apply`] sets a simulation up with them.
-#[derive(
-    Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize, clap::Args,
-)]
+/// `crease_contacts`. On the command line the same settings are the `--coarse-*` options;
+/// [`CoarseCalibration::apply`] sets a simulation up with them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoarseCalibration {
     /// The coarse membrane's stiffness under compression, as a factor in (0, 1] of its stretch
     /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
     /// in wrinkles.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[arg(long = "coarse-compression", value_name = "FACTOR")]
     pub compression: Option<f64>,
     /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
     /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[arg(long = "coarse-compression-knee", value_name = "SHORTENING")]
     pub compression_knee: Option<f64>,
     /// The coarse simulation's Coulomb friction coefficient against bodies, ≥ 0.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[arg(long = "coarse-friction", value_name = "MU")]
     pub friction: Option<f64>,
     /// The wrinkle bending gain: extra bending stiffness where the coarse membrane is
     /// shortened, up to this multiple of the fabric's, fading in as the cloth's mean speed
     /// falls from 6 cm/s to rest (0: off).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[arg(long = "coarse-wrinkle-bending", value_name = "GAIN")]
     pub wrinkle_bending: Option<f64>,
     /// The coarse hinges' bending stiffness as a factor of the fabric's, > 0 (1: the
     /// fabric's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[arg(long = "coarse-bending", value_name = "FACTOR")]
     pub bending: Option<f64>,
     /// Whether coarse cloth edges meet the colliders' sharp edges, `on` or `off`; off, a 20 mm
     /// edge may cut a table's corner as the downsampled fine cloth's do.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = on_off)]
     pub crease_contacts: Option<bool>,
-}
-
-/// `on` or `off` (a command-line value parser).
-pub fn on_off(v: &str) -> std::result::Result<bool, String> {
-    match v.trim() {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        t => Err(format!("{t}: 'on' or 'off'")),
-    }
 }
 
 /// A crease-contacts setting as `on` or `off` (`None`: on, the simulator's).

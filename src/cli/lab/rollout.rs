@@ -14,7 +14,6 @@ use clothsr::corrector::Corrector;
 use clothsr::data::{coarse_simulation, read_manifest};
 use clothsr::mesh::ClothMesh;
 use clothsr::scene::Scene;
-use clothsr::sim::coarse::CoarseCalibration;
 use nalgebra::Vector3;
 
 /// Arguments of `rollout`.
@@ -66,7 +65,7 @@ pub struct Args {
     // The coarse model of all three variants, in place of the one the corrector was trained
     // beside: to measure a corrector beside another coarse model without retraining it.
     #[command(flatten)]
-    coarse: CoarseCalibration,
+    coarse: crate::cli::CoarseArgs,
     /// Roll each data set out this many more times, each from its start moved rigidly by
     /// `--jitter-mm` along another horizontal direction (the ground truth unchanged), and pool
     /// all the runs: where contact and folds make the coarse sheet's path chaotic, one
@@ -97,9 +96,10 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
     if let Some(n) = args.smoothing {
         corrector.config.smoothing = n;
     }
-    args.coarse.check_flags().map_err(anyhow::Error::msg)?;
+    let given = args.coarse.calibration();
+    given.check_flags().map_err(anyhow::Error::msg)?;
     let t = &mut corrector.training;
-    if let Some(c) = args.coarse.replacing(&t.coarse) {
+    if let Some(c) = given.replacing(&t.coarse) {
         t.coarse = c;
     }
     Ok(corrector)

@@ -10,7 +10,6 @@ use clothsr::corrector::training::{
 };
 use clothsr::corrector::CorrectorConfig;
 use clothsr::data::coarse_simulation;
-use clothsr::sim::coarse::CoarseCalibration;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `train`.
@@ -170,7 +169,7 @@ pub struct CorrectorArgs {
     /// The decoder: `node` (the paper's: a free correction per vertex) or `gated` (a learned
     /// share of the simulator step's velocity change taken back, per-vertex terms only near
     /// colliders).
-    #[arg(long, value_enum, default_value = "gated")]
+    #[arg(long, default_value = "gated")]
     decoder: clothsr::corrector::model::Decoder,
     /// The gated decoder's tension limit at inference, saved with the model: the share of
     /// the step's velocity change taken back falls linearly to zero as the mean strain of a
@@ -215,7 +214,7 @@ pub struct CorrectorArgs {
     // The coarse model trained beside, saved with the model, which then runs with it
     // (unset: the `--init` model's, else the simulator's).
     #[command(flatten)]
-    coarse: CoarseCalibration,
+    coarse: crate::cli::CoarseArgs,
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
@@ -254,12 +253,10 @@ fn training_config(a: &CorrectorArgs) -> anyhow::Result<TrainingConfig> {
     // given here override its own.
     let init = init_config(a)?;
     let model = model_config(a, init.as_ref())?;
-    a.coarse.check_flags().map_err(anyhow::Error::msg)?;
+    let given = a.coarse.calibration();
+    given.check_flags().map_err(anyhow::Error::msg)?;
     let trained_beside = init.as_ref().map(|c| c.coarse).unwrap_or_default();
-    let coarse = a
-        .coarse
-        .replacing(&trained_beside)
-        .unwrap_or(trained_beside);
+    let coarse = given.replacing(&trained_beside).unwrap_or(trained_beside);
     let cfg = TrainingConfig::new(model)
         .with_steps(a.steps)
         .with_batch(a.batch)

@@ -108,7 +108,7 @@ impl Default for CorrectorConfig {
 }
 
 /// How the network's node latents become velocity corrections.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Decoder {
     /// The paper's: a node MLP, any correction anywhere.
@@ -117,6 +117,18 @@ pub enum Decoder {
     /// A per-vertex, per-axis share γ ∈ (0, 1)³ of the step's velocity change beyond gravity
     /// taken back, node terms only near colliders.
     Gated,
+}
+
+impl std::str::FromStr for Decoder {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim() {
+            "node" => Ok(Self::Node),
+            "gated" => Ok(Self::Gated),
+            t => Err(format!("{t}: 'node' or 'gated'")),
+        }
+    }
 }
 
 impl Decoder {
