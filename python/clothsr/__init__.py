@@ -23,7 +23,7 @@ import contextlib
 import os
 import pathlib
 import tempfile
-from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, Literal, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, List, Literal, Optional, Sequence, Tuple, Union
 
 from . import _clothsr
 from ._clothsr import BadInputError, Cancelled, ClothsrError, RunError, UsageError, __version__
@@ -81,7 +81,7 @@ def _is_stage(x: Any) -> bool:
     return type(x).__name__ == "Stage" and hasattr(x, "GetRootLayer")
 
 
-def _name_the_shot(layer, scene: Any) -> None:
+def _name_the_shot(layer: "Sdf.Layer", scene: Any) -> None:
     """An override layer made from an exported ``Usd.Stage`` names the stage's own root layer
     as its shot (none for an in-memory stage), not the temporary export; so does the composed
     shot beside it (none for an in-memory stage)."""
@@ -144,7 +144,7 @@ def _scene_path(scene: Any) -> Iterator[pathlib.Path]:
         yield path
 
 
-def _open_layer(path: pathlib.Path, keep: bool):
+def _open_layer(path: pathlib.Path, keep: bool) -> "Sdf.Layer":
     """The USD layer at ``path``: reloaded where this interpreter has it open already; when
     the file is temporary (``keep`` False), an anonymous copy."""
     from pxr import Sdf
@@ -173,7 +173,7 @@ def _path(x: Optional[PathLike]) -> Optional[str]:
     return os.fspath(x) if x is not None else None
 
 
-def _paths(xs: Sequence[PathLike]) -> list:
+def _paths(xs: Sequence[PathLike]) -> List[str]:
     return [os.fspath(x) for x in xs]
 
 

@@ -33,9 +33,11 @@ import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 from . import _clothsr
+
+PathLike = Union[str, "os.PathLike[str]"]
 
 #: Exit code of each kind of failure, as the ``clothsr`` command's.
 EXIT_CODES = {"usage": 2, "input": 3, "failure": 4}
@@ -44,7 +46,7 @@ EXIT_CODES = {"usage": 2, "input": 3, "failure": 4}
 RETRIES = 3
 
 
-def shot_output(scene: os.PathLike, out_dir: os.PathLike) -> pathlib.Path:
+def shot_output(scene: PathLike, out_dir: PathLike) -> pathlib.Path:
     """Where a shot's output goes: ``out_dir/<scene's stem>.usdc``, as ``clothsr run --out-dir``."""
     return pathlib.Path(out_dir) / (pathlib.Path(scene).stem + ".usdc")
 
@@ -154,7 +156,7 @@ class _Board:
 
 
 def _local(
-    jobs: List[tuple], options: Dict[str, Any], workers: int, cpus: int, board: _Board
+    jobs: List[Tuple[str, str]], options: Dict[str, Any], workers: int, cpus: int, board: _Board
 ) -> List[Dict[str, Any]]:
     """Each shot in a child process (`python -m clothsr.batch --one …`), `workers` at once."""
 
@@ -176,7 +178,7 @@ def _local(
             proc.wait()
             if summary is not None:
                 board.finish(k)
-                return summary
+                return dict(summary)
             print(
                 f"{scene}: its process ended ({proc.returncode}) with no result; "
                 + ("running it again" if attempt < RETRIES else "giving up"),
@@ -190,7 +192,7 @@ def _local(
         return list(pool.map(one, range(len(jobs))))
 
 
-def _connect(address: str, cpus: int, runtime_env: Optional[Dict[str, Any]]):
+def _connect(address: str, cpus: int, runtime_env: Optional[Dict[str, Any]]) -> Tuple[Any, Dict[str, Any]]:
     """Ray, connected to the cluster at `address` (or a local instance), and the runtime
     environment of tasks asking for `cpus` CPUs."""
     if address.rsplit(":", 1)[0] in ("127.0.0.1", "localhost"):
@@ -210,7 +212,7 @@ def _connect(address: str, cpus: int, runtime_env: Optional[Dict[str, Any]]):
 
 
 def _ray(
-    jobs: List[tuple],
+    jobs: List[Tuple[str, str]],
     options: Dict[str, Any],
     address: str,
     cpus: int,
@@ -229,11 +231,11 @@ def _ray(
         def update(self, k: int, done: int, total: int) -> None:
             self.done[k], self.total[k] = done, total
 
-        def get(self):
+        def get(self) -> Tuple[List[int], List[int]]:
             return self.done, self.total
 
-    @ray.remote(num_cpus=cpus, max_retries=RETRIES, runtime_env=env)
-    def shot_task(k: int, scene: str, output: str, options: Dict[str, Any], board) -> Dict[str, Any]:
+    @ray.remote(num_cpus=cpus, max_retries=RETRIES, runtime_env=env)  # type: ignore[untyped-decorator]
+    def shot_task(k: int, scene: str, output: str, options: Dict[str, Any], board: Any) -> Dict[str, Any]:
         last = [0.0]
 
         def progress(done: int, total: int) -> None:
@@ -244,7 +246,7 @@ def _ray(
 
         return run_one(scene, output, options, progress)
 
-    progress = Progress.remote(len(jobs))
+    progress = Progress.remote(len(jobs))  # type: ignore[attr-defined]
     refs = [shot_task.remote(k, s, o, options, progress) for k, (s, o) in enumerate(jobs)]
     index = {r: k for k, r in enumerate(refs)}
     results: List[Optional[Dict[str, Any]]] = [None] * len(jobs)
@@ -267,13 +269,13 @@ def _ray(
 
 
 def run_batch(
-    shots: Sequence[os.PathLike],
-    out_dir: os.PathLike,
+    shots: Sequence[PathLike],
+    out_dir: PathLike,
     *,
-    models: Optional[os.PathLike] = None,
+    models: Optional[PathLike] = None,
     frames: Optional[int] = None,
     fabric: str = "cotton",
-    avatar: Optional[os.PathLike] = None,
+    avatar: Optional[PathLike] = None,
     corrector: str = "auto",
     layer: Optional[bool] = None,
     publish_every_s: Optional[float] = None,
@@ -326,16 +328,16 @@ def run_batch(
 
 
 def fit(
-    shot: os.PathLike,
-    output: os.PathLike,
+    shot: PathLike,
+    output: PathLike,
     *,
     ray: Optional[str] = None,
     cpus_per_task: int = 1,
     runtime_env: Optional[Dict[str, Any]] = None,
     quality: str = "preview",
     fabric: str = "cotton",
-    avatar: Optional[os.PathLike] = None,
-    colliders: Sequence[os.PathLike] = (),
+    avatar: Optional[PathLike] = None,
+    colliders: Sequence[PathLike] = (),
     frames: Optional[int] = None,
     isr_steps: Optional[int] = None,
     from_scratch: bool = False,
@@ -380,7 +382,7 @@ def fit(
         return out
     ray_mod, env = _connect(ray, cpus_per_task, runtime_env)
 
-    @ray_mod.remote(num_cpus=cpus_per_task, max_retries=RETRIES, runtime_env=env)
+    @ray_mod.remote(num_cpus=cpus_per_task, max_retries=RETRIES, runtime_env=env)  # type: ignore[untyped-decorator]
     def fit_task(folder: str, task_id: str, *needs: str) -> str:
         _clothsr.fit_task(folder, task_id)
         return task_id
@@ -483,7 +485,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     with contextlib.redirect_stdout(sys.stderr):
         summary = _run_from_args(args)
     print(json.dumps(summary) if args.json else format_table(summary))
-    return summary["exit_code"]
+    return int(summary["exit_code"])
 
 
 def _run_from_args(args: argparse.Namespace) -> Dict[str, Any]:
