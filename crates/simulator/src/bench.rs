@@ -1,7 +1,7 @@
 //! The simulator's benchmark scene: a 1 m² cotton sheet dropped 2 cm above a sphere of radius
 //! 0.3 m, dt 1/300 s, one step a frame (`clothsr lab bench sim`, and
 //! `cargo run --release -p clothsr-sim --example bench` for the simulator alone). Newton 1.8's
-//! side of the comparison (`benches/newton_peer.py`) builds the same scene.
+//! side of the comparison (`tools/bench/newton_peer.py`) builds the same scene.
 
 use std::time::Instant;
 

@@ -1,6 +1,6 @@
 //! `clothsr lab bench sim`: the simulator's benchmark ([`clothsr::sim::bench`]: a 1 m² sheet
 //! dropped 2 cm above a sphere of radius 0.3 m, dt 1/300 s, at ~3K and ~40K vertices), side by
-//! side with Newton 1.8 on the same scene when `benches/setup-newton.sh` has been run.
+//! side with Newton 1.8 on the same scene when `tools/bench/setup-newton.sh` has been run.
 
 use std::path::Path;
 use std::process::Command;
@@ -175,10 +175,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// beside `ours` ((mode, vertices, ms per step) of each case).
 fn newton_peer(args: &Args, ours: &[(&str, usize, f64)]) -> anyhow::Result<()> {
     let root = clothsr::io::python::repo_root();
-    let python = root.join("benches/.venv-newton/bin/python");
-    let script = root.join("benches/newton_peer.py");
+    let python = root.join("tools/bench/.venv-newton/bin/python");
+    let script = root.join("tools/bench/newton_peer.py");
     if !python.exists() || !script.exists() {
-        println!("Newton 1.8 peer: not installed (run `bash benches/setup-newton.sh`)");
+        println!("Newton 1.8 peer: not installed (run `bash tools/bench/setup-newton.sh`)");
         return Ok(());
     }
     println!(

@@ -3,10 +3,10 @@ clothsr USD file imported by `newton.ModelBuilder.add_usd` with its vertex and t
 its mass (areal density × area), its stretch stiffness (the mean of clothsr's warp and weft) and
 its bending stiffness. Exits 1 on a mismatch.
 
-    bash benches/setup-newton.sh
-    benches/.venv-newton/bin/pip install 'newton[importers]==1.8.*'
+    bash tools/bench/setup-newton.sh
+    tools/bench/.venv-newton/bin/pip install 'newton[importers]==1.8.*'
     clothsr mesh samples/sheet_sphere.usda --edge-mm 20 -o out/sheet.usda
-    benches/.venv-newton/bin/python benches/newton_usd_import.py out/sheet.usda
+    tools/bench/.venv-newton/bin/python tools/bench/newton_usd_import.py out/sheet.usda
 """
 import sys
 import warnings

@@ -2,7 +2,7 @@
 node and of two (one CPU each, on 127.0.0.1), and on the local pool with one and two workers;
 shots per hour, and the overhead per task (the batch's wall time beyond its shots' own).
 
-    python benches/ray_throughput.py [FRAMES] [SHOTS]
+    python tools/bench/ray_throughput.py [FRAMES] [SHOTS]
 
 Each shot is a sample sheet (sphere, three balls, table, in turn) for FRAMES frames (30)
 with the generic models, SHOTS of them (4). Prints a Markdown table (docs/scaling.md).
@@ -20,7 +20,7 @@ os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 from clothsr import batch  # noqa: E402
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 SAMPLES = ["sheet_sphere", "sheet_three_balls", "sheet_table"]
 
 

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Create (or reuse) a private virtual environment for the Newton peer benchmark
-# (benches/newton_peer.py) and install Newton 1.8 with its CPU dependencies.
+# (tools/bench/newton_peer.py) and install Newton 1.8 with its CPU dependencies.
 #
-#   bash benches/setup-newton.sh            # idempotent; safe to re-run
-#   benches/.venv-newton/bin/python benches/newton_peer.py --res 3k,40k
+#   bash tools/bench/setup-newton.sh            # idempotent; safe to re-run
+#   tools/bench/.venv-newton/bin/python tools/bench/newton_peer.py --res 3k,40k
 #
-# Only PyPI is needed. The venv lives in benches/.venv-newton and carries its own
+# Only PyPI is needed. The venv lives in tools/bench/.venv-newton and carries its own
 # .gitignore ("*") so git never sees it. Override the interpreter with PYTHON=...
 set -euo pipefail
 

@@ -1,12 +1,12 @@
 """Writes a walk of any length from a UsdSkel avatar: its skeleton animation played forward,
 backward and forward again (a mirrored loop), as an override layer over the avatar.
 
-    python benches/pingpong_walk.py AVATAR.usda OUT.usdc FRAMES
+    python tools/bench/pingpong_walk.py AVATAR.usda OUT.usdc FRAMES
 
 The layer sublayers AVATAR (by a path relative to OUT) and authors, on each SkelAnimation,
 joint rotations and translations at time codes 0..FRAMES-1; time code t takes the source's
 sample at the triangle wave of t over the source's range. The long-run check
-(`benches/long_runs.sh`) walks the skirt sample on it.
+(`tools/bench/long_runs.sh`) walks the skirt sample on it.
 """
 
 import os

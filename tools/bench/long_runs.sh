@@ -1,22 +1,22 @@
 #!/usr/bin/env bash
 # Long runs: FRAMES (1,000) frames of the whole pipeline on each sample scene, each with its
 # shipped models (the generic ones for the sphere), the pencil skirt on the avatar's walk played
-# forward and back (benches/pingpong_walk.py); then `clothsr eval --pred` checks every output
+# forward and back (tools/bench/pingpong_walk.py); then `clothsr eval --pred` checks every output
 # frame: no point that is not finite, no fine vertex inside a body, the largest move of a
 # vertex in one frame. Peak memory (GNU time) beside each run.
 #
-#   CLOTHSR=path/to/clothsr OUT=DIR bash benches/long_runs.sh
+#   CLOTHSR=path/to/clothsr OUT=DIR bash tools/bench/long_runs.sh
 #
 # A killed run resumes where it stopped; a finished one is skipped. Results: DIR/summary.txt.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 BIN=${CLOTHSR:-clothsr}
 OUT=${OUT:-long_runs}
 FRAMES=${FRAMES:-1000}
 PY=${PYTHON:-.venv/bin/python}
 mkdir -p "$OUT"
 walk=$OUT/walk_pingpong_$FRAMES.usdc
-[ -f "$walk" ] || "$PY" benches/pingpong_walk.py tests/data/avatars/mh_walk_train.usda "$walk" "$FRAMES"
+[ -f "$walk" ] || "$PY" tools/bench/pingpong_walk.py tests/data/avatars/mh_walk_train.usda "$walk" "$FRAMES"
 
 long_run() { # NAME ARGS…
   local name=$1

@@ -49,10 +49,10 @@ Output
     its edges should have fallen below the start height; a warning is printed otherwise.
 
 How to run
-    bash benches/setup-newton.sh            # once: venv in benches/.venv-newton with newton 1.8
-    benches/.venv-newton/bin/python benches/newton_peer.py --res 3k,40k
-    benches/.venv-newton/bin/python benches/newton_peer.py --res 40k --solvers style3d --steps 10
-    benches/.venv-newton/bin/python benches/newton_peer.py --solvers style3d,xpbd,vbd \\
+    bash tools/bench/setup-newton.sh            # once: venv in tools/bench/.venv-newton with newton 1.8
+    tools/bench/.venv-newton/bin/python tools/bench/newton_peer.py --res 3k,40k
+    tools/bench/.venv-newton/bin/python tools/bench/newton_peer.py --res 40k --solvers style3d --steps 10
+    tools/bench/.venv-newton/bin/python tools/bench/newton_peer.py --solvers style3d,xpbd,vbd \\
         --json-out out/newton_peer.jsonl
 
 Options: --res 3k,40k (or a vertex count per side, e.g. 101), --steps N (timed, default 30),
