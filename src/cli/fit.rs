@@ -21,7 +21,7 @@ pub struct Args {
     #[arg(long, default_value = "preview")]
     quality: Quality,
     /// Coarse edge length, millimetres.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     /// Fine edge length, millimetres (the ISR network's pixel).
     #[arg(long, default_value_t = 2.5)]

@@ -15,7 +15,7 @@ pub struct Args {
     /// A GarmentCode JSON or a USD scene with pattern garments.
     input: PathBuf,
     /// Target edge length in millimetres (20 coarse, 2.5 fine).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
     edge_mm: f64,
     /// Output USD file (.usdc, .usd or .usda).
     #[arg(short, long)]

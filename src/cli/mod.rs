@@ -127,6 +127,9 @@ pub(crate) fn error_kind(err: &anyhow::Error) -> ErrorKind {
     ErrorKind::Usage
 }
 
+/// The coarse mesh's edge length, mm: the default of every `--edge-mm`/`--coarse-mm`.
+pub(crate) const COARSE_MM: f64 = clothsr::mesh::COARSE_EDGE_M * 1e3;
+
 /// `on` or `off` (a value parser).
 pub(crate) fn on_off(v: &str) -> Result<bool, String> {
     match v.trim() {

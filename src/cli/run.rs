@@ -114,7 +114,7 @@ pub struct Knobs {
     #[arg(long)]
     upsampled_out: Option<PathBuf>,
     /// Coarse edge length, millimetres.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     #[command(flatten)]
     variation: super::VariationArgs,
@@ -151,7 +151,7 @@ impl Default for Knobs {
             heat_max_mm: 5.0,
             coarse_out: None,
             upsampled_out: None,
-            coarse_mm: 20.0,
+            coarse_mm: crate::cli::COARSE_MM,
             variation: super::VariationArgs::default(),
             no_dress: false,
             converged: false,

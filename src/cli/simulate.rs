@@ -17,7 +17,7 @@ pub struct Args {
     /// Scene: USD (garments, colliders, solver), GarmentCode JSON or OBJ cloth.
     scene: PathBuf,
     /// Cloth edge length for sewing patterns, millimetres.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
     edge_mm: f64,
     /// Frames to simulate (default: the scene's frame range).
     #[arg(long)]

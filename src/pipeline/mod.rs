@@ -61,7 +61,7 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Options {
         Options {
-            coarse_edge_m: 0.02,
+            coarse_edge_m: crate::mesh::COARSE_EDGE_M,
             fast: true,
             self_collision: false,
             match_contact_thickness: true,

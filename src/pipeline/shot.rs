@@ -41,7 +41,7 @@ pub struct RunSettings {
 impl Default for RunSettings {
     fn default() -> Self {
         RunSettings {
-            coarse_edge_m: 0.02,
+            coarse_edge_m: crate::mesh::COARSE_EDGE_M,
             variation: Variation::default(),
             dress: true,
             converged: false,

@@ -20,7 +20,7 @@ pub const WARM_UP_STEPS: usize = 20;
 /// The edge length that gives the bench's sheet about `verts` vertices, m (1 m² of pattern
 /// holds about 2,950 vertices at 20 mm edges, scaling with 1/h²).
 pub fn edge_for_vertices(verts: f64) -> f64 {
-    0.020 * (2950.0 / verts).sqrt()
+    clothsr_geometry::mesh::COARSE_EDGE_M * (2950.0 / verts).sqrt()
 }
 
 /// An approximate vertex count as the bench takes it: `3k`, `40k` or a plain number (`None`

@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long)]
     ladder_own_thickness_only: bool,
     /// Coarse edge length for dressing garments with seams, millimetres.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     #[command(flatten)]
     inputs: crate::cli::SceneInputs,

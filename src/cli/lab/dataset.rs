@@ -17,7 +17,7 @@ pub struct Args {
     #[arg(short, long)]
     output: PathBuf,
     /// Coarse edge length, millimetres.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     /// Fine edge length, millimetres (the ground truth).
     #[arg(long, default_value_t = 2.5)]
