@@ -333,3 +333,25 @@ fn a_bad_triple_flag_is_refused_by_name_not_a_panic() {
         assert!(!dir.path().join("out.usda").exists(), "{v}");
     }
 }
+
+#[test]
+fn an_unknown_fabric_is_refused_naming_the_presets() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
+    for command in ["simulate", "convert"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_clothsr"))
+            .arg(command)
+            .arg(&scene)
+            .args(["--fabric", "kevlar", "-o"])
+            .arg(dir.path().join("out.usda"))
+            .output()
+            .expect("run clothsr");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{command}: {stderr}");
+        assert!(
+            stderr.contains("unknown fabric 'kevlar' (known: silk, cotton, denim, leather)"),
+            "{command}: {stderr}"
+        );
+        assert!(!dir.path().join("out.usda").exists(), "{command}");
+    }
+}

@@ -26,7 +26,7 @@ pub struct Args {
     avatar: Option<PathBuf>,
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
-    fabric: String,
+    fabric: clothsr::garment::FabricPreset,
     /// Frames per second of the scene (OBJ sequences are read at this rate).
     #[arg(long)]
     fps: Option<f64>,
@@ -40,7 +40,7 @@ pub struct Args {
 
 /// Runs `convert`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let fabric = super::fabric(&args.fabric)?;
+    let fabric = args.fabric.fabric();
     for input in &args.inputs {
         super::check_output(input, &args.output)?;
     }

@@ -22,7 +22,7 @@ pub struct Args {
     output: PathBuf,
     /// Fabric preset for GarmentCode input.
     #[arg(long, default_value = "cotton")]
-    fabric: String,
+    fabric: clothsr::garment::FabricPreset,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -37,7 +37,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.edge_mm
         );
     }
-    let scene = Scene::load(&args.input, &super::fabric(&args.fabric)?)?;
+    let scene = Scene::load(&args.input, &args.fabric.fabric())?;
     if scene.garments.is_empty() {
         bail!("{}: no sewing pattern to mesh", args.input.display());
     }

@@ -11,9 +11,9 @@ mod simulate;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use clap::{Parser, Subcommand};
-use clothsr::garment::{Fabric, PRESET_NAMES};
+use clothsr::garment::FabricPreset;
 use clothsr::io::SceneFiles;
 use clothsr::pipeline::shot::RunSummary;
 use clothsr::pipeline::CoarseCalibration;
@@ -184,16 +184,6 @@ impl CoarseArgs {
     }
 }
 
-/// The fabric named on the command line.
-pub(crate) fn fabric(name: &str) -> anyhow::Result<Fabric> {
-    Fabric::preset(name).with_context(|| {
-        format!(
-            "unknown fabric '{name}' (known: {})",
-            PRESET_NAMES.join(", ")
-        )
-    })
-}
-
 /// Checks the output before any work: a USD extension, and not the input file itself.
 pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBuf> {
     clothsr::io::usd::check_extension(output)?;
@@ -226,7 +216,7 @@ pub(crate) struct SceneInputs {
     pub(crate) avatar: Option<PathBuf>,
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
-    pub(crate) fabric: String,
+    pub(crate) fabric: FabricPreset,
 }
 
 impl SceneInputs {
@@ -236,14 +226,14 @@ impl SceneInputs {
             scene: path.to_path_buf(),
             colliders: self.collider.clone(),
             avatar: self.avatar.clone(),
-            fabric: self.fabric.clone(),
+            fabric: self.fabric.name().to_string(),
         }
     }
 
     /// The scene file `path` with this fabric for what has none, these colliders and this
     /// avatar.
     pub(crate) fn load(&self, path: &Path) -> anyhow::Result<clothsr::scene::Scene> {
-        let mut scene = clothsr::scene::Scene::load(path, &fabric(&self.fabric)?)?;
+        let mut scene = clothsr::scene::Scene::load(path, &self.fabric.fabric())?;
         for c in self.collider.iter().chain(&self.avatar) {
             scene.add_collider_file(c)?;
         }

@@ -39,7 +39,7 @@ pub struct Args {
     avatar: Option<PathBuf>,
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
-    fabric: String,
+    fabric: clothsr::garment::FabricPreset,
     /// Time step in seconds (default: the scene's, else 1/300).
     #[arg(long)]
     dt: Option<f64>,
@@ -127,7 +127,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The scene with the extra colliders, the avatar and the time step given.
 fn load_scene(args: &Args) -> anyhow::Result<Scene> {
     let offset = nalgebra::Vector3::from(args.collider_offset.unwrap_or_default());
-    let mut scene = Scene::load(&args.scene, &super::fabric(&args.fabric)?)?;
+    let mut scene = Scene::load(&args.scene, &args.fabric.fabric())?;
     for c in &args.collider {
         scene.add_collider_file_transformed(c, args.collider_scale, offset)?;
     }

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 
 use clothsr::data::SceneSource;
-use clothsr::garment::{Fabric, PRESET_NAMES};
+use clothsr::garment::{Fabric, FabricPreset};
 use clothsr::io::scene_files::{convert as convert_scene, Convert};
 use clothsr::io::SceneFiles;
 use clothsr::pipeline::shot::{run_shot, RunModels, RunSettings, ShotFiles};
@@ -71,12 +71,9 @@ fn usage(message: String) -> PyErr {
 }
 
 fn fabric(name: &str) -> PyResult<Fabric> {
-    Fabric::preset(name).ok_or_else(|| {
-        UsageError::new_err(format!(
-            "unknown fabric '{name}' (known: {})",
-            PRESET_NAMES.join(", ")
-        ))
-    })
+    name.parse::<FabricPreset>()
+        .map(Fabric::from)
+        .map_err(|e| UsageError::new_err(e.to_string()))
 }
 
 /// A progress callback shared with the worker: it is called with the GIL taken; returning

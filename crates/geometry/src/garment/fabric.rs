@@ -27,11 +27,36 @@ pub struct Fabric {
     pub damping_s: f64,
 }
 
-/// Names accepted by [`Fabric::preset`].
-pub const PRESET_NAMES: [&str; 4] = ["silk", "cotton", "denim", "leather"];
+/// clothsr's fabric presets, by name (`silk`, `cotton`, `denim`, `leather`; parsed
+/// case-insensitively).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum FabricPreset {
+    /// Silk charmeuse.
+    Silk,
+    /// Cotton shirting.
+    #[default]
+    Cotton,
+    /// Denim.
+    Denim,
+    /// Garment leather.
+    Leather,
+}
 
-impl Fabric {
-    /// A named preset (`silk`, `cotton`, `denim`, `leather`), case-insensitive.
+impl FabricPreset {
+    /// Every preset, lightest first.
+    pub const ALL: [FabricPreset; 4] = [Self::Silk, Self::Cotton, Self::Denim, Self::Leather];
+
+    /// Its name, as parsed.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Silk => "silk",
+            Self::Cotton => "cotton",
+            Self::Denim => "denim",
+            Self::Leather => "leather",
+        }
+    }
+
+    /// The fabric.
     ///
     /// Sources for the numbers:
     /// - Areal densities are the middle of the usual trade weights: silk charmeuse 60–90 g/m²,
@@ -46,17 +71,15 @@ impl Fabric {
     ///   implicit Euler at dt = 1/300 s stays well conditioned, as in Wang et al. 2011,
     ///   "Data-driven elastic models for cloth" (ACM TOG 30(4)), whose measured fabrics span
     ///   10²–10⁴ N/m.
-    pub fn preset(name: &str) -> Option<Fabric> {
-        let lower = name.to_ascii_lowercase();
-        let (density, warp, weft, shear, bending, thickness, damping) = match lower.as_str() {
-            "silk" => (0.075, 800.0, 600.0, 40.0, 2.0e-6, 0.15e-3, 2.0e-4),
-            "cotton" => (0.13, 2500.0, 1800.0, 100.0, 1.0e-5, 0.35e-3, 2.0e-4),
-            "denim" => (0.42, 6000.0, 4500.0, 400.0, 7.0e-5, 0.8e-3, 3.0e-4),
-            "leather" => (0.75, 9000.0, 8000.0, 2500.0, 5.0e-4, 1.1e-3, 5.0e-4),
-            _ => return None,
+    pub fn fabric(self) -> Fabric {
+        let (density, warp, weft, shear, bending, thickness, damping) = match self {
+            Self::Silk => (0.075, 800.0, 600.0, 40.0, 2.0e-6, 0.15e-3, 2.0e-4),
+            Self::Cotton => (0.13, 2500.0, 1800.0, 100.0, 1.0e-5, 0.35e-3, 2.0e-4),
+            Self::Denim => (0.42, 6000.0, 4500.0, 400.0, 7.0e-5, 0.8e-3, 3.0e-4),
+            Self::Leather => (0.75, 9000.0, 8000.0, 2500.0, 5.0e-4, 1.1e-3, 5.0e-4),
         };
-        Some(Fabric {
-            name: lower,
+        Fabric {
+            name: self.name().to_string(),
             areal_density_kg_m2: density,
             stretch_warp_n_m: warp,
             stretch_weft_n_m: weft,
@@ -64,7 +87,55 @@ impl Fabric {
             bending_n_m: bending,
             thickness_m: thickness,
             damping_s: damping,
-        })
+        }
+    }
+}
+
+impl std::fmt::Display for FabricPreset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A fabric name that is no preset.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownFabric(pub String);
+
+impl std::fmt::Display for UnknownFabric {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let known: Vec<&str> = FabricPreset::ALL.iter().map(|p| p.name()).collect();
+        write!(
+            f,
+            "unknown fabric '{}' (known: {})",
+            self.0,
+            known.join(", ")
+        )
+    }
+}
+
+impl std::error::Error for UnknownFabric {}
+
+impl std::str::FromStr for FabricPreset {
+    type Err = UnknownFabric;
+
+    fn from_str(s: &str) -> Result<Self, UnknownFabric> {
+        FabricPreset::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| UnknownFabric(s.to_string()))
+    }
+}
+
+impl From<FabricPreset> for Fabric {
+    fn from(p: FabricPreset) -> Fabric {
+        p.fabric()
+    }
+}
+
+impl Fabric {
+    /// The preset named `name` ([`FabricPreset`]), case-insensitive.
+    pub fn preset(name: &str) -> Option<Fabric> {
+        name.parse::<FabricPreset>().ok().map(FabricPreset::fabric)
     }
 
     /// Checks every parameter is finite and positive (damping may be zero).
@@ -97,17 +168,7 @@ impl Fabric {
 
 impl Default for Fabric {
     fn default() -> Self {
-        // "cotton" is always a valid preset name.
-        Fabric::preset("cotton").unwrap_or(Fabric {
-            name: "cotton".into(),
-            areal_density_kg_m2: 0.13,
-            stretch_warp_n_m: 2500.0,
-            stretch_weft_n_m: 1800.0,
-            shear_n_m: 100.0,
-            bending_n_m: 1.0e-5,
-            thickness_m: 0.35e-3,
-            damping_s: 2.0e-4,
-        })
+        FabricPreset::default().fabric()
     }
 }
 
@@ -117,9 +178,9 @@ mod tests {
 
     #[test]
     fn presets_are_valid_and_ordered_by_weight() {
-        let f: Vec<Fabric> = PRESET_NAMES
+        let f: Vec<Fabric> = FabricPreset::ALL
             .iter()
-            .map(|n| Fabric::preset(n).expect("preset"))
+            .map(|p| Fabric::preset(p.name()).expect("preset"))
             .collect();
         for x in &f {
             x.validate().expect("valid preset");
@@ -130,5 +191,12 @@ mod tests {
         }
         assert!(Fabric::preset("SILK").is_some());
         assert!(Fabric::preset("kevlar").is_none());
+        let err = "kevlar".parse::<FabricPreset>().expect_err("no preset");
+        assert_eq!(
+            err.to_string(),
+            "unknown fabric 'kevlar' (known: silk, cotton, denim, leather)"
+        );
+        assert_eq!(" Denim".parse(), Ok(FabricPreset::Denim));
+        assert_eq!(Fabric::default().name, "cotton");
     }
 }

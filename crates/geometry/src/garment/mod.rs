@@ -6,7 +6,7 @@ mod fabric;
 pub mod garmentcode;
 
 pub use curve::Curve;
-pub use fabric::{Fabric, PRESET_NAMES};
+pub use fabric::{Fabric, FabricPreset, UnknownFabric};
 
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 
