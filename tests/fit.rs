@@ -156,7 +156,7 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     let m = clothsr::pipeline::ModelsManifest::load(&a)
         .expect("models.json")
         .expect("written");
-    let f = m.paths["coarse_alone"];
+    let f = m.paths[&clothsr::pipeline::ModelPath::CoarseAlone];
     let base = f.baseline_mm.expect("baseline");
     assert!(f.fine_error_mm > 0.0 && base > 0.0, "{f:?}");
     assert!(

@@ -693,11 +693,11 @@ fn the_run_takes_the_better_validated_path_of_a_models_folder() {
     // Refused, naming the file: a best that is not a path, a negative figure, an unknown
     // path, another format version, a corrector's figures in a folder without one.
     for (text, says) in [
-        (manifest("isr", 2.0), "best"),
+        (manifest("isr", 2.0), "unknown variant `isr`"),
         (manifest("corrector", -1.0), "finite"),
         (
             manifest("corrector", 2.0).replace("\"coarse_alone\"", "\"coarse\""),
-            "unknown path",
+            "unknown variant `coarse`",
         ),
         (
             manifest("corrector", 2.0).replace("\"format_version\": 1", "\"format_version\": 7"),
@@ -727,10 +727,6 @@ fn the_run_takes_the_better_validated_path_of_a_models_folder() {
         let m = ModelsManifest::load(&root.join(folder))
             .expect("valid")
             .expect("every shipped folder has a models.json");
-        assert_eq!(
-            auto(&root.join(folder)).expect("auto"),
-            m.best(),
-            "{folder}"
-        );
+        assert_eq!(auto(&root.join(folder)).expect("auto"), m.best, "{folder}");
     }
 }

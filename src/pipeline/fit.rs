@@ -838,14 +838,14 @@ fn write_manifest(plan: &Plan, dir: &Path, rows: &[HeldOut]) -> Result<()> {
             plan.frames
         ),
         paths: [(
-            super::ModelPath::CoarseAlone.key().to_string(),
+            super::ModelPath::CoarseAlone,
             super::models::PathFigures {
                 fine_error_mm: round3(mean(|p| p.0)),
                 baseline_mm: Some(round3(mean(|p| p.1))),
             },
         )]
         .into(),
-        best: super::ModelPath::CoarseAlone.key().to_string(),
+        best: super::ModelPath::CoarseAlone,
     };
     let json =
         serde_json::to_string_pretty(&manifest).map_err(|e| Error::Invalid(e.to_string()))?;

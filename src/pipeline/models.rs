@@ -60,7 +60,7 @@ pub fn choose_path(models: &Path, choice: CorrectorChoice) -> Result<(ModelPath,
     let manifest = ModelsManifest::load(models)?;
     let corrector = has_corrector(models);
     let figures = |p: ModelPath| -> String {
-        match manifest.as_ref().and_then(|m| m.paths.get(p.key())) {
+        match manifest.as_ref().and_then(|m| m.paths.get(&p)) {
             Some(f) => format!(
                 "; validated at {:.2} mm from the fine simulation on {}",
                 f.fine_error_mm,
@@ -97,14 +97,14 @@ pub fn choose_path(models: &Path, choice: CorrectorChoice) -> Result<(ModelPath,
                 format!("the folder has a corrector and no {}", ModelsManifest::FILE),
             ),
             Some(m) => {
-                let best = m.best();
+                let best = m.best;
                 let other = match best {
                     ModelPath::Corrector => ModelPath::CoarseAlone,
                     ModelPath::CoarseAlone => ModelPath::Corrector,
                 };
                 let against = m
                     .paths
-                    .get(other.key())
+                    .get(&other)
                     .map(|f| format!(", against {:.2} mm for {other}", f.fine_error_mm))
                     .unwrap_or_default();
                 (

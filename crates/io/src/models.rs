@@ -38,8 +38,9 @@ impl FromStr for CorrectorChoice {
     }
 }
 
-/// A path through a models folder.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A path through a models folder; in `models.json`, `corrector` or `coarse_alone`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum ModelPath {
     /// The corrector interleaved with the coarse simulation (the paper's Fig. 2).
     Corrector,
@@ -54,12 +55,6 @@ impl ModelPath {
             Self::Corrector => "corrector",
             Self::CoarseAlone => "coarse_alone",
         }
-    }
-
-    fn from_key(key: &str) -> Option<Self> {
-        [Self::Corrector, Self::CoarseAlone]
-            .into_iter()
-            .find(|p| p.key() == key)
     }
 }
 
@@ -96,10 +91,10 @@ pub struct ModelsManifest {
     pub held_out: String,
     /// What was measured, and with which command.
     pub protocol: String,
-    /// Figures per path, by [`ModelPath::key`].
-    pub paths: BTreeMap<String, PathFigures>,
-    /// The key of the better path.
-    pub best: String,
+    /// Figures per path.
+    pub paths: BTreeMap<ModelPath, PathFigures>,
+    /// The better path.
+    pub best: ModelPath,
 }
 
 impl ModelsManifest {
@@ -121,8 +116,24 @@ impl ModelsManifest {
     /// The manifest in `models.json` text (errors name `path`), checked against a folder that
     /// has a corrector or not.
     pub fn parse(text: &str, path: &Path, corrector: bool) -> Result<ModelsManifest> {
-        let m: ModelsManifest = serde_json::from_str(text)
-            .map_err(|e| Error::bad_input(path, format!("not a models manifest: {e}")))?;
+        let not =
+            |e: serde_json::Error| Error::bad_input(path, format!("not a models manifest: {e}"));
+        // The version first: another version's fields may not parse as this one's.
+        let value: serde_json::Value = serde_json::from_str(text).map_err(not)?;
+        let version = value
+            .get("format_version")
+            .and_then(serde_json::Value::as_u64);
+        if version != Some(u64::from(Self::FORMAT_VERSION)) {
+            return Err(Error::bad_input(
+                path,
+                format!(
+                    "format_version {} (this build reads {})",
+                    version.map_or("missing".to_string(), |v| v.to_string()),
+                    Self::FORMAT_VERSION
+                ),
+            ));
+        }
+        let m: ModelsManifest = serde_json::from_value(value).map_err(not)?;
         m.check(corrector)
             .map_err(|msg| Error::bad_input(path, msg))?;
         Ok(m)
@@ -131,17 +142,8 @@ impl ModelsManifest {
     /// Why this manifest does not describe a folder that has a corrector (`corrector`) or
     /// not, if it does not.
     fn check(&self, corrector: bool) -> std::result::Result<(), String> {
-        if self.format_version != Self::FORMAT_VERSION {
-            return Err(format!(
-                "format_version {} (this build reads {})",
-                self.format_version,
-                Self::FORMAT_VERSION
-            ));
-        }
-        for (key, f) in &self.paths {
-            let path = ModelPath::from_key(key).ok_or_else(|| {
-                format!("paths.{key}: unknown path (known: corrector, coarse_alone)")
-            })?;
+        for (&path, f) in &self.paths {
+            let key = path.key();
             let ok = |x: f64| x.is_finite() && x >= 0.0;
             if !ok(f.fine_error_mm) || f.baseline_mm.is_some_and(|b| !ok(b)) {
                 return Err(format!("paths.{key}: figures must be finite and ≥ 0"));
@@ -151,14 +153,12 @@ impl ModelsManifest {
             }
         }
         if !self.paths.contains_key(&self.best) {
-            return Err(format!("best: '{}' is not one of its paths", self.best));
+            return Err(format!(
+                "best: '{}' is not one of its paths",
+                self.best.key()
+            ));
         }
         Ok(())
-    }
-
-    /// The path it validated as better.
-    pub fn best(&self) -> ModelPath {
-        ModelPath::from_key(&self.best).unwrap_or(ModelPath::CoarseAlone)
     }
 }
 
