@@ -1069,17 +1069,27 @@ fn a_batch_goes_on_past_a_bad_shot_and_summarises_it_in_json() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    use clothsr::pipeline::shot::Status;
+    // The JSON's words, as a farm's script reads them.
+    let text = String::from_utf8_lossy(&out.stdout);
+    for word in [
+        r#""status":"failed""#,
+        r#""status":"ok""#,
+        r#""kind":"input""#,
+    ] {
+        assert!(text.contains(word), "{word} in {text}");
+    }
     let summary: clothsr::pipeline::shot::RunSummary =
         serde_json::from_slice(&out.stdout).expect("one JSON summary on stdout");
-    assert_eq!((summary.status.as_str(), summary.exit_code), ("failed", 3));
+    assert_eq!((summary.status, summary.exit_code), (Status::Failed, 3));
     assert_eq!(summary.shots.len(), 2);
     let (first, second) = (&summary.shots[0], &summary.shots[1]);
-    assert_eq!(first.status, "failed");
+    assert_eq!(first.status, Status::Failed);
     let error = first.error.as_ref().expect("the first shot's error");
-    assert_eq!(error.kind, "input");
+    assert_eq!(error.kind, clothsr::ErrorKind::Input);
     assert!(error.message.contains("broken.usda"), "{}", error.message);
     assert!(!dir.path().join("broken.usdc").exists());
-    assert_eq!((second.status.as_str(), second.frames_computed), ("ok", 1));
+    assert_eq!((second.status, second.frames_computed), (Status::Ok, 1));
     assert!(dir.path().join("sheet_sphere.usdc").exists());
     // Bad usage before any shot: exit code 2, and the summary says so.
     let out = clothsr()
@@ -1092,7 +1102,10 @@ fn a_batch_goes_on_past_a_bad_shot_and_summarises_it_in_json() {
     assert_eq!(out.status.code(), Some(2));
     let summary: clothsr::pipeline::shot::RunSummary =
         serde_json::from_slice(&out.stdout).expect("JSON");
-    assert_eq!(summary.error.expect("an error").kind, "usage");
+    assert_eq!(
+        summary.error.expect("an error").kind,
+        clothsr::ErrorKind::Usage
+    );
 }
 
 /// A garment is dressed once per shot: a later run of it starts from the dressed state kept

@@ -373,8 +373,9 @@ fn a_batch_goes_on_past_a_shot_that_crashes_a_native_library() {
     );
     let summary: clothsr::pipeline::shot::RunSummary =
         serde_json::from_slice(&res.stdout).expect("the JSON summary");
-    let status: Vec<&str> = summary.shots.iter().map(|s| s.status.as_str()).collect();
-    assert_eq!(status, ["ok", "failed", "ok"], "{err}");
+    use clothsr::pipeline::shot::Status;
+    let status: Vec<Status> = summary.shots.iter().map(|s| s.status).collect();
+    assert_eq!(status, [Status::Ok, Status::Failed, Status::Ok], "{err}");
     assert_ne!(summary.exit_code, 0);
     assert_eq!(res.status.code(), Some(summary.exit_code));
     let message = &summary.shots[1].error.as_ref().expect("an error").message;

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clothsr::pipeline::shot::{
     run_shot, ErrorSummary, OutputKind, RunModels, RunSettings, RunSummary, ShotFiles, ShotSummary,
-    DEFAULT_CLIP_FRAMES,
+    Status, DEFAULT_CLIP_FRAMES,
 };
 use clothsr::pipeline::{CoarseCalibration, CorrectorChoice, Progress, Report};
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -314,22 +314,21 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
             }
         });
         let (status, report, error) = match outcome {
-            Ok(r) => ("ok", Some(r), None),
+            Ok(r) => (Status::Ok, Some(r), None),
             Err(err) => {
                 // A batch goes on: the error is reported here and in the summary.
                 eprintln!("error: {err:#}");
-                let kind = super::error_kind(&err);
                 let error = ErrorSummary {
-                    kind: kind.name().into(),
+                    kind: super::error_kind(&err),
                     message: format!("{err:#}"),
                 };
-                ("failed", None, Some(error))
+                (Status::Failed, None, Some(error))
             }
         };
         shots.push(ShotSummary {
             scene: job.scene.clone(),
             output: job.output.clone(),
-            status: status.into(),
+            status,
             frames_computed: report.map_or(0, |r| r.frames_computed),
             resumed_after: report.and_then(|r| r.resumed_after),
             wall_s: t0.elapsed().as_secs_f64(),
@@ -380,7 +379,7 @@ fn run_isolated(jobs: &[Job]) -> anyhow::Result<RunSummary> {
         let failed = |error: ErrorSummary| ShotSummary {
             scene: job.scene.clone(),
             output: job.output.clone(),
-            status: "failed".into(),
+            status: Status::Failed,
             frames_computed: 0,
             resumed_after: None,
             wall_s: t0.elapsed().as_secs_f64(),
@@ -399,7 +398,7 @@ fn run_isolated(jobs: &[Job]) -> anyhow::Result<RunSummary> {
                 );
                 eprintln!("error: {message}");
                 failed(ErrorSummary {
-                    kind: clothsr::ErrorKind::Failure.name().into(),
+                    kind: clothsr::ErrorKind::Failure,
                     message,
                 })
             }

@@ -360,8 +360,8 @@ pub struct ShotSummary {
     pub scene: PathBuf,
     /// Its output.
     pub output: PathBuf,
-    /// `ok` or `failed`.
-    pub status: String,
+    /// Whether it went through.
+    pub status: Status,
     /// Frames computed in this call.
     pub frames_computed: usize,
     /// The frame a resumed run started after.
@@ -375,17 +375,27 @@ pub struct ShotSummary {
 /// An error in a summary: its kind (`usage`, `input`, `failure`) and its message.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorSummary {
-    /// `usage`, `input` or `failure` ([`crate::ErrorKind::name`]).
-    pub kind: String,
+    /// Its kind: `usage`, `input` or `failure` in JSON.
+    pub kind: crate::ErrorKind,
     /// The message, with its causes.
     pub message: String,
+}
+
+/// Whether a shot, or a whole run, went through: `ok` or `failed` in JSON.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    /// Done.
+    Ok,
+    /// Failed (the summary's error says why).
+    Failed,
 }
 
 /// What a run or a batch did, as `clothsr run --json` prints it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RunSummary {
-    /// `ok`, or `failed` when any shot (or the run before any shot) failed.
-    pub status: String,
+    /// Failed when any shot (or the run before any shot) failed.
+    pub status: Status,
     /// The exit code: 0, or the code of the most severe failure ([`crate::ErrorKind::exit_code`]).
     pub exit_code: i32,
     /// An error before any shot ran (bad usage, a models folder that does not load).
@@ -397,25 +407,20 @@ pub struct RunSummary {
 impl RunSummary {
     /// The summary of `shots`, with `error` before any shot when there was one.
     pub fn of(shots: Vec<ShotSummary>, error: Option<(crate::ErrorKind, String)>) -> RunSummary {
-        use crate::ErrorKind;
-        let kind_of = |name: &str| match name {
-            "usage" => ErrorKind::Usage,
-            "input" => ErrorKind::Input,
-            _ => ErrorKind::Failure,
-        };
-        let mut kinds: Vec<ErrorKind> = shots
+        let mut kinds: Vec<crate::ErrorKind> = shots
             .iter()
-            .filter_map(|s| s.error.as_ref().map(|e| kind_of(&e.kind)))
+            .filter_map(|s| s.error.as_ref().map(|e| e.kind))
             .collect();
         kinds.extend(error.as_ref().map(|(k, _)| *k));
         let exit_code = kinds.iter().map(|k| k.exit_code()).max().unwrap_or(0);
         RunSummary {
-            status: if exit_code == 0 { "ok" } else { "failed" }.into(),
+            status: if exit_code == 0 {
+                Status::Ok
+            } else {
+                Status::Failed
+            },
             exit_code,
-            error: error.map(|(k, message)| ErrorSummary {
-                kind: k.name().into(),
-                message,
-            }),
+            error: error.map(|(kind, message)| ErrorSummary { kind, message }),
             shots,
         }
     }

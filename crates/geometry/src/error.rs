@@ -43,8 +43,12 @@ pub enum Error {
 }
 
 /// What kind of failure an [`Error`] is, for whoever acts on it: a farm reads it as the exit
-/// code of the `clothsr` command, the Python package as the exception type.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// code of the `clothsr` command, the Python package as the exception type; in JSON, its
+/// [`ErrorKind::name`].
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum ErrorKind {
     /// The request itself is wrong: fix the command line or the call.
     Usage,
