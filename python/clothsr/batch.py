@@ -163,18 +163,26 @@ def _local(
     def one(k: int) -> Dict[str, Any]:
         scene, output = jobs[k]
         env = dict(os.environ, RAYON_NUM_THREADS=str(cpus))
-        cmd = [sys.executable, "-m", "clothsr.batch", "--one", json.dumps([scene, output, options])]
         for attempt in range(RETRIES + 1):
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, env=env, text=True)
+            # The child reports on a pipe of its own: whatever it (or a library in it) prints
+            # goes to stderr and cannot be mistaken for a result.
+            read_fd, write_fd = os.pipe()
+            cmd = [sys.executable, "-m", "clothsr.batch", "--one", json.dumps([scene, output, options]),
+                   "--report-fd", str(write_fd)]
+            proc = subprocess.Popen(cmd, stdout=sys.stderr, env=env, pass_fds=(write_fd,))
+            os.close(write_fd)
             summary = None
-            assert proc.stdout is not None
-            for line in proc.stdout:
-                msg = json.loads(line)
-                if "progress" in msg:
-                    board.update(k, *msg["progress"])
-                    board.show()
-                elif "summary" in msg:
-                    summary = msg["summary"]
+            with os.fdopen(read_fd, "r") as reports:
+                for line in reports:
+                    try:
+                        msg = json.loads(line)
+                    except json.JSONDecodeError:
+                        continue
+                    if "progress" in msg:
+                        board.update(k, *msg["progress"])
+                        board.show()
+                    elif "summary" in msg:
+                        summary = msg["summary"]
             proc.wait()
             if summary is not None:
                 board.finish(k)
@@ -419,15 +427,21 @@ def format_table(summary: Dict[str, Any]) -> str:
     return "\n".join(rows)
 
 
-def _one(arg: str) -> int:
-    """A local pool's child: runs one shot, printing progress and its summary as JSON lines."""
+def _one(arg: str, report_fd: Optional[int]) -> int:
+    """A local pool's child: runs one shot, writing progress and its summary as JSON lines to
+    the file descriptor ``report_fd`` (default: stdout)."""
     scene, output, options = json.loads(arg)
+    reports = os.fdopen(report_fd, "w") if report_fd is not None else sys.stdout
+
+    def report(msg: Dict[str, Any]) -> None:
+        reports.write(json.dumps(msg) + "\n")
+        reports.flush()
 
     def progress(done: int, total: int) -> None:
-        print(json.dumps({"progress": [done, total]}), flush=True)
+        report({"progress": [done, total]})
 
     summary = run_one(scene, output, options, progress)
-    print(json.dumps({"summary": summary}), flush=True)
+    report({"summary": summary})
     return 0
 
 
@@ -462,9 +476,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     )
     p.add_argument("--quality", default="preview", choices=["preview", "final"])
     p.add_argument("--one", help=argparse.SUPPRESS)
+    p.add_argument("--report-fd", type=int, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.one is not None:
-        return _one(args.one)
+        return _one(args.one, args.report_fd)
     if args.fit is not None:
         if len(args.shots) != 1:
             p.error("--fit takes one shot")

@@ -87,6 +87,20 @@ def test_a_bad_shot_is_reported_not_retried_and_the_others_run(tmp_path):
     assert s["exit_code"] == 2 and not s["shots"], s
 
 
+def test_a_child_that_prints_does_not_garble_its_result(tmp_path, monkeypatch):
+    # Every child process prints to stdout as it starts (a host's site hook, a chatty library).
+    noise = tmp_path / "noise"
+    noise.mkdir()
+    (noise / "sitecustomize.py").write_text('print("{not json", flush=True)\n')
+    monkeypatch.setenv("PYTHONPATH", str(noise))
+    good = tmp_path / "good.usda"
+    shutil.copy(ROOT / "samples" / "sheet_sphere.usda", good)
+    (tmp_path / "out").mkdir()
+    s = batch.run_batch([good], tmp_path / "out", frames=1, layer=False, workers=1, quiet=True)
+    assert [x["status"] for x in s["shots"]] == ["ok"], s
+    assert s["shots"][0]["frames_computed"] == 1
+
+
 @pytest.fixture(scope="module")
 def cluster():
     """A head and one more node, one CPU each, on 127.0.0.1 only."""
