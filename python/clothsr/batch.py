@@ -39,16 +39,13 @@ from . import _clothsr
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-#: Exit code of each kind of failure, as the ``clothsr`` command's.
-EXIT_CODES = {"usage": 2, "input": 3, "failure": 4}
-
 #: How often a process that died is run again before the shot counts as failed.
 RETRIES = 3
 
 
 def shot_output(scene: PathLike, out_dir: PathLike) -> pathlib.Path:
     """Where a shot's output goes: ``out_dir/<scene's stem>.usdc``, as ``clothsr run --out-dir``."""
-    return pathlib.Path(out_dir) / (pathlib.Path(scene).stem + ".usdc")
+    return pathlib.Path(_clothsr.shot_output(os.fspath(scene), os.fspath(out_dir)))
 
 
 def _shot(scene: str, output: str, error: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
@@ -107,17 +104,10 @@ def run_one(
 
 
 def summarise(shots: List[Dict[str, Any]], error: Optional[Dict[str, str]] = None) -> Dict[str, Any]:
-    """The batch's summary: the ``clothsr --json`` form (status, exit code, error, shots)."""
-    kinds = [s["error"]["kind"] for s in shots if s.get("error")]
-    if error:
-        kinds.append(error["kind"])
-    code = max((EXIT_CODES.get(k, 4) for k in kinds), default=0)
-    return {
-        "status": "ok" if code == 0 else "failed",
-        "exit_code": code,
-        "error": error,
-        "shots": shots,
-    }
+    """The batch's summary: the ``clothsr --json`` form (status, exit code, error, shots), made
+    by the library as the command makes it."""
+    text = _clothsr.summarise(json.dumps(shots), json.dumps(error) if error else None)
+    return dict(json.loads(text))
 
 
 class _Board:

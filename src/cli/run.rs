@@ -211,16 +211,15 @@ fn jobs(args: &Args, knobs: &Knobs) -> anyhow::Result<Vec<Job>> {
             args.scenes
                 .iter()
                 .map(|s| {
-                    let stem = s
-                        .file_stem()
-                        .map(|n| n.to_string_lossy().into_owned())
+                    let output = clothsr::pipeline::shot::shot_output(s, dir)
                         .with_context(|| format!("{}: no file name", s.display()))?;
                     anyhow::ensure!(
-                        seen.insert(stem.clone()),
-                        "two scenes are named '{stem}': their outputs would collide in {}",
+                        seen.insert(output.clone()),
+                        "two scenes are named '{}': their outputs would collide in {}",
+                        s.file_stem().unwrap_or_default().to_string_lossy(),
                         dir.display()
                     );
-                    let output = super::check_output(s, &dir.join(format!("{stem}.usdc")))?;
+                    let output = super::check_output(s, &output)?;
                     Ok(Job {
                         scene: s.clone(),
                         rrd: args.rrd.as_ref().map(|_| rrd_beside(&output)),

@@ -381,6 +381,13 @@ pub struct ErrorSummary {
     pub message: String,
 }
 
+/// Where a shot's output goes in a batch's output folder: `out_dir/<the scene's stem>.usdc`
+/// (`None` for a path with no file name).
+pub fn shot_output(scene: &Path, out_dir: &Path) -> Option<PathBuf> {
+    let stem = scene.file_stem()?.to_string_lossy();
+    Some(out_dir.join(format!("{stem}.usdc")))
+}
+
 /// Whether a shot, or a whole run, went through: `ok` or `failed` in JSON.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

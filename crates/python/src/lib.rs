@@ -282,6 +282,27 @@ fn inspect<'py>(py: Python<'py>, path: PathBuf, fabric: &str) -> PyResult<Bound<
     Ok(out)
 }
 
+/// Where a batch writes the shot `scene` in `out_dir` (as `clothsr run --out-dir`).
+#[pyfunction]
+fn shot_output(scene: PathBuf, out_dir: PathBuf) -> PyResult<PathBuf> {
+    clothsr::pipeline::shot::shot_output(&scene, &out_dir)
+        .ok_or_else(|| UsageError::new_err(format!("{}: no file name", scene.display())))
+}
+
+/// A batch's summary (the `clothsr run --json` form, as JSON text) of its shots' summaries
+/// (JSON text of a list) and an error before any shot (JSON text, or None): its status and
+/// exit code as the command gives them.
+#[pyfunction]
+#[pyo3(signature = (shots, error=None))]
+fn summarise(shots: &str, error: Option<&str>) -> PyResult<String> {
+    use clothsr::pipeline::shot::{ErrorSummary, RunSummary, ShotSummary};
+    let bad = |e: serde_json::Error| UsageError::new_err(format!("not a shot summary: {e}"));
+    let shots: Vec<ShotSummary> = serde_json::from_str(shots).map_err(bad)?;
+    let error: Option<ErrorSummary> = error.map(serde_json::from_str).transpose().map_err(bad)?;
+    let summary = RunSummary::of(shots, error.map(|e| (e.kind, e.message)));
+    serde_json::to_string(&summary).map_err(|e| RunError::new_err(e.to_string()))
+}
+
 /// Per-frame errors of `prediction` (and baselines) against a fine simulation (see
 /// `clothsr.eval`).
 #[pyfunction]
@@ -512,5 +533,7 @@ fn _clothsr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(fit_plan, m)?)?;
     m.add_function(wrap_pyfunction!(fit_task, m)?)?;
+    m.add_function(wrap_pyfunction!(shot_output, m)?)?;
+    m.add_function(wrap_pyfunction!(summarise, m)?)?;
     Ok(())
 }
