@@ -198,6 +198,8 @@ fn save_load_is_exact_batching_is_transparent_and_zero_input_is_finite() {
             decoder.is_gated().then_some(DEFAULT_TENSION_RAMP)
         );
         let device = default_device().expect("device");
+        // Seeded: the checks below on what the gate does hold for most random weights, not all.
+        device.seed(11);
         let net = cfg.model.init(&device);
         let dir = tempfile::tempdir().expect("tmp");
         save_model(dir.path(), &cfg, &norm, &net).expect("save");

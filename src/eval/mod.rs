@@ -273,14 +273,7 @@ const COINCIDENT_M: f64 = 1e-7;
 /// Edges of `anim`'s cloth through its triangles at positions `x` ([`Health::crossings`]):
 /// (all, between two garments).
 pub fn crossings(anim: &Animation, x: &[Vector3<f64>]) -> (usize, usize) {
-    let mut edges: Vec<[u32; 2]> = anim
-        .triangles
-        .iter()
-        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
-        .map(|[a, b]| if a < b { [a, b] } else { [b, a] })
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
+    let edges = crate::mesh::unique_edges(&anim.triangles);
     let near =
         |a: u32, b: u32| (x[a as usize] - x[b as usize]).norm_squared() < COINCIDENT_M.powi(2);
     let found = crate::sim::collide::edge_triangle_crossings(x, &anim.triangles, &edges, |e, t| {

@@ -103,17 +103,9 @@ impl ClothMesh {
         0.5 * (b - a).perp(&(c - a))
     }
 
-    /// Unique undirected edges `(i, j)` with `i < j`, sorted.
+    /// Unique undirected edges `(i, j)` with `i < j`, sorted ([`unique_edges`]).
     pub fn edges(&self) -> Vec<[u32; 2]> {
-        let mut e: Vec<[u32; 2]> = self
-            .triangles
-            .iter()
-            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
-            .map(|[a, b]| if a < b { [a, b] } else { [b, a] })
-            .collect();
-        e.sort_unstable();
-        e.dedup();
-        e
+        unique_edges(&self.triangles)
     }
 
     /// Quality statistics in material space.
@@ -182,6 +174,18 @@ impl ClothMesh {
         }
         self.seam_pairs.sort_unstable();
     }
+}
+
+/// The unique undirected edges `(i, j)`, `i < j`, of `triangles`, sorted.
+pub fn unique_edges(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
+    let mut e: Vec<[u32; 2]> = triangles
+        .iter()
+        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+        .map(|[a, b]| if a < b { [a, b] } else { [b, a] })
+        .collect();
+    e.sort_unstable();
+    e.dedup();
+    e
 }
 
 #[cfg(test)]
