@@ -311,27 +311,94 @@ fn a_missing_file_is_named_once_with_its_reason() {
     );
 }
 
+/// Hostile values of flags that once reached a command's code (one panicked: a
+/// `--collider-offset` of two numbers) are refused when parsed: exit code 2, the flag named,
+/// no panic, nothing written. The binary's own `hostile` test gives every flag of every
+/// command such values in-process.
 #[test]
-fn a_bad_triple_flag_is_refused_by_name_not_a_panic() {
+fn hostile_flag_values_are_refused_by_name_not_a_panic() {
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/sheet_sphere.usda");
-    for v in ["1,2", "-1", "nan,0,0", "1e400,0,0", "1,2,3,4"] {
-        let out = Command::new(env!("CARGO_BIN_EXE_clothsr"))
-            .arg("simulate")
-            .arg(&scene)
-            .args(["--frames", "1", "--collider"])
-            .arg(&scene)
-            .arg(format!("--collider-offset={v}"))
-            .arg("-o")
-            .arg(dir.path().join("out.usda"))
-            .output()
-            .expect("run clothsr");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{v}: {stderr}");
-        assert!(stderr.contains("--collider-offset"), "{v}: {stderr}");
-        assert!(!stderr.contains("panicked"), "{v}: {stderr}");
-        assert!(!dir.path().join("out.usda").exists(), "{v}");
+    let out = dir.path().join("out.usda");
+    for (command, flag) in [
+        (&["simulate"][..], "--collider-offset"),
+        (&["simulate"][..], "--dt"),
+        (&["simulate"][..], "--avatar"),
+        (&["lab", "run"][..], "--heat-max-mm"),
+        (&["lab", "run"][..], "--garment-offset"),
+        (&["run"][..], "--models"),
+    ] {
+        for v in [
+            "",
+            "1,2",
+            "-1",
+            "nan,0,0",
+            "1e400,0,0",
+            "1,2,3,4",
+            "nan",
+            "1e308",
+            "/nonexistent/x.usda",
+        ] {
+            let run = Command::new(env!("CARGO_BIN_EXE_clothsr"))
+                .args(command)
+                .arg(&scene)
+                .args(["--frames", "1", "-o"])
+                .arg(&out)
+                .arg(format!("{flag}={v}"))
+                .output()
+                .expect("run clothsr");
+            let stderr = String::from_utf8_lossy(&run.stderr);
+            let case = format!("{command:?} {flag}={v}");
+            assert_eq!(run.status.code(), Some(2), "{case}: {stderr}");
+            assert!(stderr.contains(flag), "{case}: {stderr}");
+            assert!(!stderr.contains("panicked"), "{case}: {stderr}");
+            assert!(!out.exists(), "{case}");
+        }
     }
+}
+
+/// A USD file that states no units is refused with the way on named, and read in the units
+/// `--meters-per-unit` gives, which the run logs.
+#[test]
+fn units_a_file_does_not_state_are_given_on_the_command_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/bad/usd/no_meters_per_unit.usda");
+    let out = dir.path().join("scene.usda");
+    let convert = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_clothsr"))
+            .args(extra)
+            .arg("convert")
+            .arg(&file)
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .expect("run clothsr")
+    };
+    let refused = convert(&[]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(3), "{stderr}");
+    assert!(
+        stderr.contains("no_meters_per_unit.usda") && stderr.contains("--meters-per-unit"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+    for bad in ["0", "-1", "nan", "x"] {
+        let run = convert(&["--meters-per-unit", bad]);
+        assert_eq!(run.status.code(), Some(2), "{bad}");
+    }
+    let done = convert(&["--meters-per-unit", "0.01"]);
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert!(done.status.success(), "{stderr}");
+    assert!(stderr.contains("taking 0.01 m per unit"), "{stderr}");
+    // The sheet's corner at (-0.15, 0.5, -0.15) units is written in metres.
+    let stage = clothsr::io::usd::read_usd(&out).expect("read the converted scene");
+    let sheet = &stage.meshes[0];
+    let corner = sheet.frames[0][0];
+    assert!(
+        (corner - nalgebra::Vector3::new(-0.0015f32, 0.005, -0.0015)).norm() < 1e-7,
+        "{corner:?}"
+    );
 }
 
 #[test]

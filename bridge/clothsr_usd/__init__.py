@@ -23,14 +23,14 @@ except ImportError as exc:  # pragma: no cover - the message is the point
         "Blender), or install them with `pip install 'clothsr[usd]'` (usd-core)"
     ) from exc
 
-from .common import PANEL, SCHEMA_VERSION, composed_path, write_composed  # noqa: E402
+from .common import PANEL, SCHEMA_VERSION, assume_meters_per_unit, composed_path, write_composed  # noqa: E402
 from .plot import plot_errors  # noqa: E402
 from .read import inspect_stage, read_stage  # noqa: E402
 from .validate import validate  # noqa: E402
 from .write import AnimationWriter, write_stage  # noqa: E402
 from .layer import LayerWriter  # noqa: E402
 
-__all__ = ["SCHEMA_VERSION", "composed_path", "write_composed", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "LayerWriter", "schema_registered"]
+__all__ = ["SCHEMA_VERSION", "assume_meters_per_unit", "composed_path", "write_composed", "plot_errors", "inspect_stage", "read_stage", "validate", "write_stage", "AnimationWriter", "LayerWriter", "schema_registered"]
 
 
 def schema_registered() -> bool:

@@ -156,14 +156,43 @@ def _open(path: str) -> Usd.Stage:
     return stage
 
 
+#: The units taken for stages that do not author ``metersPerUnit`` (``None``: refused).
+_assumed_meters_per_unit = None
+
+
+def assume_meters_per_unit(value):
+    """Takes ``value`` metres per unit for every stage read or layered over from now on that
+    does not author ``metersPerUnit`` (``None``: such stages are refused). Returns the value
+    it replaces."""
+    global _assumed_meters_per_unit
+    if value is not None:
+        value = float(value)
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"meters per unit = {value}: expected a positive number")
+    previous, _assumed_meters_per_unit = _assumed_meters_per_unit, value
+    return previous
+
+
+def units_assumed(stage: Usd.Stage):
+    """The metres per unit taken for ``stage`` because it authors none, else ``None``."""
+    if UsdGeom.StageHasAuthoredMetersPerUnit(stage):
+        return None
+    return _assumed_meters_per_unit
+
+
 def stage_frame(stage: Usd.Stage, path: str):
-    """(metersPerUnit, axis matrix to y-up) of a stage; unknown units are an error."""
-    if not UsdGeom.StageHasAuthoredMetersPerUnit(stage):
+    """(metersPerUnit, axis matrix to y-up) of a stage; unknown units are an error unless a
+    value was given for them (:func:`assume_meters_per_unit`)."""
+    if UsdGeom.StageHasAuthoredMetersPerUnit(stage):
+        mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    elif _assumed_meters_per_unit is not None:
+        mpu = _assumed_meters_per_unit
+    else:
         raise BadInput(
-            f"{path}: metersPerUnit is not authored, so the units are unknown "
-            "(author it in the stage metadata, e.g. metersPerUnit = 1)"
+            f"{path}: metersPerUnit is not authored, so the units are unknown (author it in "
+            "the stage metadata, e.g. metersPerUnit = 1, or give them: --meters-per-unit M, "
+            "meters_per_unit=M in Python)"
         )
-    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     if not (np.isfinite(mpu) and mpu > 0):
         raise BadInput(f"{path}: metersPerUnit = {mpu} is not a positive number")
     up = UsdGeom.GetStageUpAxis(stage)

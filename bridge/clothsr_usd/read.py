@@ -15,7 +15,7 @@ import math
 import numpy as np
 from pxr import Gf, Usd, UsdGeom, UsdPhysics, UsdShade, UsdSkel, Vt
 
-from .common import GARMENT_API, PANEL, SEAM, BadInput, open_stage, stage_frame
+from .common import GARMENT_API, PANEL, SEAM, BadInput, open_stage, stage_frame, units_assumed
 
 FABRIC_ATTRS = {
     "name": "clothsr:fabric:name",
@@ -508,6 +508,9 @@ def _walk(path: str, animation: bool) -> dict:
     skinned = _skinned_prims(stage)
     _unbound_skinned_meshes(stage, skinned, path)
     meshes, garments, warnings = [], [], []
+    assumed = units_assumed(stage)
+    if assumed is not None:
+        warnings.append(f"{path}: metersPerUnit is not authored: taking {assumed:g} m per unit as given")
     for prim in stage.Traverse():
         if prim.IsA(UsdGeom.Mesh):
             meshes.append(

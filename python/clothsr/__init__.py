@@ -20,6 +20,7 @@ fault), ``RunError`` (a failure while running); a progress callback returning ``
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import pathlib
 import tempfile
@@ -144,6 +145,26 @@ def _scene_path(scene: Any) -> Iterator[pathlib.Path]:
         yield path
 
 
+@contextlib.contextmanager
+def _units(meters_per_unit: Optional[float]) -> Iterator[None]:
+    """USD files that state no units (no ``metersPerUnit``) read in ``meters_per_unit`` for
+    the call (``None``: such files are refused)."""
+    if meters_per_unit is None:
+        yield
+        return
+    if isinstance(meters_per_unit, bool) or not isinstance(meters_per_unit, (int, float)) or not (
+        math.isfinite(meters_per_unit) and meters_per_unit > 0
+    ):
+        raise UsageError(f"meters_per_unit={meters_per_unit!r}: expected a positive number (0.01: centimetres)")
+    import clothsr_usd
+
+    previous = clothsr_usd.assume_meters_per_unit(float(meters_per_unit))
+    try:
+        yield
+    finally:
+        clothsr_usd.assume_meters_per_unit(previous)
+
+
 def _open_layer(path: pathlib.Path, keep: bool) -> "Sdf.Layer":
     """The USD layer at ``path``: reloaded where this interpreter has it open already; when
     the file is temporary (``keep`` False), an anonymous copy."""
@@ -200,6 +221,7 @@ def run(
     layer: LayerChoice = None,
     clip_frames: int = 100,
     publish_every_s: Optional[float] = None,
+    meters_per_unit: Optional[float] = None,
     progress: Optional[Progress] = None,
 ) -> "Sdf.Layer":
     """Runs the whole pipeline on a shot and returns the output layer (``Sdf.Layer``).
@@ -216,12 +238,14 @@ def run(
     open stage with :func:`compose`, or open ``NAME.composed.usda`` written beside it), ``"off"`` a standalone stage (garments under ``/World/Garments``, colliders,
     metres, y up); a layered shot longer than ``clip_frames`` frames goes to value clips.
     ``publish_every_s``: seconds between publishing the files and the resume point while
-    running (default 10; 0: every frame). ``progress(done, total)`` is
+    running (default 10; 0: every frame). ``meters_per_unit``: the units of USD files that
+    state none (no ``metersPerUnit``; 0.01 for centimetres), which are refused without it.
+    ``progress(done, total)`` is
     called after every frame, with the GIL taken; returning ``False`` stops the run (raising
     :class:`Cancelled`; the file keeps the frames so far and the next call resumes), and an
     exception it raises stops the run and propagates.
     """
-    with _scene_path(scene) as path, _output(output) as (out, keep):
+    with _units(meters_per_unit), _scene_path(scene) as path, _output(output) as (out, keep):
         _clothsr.run(
             os.fspath(path),
             os.fspath(out),
@@ -254,13 +278,14 @@ def convert(
     fps: Optional[float] = None,
     frames: Optional[int] = None,
     ascii: bool = False,
+    meters_per_unit: Optional[float] = None,
 ) -> "Sdf.Layer":
     """Makes a USD scene with clothsr's schema from garments (GarmentCode JSON, OBJ, USD;
     several go onto one avatar) and colliders; returns its layer (``Sdf.Layer``). ``output``
-    ``None`` returns an anonymous layer."""
+    ``None`` returns an anonymous layer. ``meters_per_unit``: as for :func:`run`."""
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
-    with _output(output) as (out, keep):
+    with _units(meters_per_unit), _output(output) as (out, keep):
         if not keep:
             out = out.with_suffix(".usda")
         _clothsr.convert(
@@ -276,11 +301,13 @@ def convert(
         return _open_layer(out, keep)
 
 
-def inspect(scene: Any, *, fabric: Fabric = "cotton") -> Dict[str, Any]:
+def inspect(
+    scene: Any, *, fabric: Fabric = "cotton", meters_per_unit: Optional[float] = None
+) -> Dict[str, Any]:
     """What a garment, mesh or scene file (or an open ``Usd.Stage``) holds: garments (panels,
     seams, area, fabric), cloth meshes (vertices, triangles), colliders (frames), frame rate
-    and range, as a dict."""
-    with _scene_path(scene) as path:
+    and range, as a dict. ``meters_per_unit``: as for :func:`run`."""
+    with _units(meters_per_unit), _scene_path(scene) as path:
         return _clothsr.inspect(os.fspath(path), fabric=fabric)
 
 
@@ -314,16 +341,18 @@ def fit(
     from_scratch: bool = False,
     coarse_mm: Optional[float] = None,
     fine_mm: Optional[float] = None,
+    meters_per_unit: Optional[float] = None,
     progress: Optional[Callable[[int, int, str], Optional[bool]]] = None,
 ) -> pathlib.Path:
     """Makes the best models for one shot in the folder ``output`` (variations simulated, the
     coarse model calibrated, the ISR network fine-tuned from the generic one unless
     ``from_scratch``, a held-out report); a fit stopped there resumes. ``quality``:
     ``preview`` or ``final``. ``coarse_mm``/``fine_mm``: the resolutions (default 20 and
-    2.5). ``progress(done, total, message)`` sees each task. Returns the folder, for
+    2.5). ``meters_per_unit``: as for :func:`run`. ``progress(done, total, message)`` sees
+    each task. Returns the folder, for
     ``run(..., models=...)``. :func:`clothsr.batch.fit` runs the same fit's tasks on Ray."""
     generic_isr = None if from_scratch else os.fspath(generic_models() / "isr")
-    with _scene_path(shot) as path:
+    with _units(meters_per_unit), _scene_path(shot) as path:
         _clothsr.fit(
             os.fspath(path),
             os.fspath(output),

@@ -154,6 +154,25 @@ def test_convert_and_inspect(tmp_path):
     assert [c["name"] for c in info["colliders"]] == ["sphere"]
 
 
+def test_units_a_file_does_not_state_are_given_for_the_call(tmp_path):
+    no_units = ROOT / "tests/data/bad/usd/no_meters_per_unit.usda"
+    with pytest.raises(clothsr.BadInputError, match="meters_per_unit"):
+        clothsr.convert(no_units, tmp_path / "refused.usda")
+    with pytest.raises(clothsr.UsageError, match="meters_per_unit"):
+        clothsr.convert(no_units, tmp_path / "refused.usda", meters_per_unit=-1.0)
+    layer = clothsr.convert(no_units, tmp_path / "scene.usda", meters_per_unit=0.01)
+    stage = Usd.Stage.Open(layer)
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    sheet = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    corner = np.array(UsdGeom.Mesh(sheet).GetPointsAttr().Get(0)[0])
+    assert np.allclose(corner, [-0.0015, 0.005, -0.0015], atol=1e-7)
+    assert clothsr.inspect(no_units, meters_per_unit=0.01)["cloths"]
+    # The units were for that call only.
+    with pytest.raises(clothsr.BadInputError, match="metersPerUnit"):
+        clothsr.inspect(no_units)
+    assert not (tmp_path / "refused.usda").exists()
+
+
 def test_eval_measures_a_run_against_itself_as_zero(tmp_path):
     out = tmp_path / "out.usdc"
     clothsr.run(SAMPLE, out, frames=2)

@@ -16,22 +16,22 @@ pub struct Args {
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
     /// Output USD file (.usda, .usd or .usdc).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_usd, short, long)]
     output: PathBuf,
     /// Collider: OBJ, OBJ sequence (frame_%04d.obj) or USD; repeatable.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_file, long)]
     collider: Vec<PathBuf>,
     /// Avatar: a USD file with a UsdSkel-skinned or time-sampled body.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_file, long)]
     avatar: Option<PathBuf>,
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
     fabric: clothsr::garment::FabricPreset,
     /// Frames per second of the scene (OBJ sequences are read at this rate).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::positive(1000.0), long)]
     fps: Option<f64>,
     /// Last frame to simulate (default: the end of the colliders' animation).
-    #[arg(long)]
+    #[arg(value_parser = clap::value_parser!(i64).range(0..), long)]
     frames: Option<i64>,
     /// Write text USD even for a .usd file.
     #[arg(long)]

@@ -19,10 +19,10 @@ pub struct Args {
     /// `clothsr lab dataset` directory (its fine frames, matched to the prediction's frames 1..).
     /// Without it, the prediction alone is checked: points that are not finite, cloth inside
     /// the bodies, the largest move of a vertex in one frame.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input, long)]
     gt: Option<PathBuf>,
     /// The prediction: `clothsr run`'s output.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_file, long)]
     pred: PathBuf,
     /// Baselines on the same fine mesh (e.g. `clothsr lab run --upsampled-out`, or a run without
     /// the corrector); NAME=FILE sets the label, else the file's name. A `clothsr lab dataset`
@@ -30,53 +30,51 @@ pub struct Args {
     /// truth's data set (its garment moved a fraction of a millimetre), this baseline is the
     /// scene's predictability floor, which no prediction can be expected to beat (its frames
     /// up to the fork count as zero). Every baseline is measured over the prediction's frames.
-    #[arg(long)]
-    baseline: Vec<String>,
+    #[arg(long, value_name = "[NAME=]FILE", value_parser = baseline)]
+    baseline: Vec<(String, PathBuf)>,
     /// The ground truth's twin: a `clothsr lab fork` of its data set (or another fine simulation
     /// whose start differs by a fraction of a millimetre). Adds the two ground truths' distance
     /// (the scene's predictability floor) as the series `floor`, the prediction's error against
     /// the twin, and the least error any prediction from their shared start can average over
     /// the two: half the floor (the triangle inequality), also as a share of each baseline.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input, long)]
     floor: Option<PathBuf>,
     /// Per-frame metrics of every series as CSV.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::output_file, long)]
     csv: Option<PathBuf>,
     /// Error over time as a PNG plot (the paper's Fig. 11).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::output_file, long)]
     plot: Option<PathBuf>,
     /// A Rerun recording: the ground truth and each series coloured by per-vertex error.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::output_file, long)]
     rrd: Option<PathBuf>,
     /// Error at which the heat map turns red, mm (default: twice the prediction's mean).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long)]
     heat_max_mm: Option<f64>,
 }
 
 /// A series' label and its per-frame metrics.
 type Series = (String, Vec<FrameMetrics>);
 
-fn label_and_path(s: &str) -> (String, PathBuf) {
-    match s.split_once('=') {
+/// `NAME=FILE` or `FILE` (labelled by its name), the file existing.
+fn baseline(s: &str) -> Result<(String, PathBuf), String> {
+    let (name, path) = match s.split_once('=') {
         Some((name, path)) if !name.is_empty() && !name.contains('/') => {
-            (name.to_string(), PathBuf::from(path))
+            (Some(name.to_string()), path)
         }
-        _ => {
-            let p = PathBuf::from(s);
-            let name = p
-                .file_stem()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_else(|| s.to_string());
-            (name, p)
-        }
-    }
+        _ => (None, s),
+    };
+    let p = crate::cli::values::input(path)?;
+    let name = name.unwrap_or_else(|| {
+        p.file_stem()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| s.to_string())
+    });
+    Ok((name, p))
 }
 
 /// Runs `eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if let Some(h) = args.heat_max_mm {
-        anyhow::ensure!(h.is_finite() && h > 0.0, "--heat-max-mm must be positive");
-    }
     let Some(gt_path) = &args.gt else {
         return check(&args);
     };
@@ -164,11 +162,8 @@ fn check(args: &Args) -> anyhow::Result<()> {
 
 /// The series to measure, labelled: the prediction, the baselines, then the twin as `floor`.
 fn inputs(args: &Args) -> anyhow::Result<Vec<(String, PathBuf)>> {
-    let mut inputs = vec![label_and_path(&format!(
-        "prediction={}",
-        args.pred.display()
-    ))];
-    inputs.extend(args.baseline.iter().map(|b| label_and_path(b)));
+    let mut inputs = vec![("prediction".to_string(), args.pred.clone())];
+    inputs.extend(args.baseline.iter().cloned());
     if let Some(twin) = &args.floor {
         anyhow::ensure!(
             inputs.iter().all(|(name, _)| name != "floor"),

@@ -13,7 +13,7 @@ pub struct Args {
     /// The shot: USD, GarmentCode JSON or OBJ cloth.
     shot: PathBuf,
     /// Models folder to make (created; a fit stopped there resumes).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
     #[command(flatten)]
     inputs: super::SceneInputs,
@@ -21,10 +21,10 @@ pub struct Args {
     #[arg(long, default_value = "preview")]
     quality: Quality,
     /// Coarse edge length, millimetres.
-    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     /// Fine edge length, millimetres (the ISR network's pixel).
-    #[arg(long, default_value_t = 2.5)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = 2.5)]
     fine_mm: f64,
     /// Frames of each variation (default: the quality's).
     #[arg(long)]

@@ -15,10 +15,10 @@ pub struct Args {
     /// A GarmentCode JSON or a USD scene with pattern garments.
     input: PathBuf,
     /// Target edge length in millimetres (20 coarse, 2.5 fine).
-    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = crate::cli::COARSE_MM)]
     edge_mm: f64,
     /// Output USD file (.usdc, .usd or .usda).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_file, short, long)]
     output: PathBuf,
     /// Fabric preset for GarmentCode input.
     #[arg(long, default_value = "cotton")]
@@ -31,12 +31,6 @@ pub struct Args {
 /// Runs `mesh`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let output = super::check_output(&args.input, &args.output)?;
-    if !(args.edge_mm.is_finite() && args.edge_mm > 0.0) {
-        bail!(
-            "--edge-mm must be a positive number of millimetres, got {}",
-            args.edge_mm
-        );
-    }
     let scene = Scene::load(&args.input, &args.fabric.fabric())?;
     if scene.garments.is_empty() {
         bail!("{}: no sewing pattern to mesh", args.input.display());

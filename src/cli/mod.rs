@@ -8,6 +8,7 @@ mod lab;
 mod mesh;
 mod run;
 mod simulate;
+mod values;
 
 use std::path::{Path, PathBuf};
 
@@ -40,6 +41,10 @@ struct Cli {
     /// its frames or its error (kind `usage`, `input` or `failure`, and message).
     #[arg(long, global = true)]
     json: bool,
+    /// The units of USD files that do not state them (no `metersPerUnit`), in metres per
+    /// unit: 0.01 for centimetres. Without it such files are refused.
+    #[arg(long, global = true, value_name = "M", value_parser = values::positive(1e3))]
+    meters_per_unit: Option<f64>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -69,7 +74,10 @@ enum Command {
 /// Runs the command line and returns the exit code, printing errors with their causes (and
 /// the `--json` summary).
 pub fn run() -> i32 {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return refused(&e),
+    };
     let default = match cli.verbose {
         0 => "info",
         1 => "debug",
@@ -82,7 +90,7 @@ pub fn run() -> i32 {
         .with_writer(std::io::stderr)
         .with_target(false)
         .init();
-    let outcome = match cli.command {
+    let outcome = assume_units(cli.meters_per_unit).and_then(|()| match cli.command {
         Command::Run(a) => run::run(a),
         Command::Fit(a) => fit::run(a).map(|()| none_run()),
         Command::Eval(a) => eval::run(a).map(|()| none_run()),
@@ -91,7 +99,7 @@ pub fn run() -> i32 {
         Command::Mesh(a) => mesh::run(a).map(|()| none_run()),
         Command::Simulate(a) => simulate::run(a).map(|()| none_run()),
         Command::Lab(c) => lab::run(*c),
-    };
+    });
     let summary = match outcome {
         Ok(summary) => summary,
         Err(err) => {
@@ -106,6 +114,30 @@ pub fn run() -> i32 {
         }
     }
     summary.exit_code
+}
+
+/// Prints clap's refusal of the command line (or the help or version asked for) and returns
+/// its exit code; with `--json`, a refusal's summary too.
+fn refused(e: &clap::Error) -> i32 {
+    let _ = e.print();
+    let code = e.exit_code();
+    if e.use_stderr() && std::env::args_os().any(|a| a == "--json") {
+        let summary = RunSummary::of(Vec::new(), Some((ErrorKind::Usage, e.kind().to_string())));
+        if let Ok(text) = serde_json::to_string(&summary) {
+            println!("{text}");
+        }
+        return summary.exit_code;
+    }
+    code
+}
+
+/// Takes `--meters-per-unit` for USD files that state no units.
+fn assume_units(meters_per_unit: Option<f64>) -> anyhow::Result<()> {
+    if let Some(m) = meters_per_unit {
+        clothsr::io::usd::assume_meters_per_unit(Some(m))?;
+        tracing::info!("USD files without metersPerUnit are read in {m} m per unit");
+    }
+    Ok(())
 }
 
 /// The summary of a command that runs no shots and succeeded.
@@ -130,15 +162,6 @@ pub(crate) fn error_kind(err: &anyhow::Error) -> ErrorKind {
 /// The coarse mesh's edge length, mm: the default of every `--edge-mm`/`--coarse-mm`.
 pub(crate) const COARSE_MM: f64 = clothsr::mesh::COARSE_EDGE_M * 1e3;
 
-/// `on` or `off` (a value parser).
-pub(crate) fn on_off(v: &str) -> Result<bool, String> {
-    match v.trim() {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        t => Err(format!("{t}: 'on' or 'off'")),
-    }
-}
-
 /// The coarse model's settings on the command line (`--coarse-*`); each unset is the
 /// simulator's own. See [`CoarseCalibration`].
 #[derive(Debug, Clone, Copy, Default, clap::Args)]
@@ -146,27 +169,27 @@ pub(crate) struct CoarseArgs {
     /// The coarse membrane's stiffness under compression, as a factor in (0, 1] of its stretch
     /// stiffness: below 1 the coarse mesh gives way to the shortening the fine cloth takes up
     /// in wrinkles.
-    #[arg(long = "coarse-compression", value_name = "FACTOR")]
+    #[arg(value_parser = values::positive(1.0), long = "coarse-compression", value_name = "FACTOR")]
     compression: Option<f64>,
     /// The shortening (1 − stretch ratio, > 0) beyond which the compression-soft coarse
     /// membrane is stiff again, as the fine cloth's wrinkles pack tight (0: none).
-    #[arg(long = "coarse-compression-knee", value_name = "SHORTENING")]
+    #[arg(value_parser = values::non_negative(1.0), long = "coarse-compression-knee", value_name = "SHORTENING")]
     compression_knee: Option<f64>,
     /// The coarse simulation's Coulomb friction coefficient against bodies, ≥ 0.
-    #[arg(long = "coarse-friction", value_name = "MU")]
+    #[arg(value_parser = values::non_negative(100.0), long = "coarse-friction", value_name = "MU")]
     friction: Option<f64>,
     /// The wrinkle bending gain: extra bending stiffness where the coarse membrane is
     /// shortened, up to this multiple of the fabric's, fading in as the cloth's mean speed
     /// falls from 6 cm/s to rest (0: off).
-    #[arg(long = "coarse-wrinkle-bending", value_name = "GAIN")]
+    #[arg(value_parser = values::non_negative(values::MAX_FACTOR), long = "coarse-wrinkle-bending", value_name = "GAIN")]
     wrinkle_bending: Option<f64>,
     /// The coarse hinges' bending stiffness as a factor of the fabric's, > 0 (1: the
     /// fabric's).
-    #[arg(long = "coarse-bending", value_name = "FACTOR")]
+    #[arg(value_parser = values::positive(values::MAX_FACTOR), long = "coarse-bending", value_name = "FACTOR")]
     bending: Option<f64>,
     /// Whether coarse cloth edges meet the colliders' sharp edges, `on` or `off`; off, a 20 mm
     /// edge may cut a table's corner as the downsampled fine cloth's do.
-    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = on_off)]
+    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = values::on_off)]
     crease_contacts: Option<bool>,
 }
 
@@ -195,24 +218,14 @@ pub(crate) fn check_output(input: &Path, output: &Path) -> anyhow::Result<PathBu
     Ok(output.to_path_buf())
 }
 
-/// Clap's parser of an `x,y,z` option: three finite numbers.
-pub(crate) fn triple(s: &str) -> Result<[f64; 3], String> {
-    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    let values: Vec<f64> = parts.iter().filter_map(|p| p.parse().ok()).collect();
-    match values[..] {
-        [x, y, z] if parts.len() == 3 && values.iter().all(|v| v.is_finite()) => Ok([x, y, z]),
-        _ => Err(format!("'{s}': expected three finite numbers x,y,z")),
-    }
-}
-
 /// A scene's extra inputs, as `clothsr lab dataset` records them and `clothsr run` replays them.
 #[derive(Debug, clap::Args)]
 pub(crate) struct SceneInputs {
     /// Extra colliders (OBJ, OBJ sequence, USD).
-    #[arg(long)]
+    #[arg(value_parser = values::input_file, long)]
     pub(crate) collider: Vec<PathBuf>,
     /// Avatar (USD, UsdSkel or point cache).
-    #[arg(long)]
+    #[arg(value_parser = values::input_file, long)]
     pub(crate) avatar: Option<PathBuf>,
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
@@ -246,33 +259,30 @@ impl SceneInputs {
 #[derive(Debug, Default, clap::Args)]
 pub(crate) struct VariationArgs {
     /// Variation: move the garments by x,y,z metres (e.g. a drop height).
-    #[arg(long, value_parser = triple, allow_hyphen_values = true)]
+    #[arg(long, value_parser = values::triple, allow_hyphen_values = true)]
     garment_offset: Option<[f64; 3]>,
     /// Variation: move the colliders by x,y,z metres.
-    #[arg(long, value_parser = triple, allow_hyphen_values = true)]
+    #[arg(long, value_parser = values::triple, allow_hyphen_values = true)]
     collider_offset: Option<[f64; 3]>,
     /// Variation: turn the garments about the vertical axis, degrees.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    #[arg(value_parser = values::within(-3600.0, 3600.0), long, default_value_t = 0.0, allow_hyphen_values = true)]
     garment_yaw_deg: f64,
     /// Variation: start animated colliders (an avatar's clip) this many seconds in.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(value_parser = values::non_negative(values::MAX_S), long, default_value_t = 0.0)]
     clip_start_s: f64,
 }
 
 impl VariationArgs {
-    /// The validated variation.
-    pub(crate) fn variation(&self) -> anyhow::Result<clothsr::data::Variation> {
-        anyhow::ensure!(
-            self.garment_yaw_deg.is_finite()
-                && self.clip_start_s.is_finite()
-                && self.clip_start_s >= 0.0,
-            "--garment-yaw-deg must be finite and --clip-start-s finite and not negative"
-        );
-        Ok(clothsr::data::Variation {
+    /// The variation.
+    pub(crate) fn variation(&self) -> clothsr::data::Variation {
+        clothsr::data::Variation {
             garment_offset_m: self.garment_offset.unwrap_or_default(),
             collider_offset_m: self.collider_offset.unwrap_or_default(),
             garment_yaw_deg: self.garment_yaw_deg,
             clip_start_s: self.clip_start_s,
-        })
+        }
     }
 }
+
+#[cfg(test)]
+mod hostile;

@@ -9,10 +9,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::pipeline::shot::{
-    run_shot, ErrorSummary, OutputKind, RunModels, RunSettings, RunSummary, ShotFiles, ShotSummary,
-    Status, DEFAULT_CLIP_FRAMES,
+    run_shot, ErrorSummary, OutputKind, RunModels, RunSummary, ShotFiles, ShotSummary, Status,
+    DEFAULT_CLIP_FRAMES,
 };
-use clothsr::pipeline::{CoarseCalibration, CorrectorChoice, Progress, Report};
+use clothsr::pipeline::{CoarseCalibration, CorrectorChoice, Options, Progress, Report};
+use clothsr::sim::step::SolverMode;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// Arguments of `run`: what a user needs.
@@ -26,11 +27,11 @@ pub struct Args {
     inputs: super::SceneInputs,
     /// Output USD file of a single scene: the fine garments (and the colliders), one time
     /// sample per frame.
-    #[arg(short, long, conflicts_with = "out_dir", help_heading = "Output")]
+    #[arg(value_parser = crate::cli::values::output_usd, short, long, conflicts_with = "out_dir", help_heading = "Output")]
     output: Option<PathBuf>,
     /// Output folder for several scenes: DIR/<scene name>.usdc (and .rrd with --rrd). Each
     /// scene runs in its own process; the batch goes on past one that fails.
-    #[arg(long, help_heading = "Output")]
+    #[arg(value_parser = crate::cli::values::input_dir, long, help_heading = "Output")]
     out_dir: Option<PathBuf>,
     /// Frames to run (default: the scene's frame range).
     #[arg(long, help_heading = "Output")]
@@ -63,7 +64,7 @@ pub struct Args {
     /// `models.json`, the held-out figures each path through them was validated with.
     /// Default: the generic models ($CLOTHSR_MODELS, else `models/generic` beside the
     /// executable or in the source tree it was built from).
-    #[arg(long, help_heading = "Models")]
+    #[arg(value_parser = crate::cli::values::input_dir, long, help_heading = "Models")]
     models: Option<PathBuf>,
     /// Whether the corrector runs: `auto` takes the path the folder's models.json validated
     /// as better (the corrector where a folder without one has it), `on` or `off` forces it.
@@ -77,14 +78,14 @@ pub struct Args {
     /// Save a Rerun recording (colliders, coarse and fine meshes, stage timings on a frame
     /// timeline): to FILE.rrd, or without a value beside each output as <name>.rrd. Open it
     /// with `rerun FILE.rrd` (pip install rerun-sdk==0.36.3).
-    #[arg(long, num_args = 0..=1, default_missing_value = "", help_heading = "Preview")]
+    #[arg(value_parser = crate::cli::values::output_file_or_default, long, num_args = 0..=1, default_missing_value = "", help_heading = "Preview")]
     rrd: Option<PathBuf>,
     /// Stream live to a Rerun viewer (started if none runs; needs `rerun` on the PATH).
     #[arg(long, conflicts_with = "rrd", help_heading = "Preview")]
     spawn: bool,
     /// A fine simulation of the same scene (USD, or a `clothsr lab dataset` directory): the
     /// Rerun preview then colours the fine mesh by its distance to it and plots the mean.
-    #[arg(long, help_heading = "Preview")]
+    #[arg(value_parser = crate::cli::values::input, long, help_heading = "Preview")]
     gt: Option<PathBuf>,
     /// Run only this shot of the batch (the batch runs each shot in a child process).
     #[arg(long, hide = true)]
@@ -100,22 +101,23 @@ pub struct LabArgs {
     knobs: Knobs,
 }
 
-/// The pipeline's research settings (`lab run`); a user's `run` takes their defaults.
-#[derive(Debug, clap::Args)]
+/// The pipeline's research settings (`lab run`): each unset leaves [`Options::default`]'s
+/// value, which a user's `run` takes.
+#[derive(Debug, Default, clap::Args)]
 pub struct Knobs {
-    /// Distance shown red in the --gt heat map, mm.
-    #[arg(long, default_value_t = 5.0)]
-    heat_max_mm: f64,
+    /// Distance shown red in the --gt heat map, mm [default: 5].
+    #[arg(long, value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM))]
+    heat_max_mm: Option<f64>,
     /// Also write the coarse mesh the MSR module saw (M_int, or M_c without corrector).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::values::output_usd)]
     coarse_out: Option<PathBuf>,
     /// Also write the coarse mesh upsampled to the fine mesh (the baseline without learned
     /// detail), for `clothsr eval --baseline`.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::values::output_usd)]
     upsampled_out: Option<PathBuf>,
-    /// Coarse edge length, millimetres.
-    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
-    coarse_mm: f64,
+    /// Coarse edge length, millimetres [default: 20].
+    #[arg(long, value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM))]
+    coarse_mm: Option<f64>,
     #[command(flatten)]
     variation: super::VariationArgs,
     /// Skip sewing and settling garments with seams before the first frame.
@@ -134,7 +136,7 @@ pub struct Knobs {
     coarse: super::CoarseArgs,
     /// Seconds between publishing the output and the resume point while running (0: every
     /// frame, as the fault tests kill runs).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_S))]
     publish_every_s: Option<f64>,
     /// Write the MSR module's fine meshes as the network gives them. By default every fine
     /// vertex found inside a collider, or nearer it than half the fine simulation's contact
@@ -142,25 +144,6 @@ pub struct Knobs {
     /// wrinkles cut into a body the cloth wraps)
     #[arg(long)]
     no_push_out: bool,
-}
-
-impl Default for Knobs {
-    /// The settings a user's `run` takes: those `lab run` has when none is given.
-    fn default() -> Self {
-        Knobs {
-            heat_max_mm: 5.0,
-            coarse_out: None,
-            upsampled_out: None,
-            coarse_mm: crate::cli::COARSE_MM,
-            variation: super::VariationArgs::default(),
-            no_dress: false,
-            converged: false,
-            self_collision: false,
-            coarse: super::CoarseArgs::default(),
-            no_push_out: false,
-            publish_every_s: None,
-        }
-    }
 }
 
 /// One scene's files.
@@ -243,18 +226,23 @@ pub fn run_lab(args: LabArgs) -> anyhow::Result<RunSummary> {
 }
 
 impl Knobs {
-    /// The library's run settings these flags give.
-    fn settings(&self) -> anyhow::Result<RunSettings> {
-        Ok(RunSettings {
-            coarse_edge_m: self.coarse_mm * 1e-3,
-            variation: self.variation.variation()?,
-            dress: !self.no_dress,
-            converged: self.converged,
-            self_collision: self.self_collision,
+    /// The run's options: the defaults with what these flags set.
+    fn options(&self) -> Options {
+        let d = Options::default();
+        Options {
+            coarse_edge_m: self.coarse_mm.map_or(d.coarse_edge_m, |mm| mm * 1e-3),
+            coarse_solver: if self.converged {
+                SolverMode::Converged
+            } else {
+                d.coarse_solver
+            },
+            self_collision: self.self_collision || d.self_collision,
+            match_contact_thickness: d.match_contact_thickness,
+            dress: d.dress && !self.no_dress,
             coarse: self.coarse.calibration(),
-            push_out: !self.no_push_out,
-            heat_max_m: self.heat_max_mm * 1e-3,
-        })
+            push_out: d.push_out && !self.no_push_out,
+            variation: self.variation.variation(),
+        }
     }
 }
 
@@ -263,14 +251,12 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
         Some(m) => m.clone(),
         None => clothsr::pipeline::models::find_generic_models().map_err(anyhow::Error::msg)?,
     };
-    let settings = knobs.settings()?;
-    settings.check()?;
     anyhow::ensure!(
         args.gt.is_none() || args.rrd.is_some() || args.spawn,
         "--gt colours the Rerun preview: give --rrd or --spawn with it (clothsr eval measures files)"
     );
     let mut jobs = jobs(&args, &knobs)?;
-    let models = RunModels::load(&models_dir, args.corrector, &settings)?;
+    let models = RunModels::load(&models_dir, args.corrector, knobs.options())?;
     if let Some(k) = args.batch_shot {
         anyhow::ensure!(
             k < jobs.len(),
@@ -304,7 +290,7 @@ fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
             o.set_message(job.scene.display().to_string());
         }
         let t0 = std::time::Instant::now();
-        let outcome = run_one(&args, &knobs, job, &models, &settings, &multi).map_err(|e| {
+        let outcome = run_one(&args, &knobs, job, &models, &multi).map_err(|e| {
             // Name the shot where the error does not already.
             if format!("{e:#}").contains(&job.scene.display().to_string()) {
                 e
@@ -456,7 +442,6 @@ fn run_one(
     knobs: &Knobs,
     job: &Job,
     models: &RunModels,
-    settings: &RunSettings,
     multi: &MultiProgress,
 ) -> anyhow::Result<Report> {
     let source = args.inputs.source(&job.scene);
@@ -472,20 +457,16 @@ fn run_one(
         kind: args.layer,
         clip_frames: args.clip_frames,
         publish_every_s: knobs.publish_every_s,
+        heat_max_m: knobs.heat_max_mm.map(|mm| mm * 1e-3),
     };
     let bar = multi.add(ProgressBar::new(0));
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} frames {per_sec} eta {eta} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let report = run_shot(
-        models,
-        &source,
-        settings,
-        &files,
-        args.frames,
-        |g: &Progress| show_progress(&bar, g),
-    );
+    let report = run_shot(models, &source, &files, args.frames, |g: &Progress| {
+        show_progress(&bar, g)
+    });
     let report = match report {
         Ok(r) => r,
         Err(e) => {

@@ -17,37 +17,37 @@ pub struct Args {
     /// Scene: USD (garments, colliders, solver), GarmentCode JSON or OBJ cloth.
     scene: PathBuf,
     /// Cloth edge length for sewing patterns, millimetres.
-    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = crate::cli::COARSE_MM)]
     edge_mm: f64,
     /// Frames to simulate (default: the scene's frame range).
     #[arg(long)]
     frames: Option<usize>,
     /// Output USD file.
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_usd, short, long)]
     output: PathBuf,
     /// Extra colliders (OBJ, OBJ sequence, USD).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_file, long)]
     collider: Vec<PathBuf>,
     /// Scale applied to the --collider files' points (their units to metres).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_FACTOR), long, default_value_t = 1.0)]
     collider_scale: f64,
     /// Offset (x,y,z metres) applied to the --collider files after scaling.
-    #[arg(long, value_parser = super::triple, allow_hyphen_values = true)]
+    #[arg(long, value_parser = crate::cli::values::triple, allow_hyphen_values = true)]
     collider_offset: Option<[f64; 3]>,
     /// Avatar (USD, UsdSkel or point cache).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_file, long)]
     avatar: Option<PathBuf>,
     /// Fabric preset for patterns and meshes without one.
     #[arg(long, default_value = "cotton")]
     fabric: clothsr::garment::FabricPreset,
     /// Time step in seconds (default: the scene's, else 1/300).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long)]
     dt: Option<f64>,
     /// Stiffness κ of the contact repulsion ½κ(d̂ − d)², N/m (default 2000)
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::positive(1e12), long)]
     contact_stiffness: Option<f64>,
     /// Coulomb friction coefficient against colliders (default 0.3)
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::non_negative(100.0), long)]
     friction: Option<f64>,
     /// Disable cloth self-collision.
     #[arg(long)]
@@ -64,20 +64,16 @@ pub struct Args {
     #[arg(long)]
     no_dress: bool,
     /// Longest sewing phase of dressing, simulated seconds.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_S), long, default_value_t = 2.0)]
     dress_max_s: f64,
     /// Settling under gravity after sewing, simulated seconds.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_S), long, default_value_t = 0.3)]
     settle_s: f64,
 }
 
 /// Runs `simulate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let output = super::check_output(&args.scene, &args.output)?;
-    anyhow::ensure!(
-        args.edge_mm.is_finite() && args.edge_mm > 0.0,
-        "--edge-mm must be positive"
-    );
     let scene = load_scene(&args)?;
     let frames = args
         .frames
@@ -135,7 +131,6 @@ fn load_scene(args: &Args) -> anyhow::Result<Scene> {
         scene.add_collider_file(a)?;
     }
     if let Some(dt) = args.dt {
-        anyhow::ensure!(dt.is_finite() && dt > 0.0, "--dt must be positive");
         scene.dt_s = dt;
     }
     Ok(scene)
@@ -144,18 +139,6 @@ fn load_scene(args: &Args) -> anyhow::Result<Scene> {
 /// The simulation of `scene` at `--edge-mm` under the solver flags given.
 fn new_simulation(scene: &Scene, args: &Args) -> anyhow::Result<Simulation> {
     let (no_self, fast) = (args.no_self_collision, args.fast);
-    if let Some(mu) = args.friction {
-        anyhow::ensure!(
-            mu.is_finite() && mu >= 0.0,
-            "--friction must be a coefficient ≥ 0, not {mu}"
-        );
-    }
-    if let Some(k) = args.contact_stiffness {
-        anyhow::ensure!(
-            k.is_finite() && k > 0.0,
-            "--contact-stiffness must be a positive number of N/m, not {k}"
-        );
-    }
     let sim = Simulation::new(scene, args.edge_mm * 1e-3, |p| {
         p.collision.self_collision = !no_self;
         p.newton_exact = !fast;
@@ -171,10 +154,6 @@ fn new_simulation(scene: &Scene, args: &Args) -> anyhow::Result<Simulation> {
 
 /// Sews the garments with seams, then settles them, before the first frame.
 fn dress(sim: &mut Simulation, dress_max_s: f64, settle_s: f64) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        dress_max_s >= 0.0 && settle_s >= 0.0,
-        "--dress-max-s and --settle-s must not be negative"
-    );
     let t = Instant::now();
     let d = sim
         .dress(dress_max_s, settle_s, 1e-3)

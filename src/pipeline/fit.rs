@@ -678,17 +678,18 @@ fn run_held_out(
     } else {
         None
     };
-    let mut scene = plan.shot.load()?;
-    v.variation.apply(&mut scene);
     let opts = |coarse: CoarseCalibration| super::Options {
         coarse_edge_m: plan.coarse_edge_m,
-        fast: plan.fast,
+        coarse_solver: crate::data::coarse_mode(plan.fast),
         self_collision: !plan.fast,
         match_contact_thickness: true,
         dress: true,
         coarse,
         push_out: true,
+        variation: v.variation,
     };
+    let mut scene = plan.shot.load()?;
+    opts(*cal).variation.apply(&mut scene);
     let mut run = super::Pipeline::new(&scene, isr, None, opts(*cal))?;
     let mut paper = super::Pipeline::new(&scene, isr, None, opts(CoarseCalibration::default()))?;
     if run.fine.num_vertices() != gt.num_vertices() {
@@ -948,4 +949,130 @@ fn csv(rows: &[HeldOut]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(quality: Quality) -> FitOptions {
+        FitOptions {
+            quality,
+            coarse_edge_m: 0.02,
+            fine_edge_m: 0.0025,
+            frames: None,
+            isr_steps: None,
+            generic_isr: None,
+        }
+    }
+
+    fn plan(quality: Quality) -> Plan {
+        let scene = crate::scene::samples::sample("sheet_sphere").expect("a sample");
+        let shot = SceneSource {
+            scene: PathBuf::from("/shots/sheet_sphere.usda"),
+            colliders: Vec::new(),
+            avatar: None,
+            fabric: "cotton".into(),
+        };
+        Plan::new(shot, &scene, &options(quality)).expect("a plan")
+    }
+
+    #[test]
+    fn every_task_comes_after_what_it_needs_and_evaluate_after_all() {
+        for quality in [Quality::Preview, Quality::Final] {
+            let plan = plan(quality);
+            let (train, held) = match quality {
+                Quality::Preview => (2, 1),
+                Quality::Final => (5, 2),
+            };
+            assert_eq!(plan.of_role(Role::Train).count(), train);
+            assert_eq!(plan.of_role(Role::HeldOut).count(), held);
+            // A data set per variation, calibration, training, one twin, the evaluation.
+            assert_eq!(plan.tasks.len(), train + held + 4);
+            let mut done = std::collections::HashSet::new();
+            for t in &plan.tasks {
+                for a in &t.after {
+                    assert!(done.contains(a.as_str()), "{} runs before {a}", t.id);
+                }
+                assert!(done.insert(t.id.as_str()), "{} twice", t.id);
+            }
+            let last = plan.tasks.last().expect("tasks");
+            assert_eq!(last.kind, TaskKind::Evaluate);
+            assert_eq!(last.after.len(), plan.tasks.len() - 1 - train);
+            // Calibration and training never see a held-out variation.
+            for t in &plan.tasks {
+                if matches!(t.kind, TaskKind::Calibrate | TaskKind::TrainIsr) {
+                    assert_eq!(t.after.len(), train);
+                    assert!(t.after.iter().all(|a| a.starts_with("data_train_")));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_plan_round_trips_through_its_folder_with_relative_files() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut plan = plan(Quality::Preview);
+        plan.shot.scene = dir.path().join("shots/sheet_sphere.usda");
+        save_plan(&plan, dir.path()).expect("save");
+        let text = std::fs::read_to_string(dir.path().join(PLAN_FILE)).expect("read");
+        assert!(!text.contains(&dir.path().display().to_string()), "{text}");
+        assert_eq!(Plan::load(dir.path()).expect("load"), plan);
+        let moved = tempfile::tempdir().expect("tempdir");
+        std::fs::copy(dir.path().join(PLAN_FILE), moved.path().join(PLAN_FILE)).expect("copy");
+        let there = Plan::load(moved.path()).expect("load");
+        assert_eq!(
+            there.shot.scene,
+            moved.path().join("shots/sheet_sphere.usda")
+        );
+    }
+
+    #[test]
+    fn a_plan_needs_a_coarse_edge_longer_than_the_fine_one() {
+        let scene = crate::scene::samples::sample("sheet_sphere").expect("a sample");
+        let shot = plan(Quality::Preview).shot;
+        for (coarse, fine) in [
+            (0.0025, 0.0025),
+            (0.001, 0.0025),
+            (f64::NAN, 0.0025),
+            (0.02, 0.0),
+        ] {
+            let opts = FitOptions {
+                coarse_edge_m: coarse,
+                fine_edge_m: fine,
+                ..options(Quality::Preview)
+            };
+            assert!(
+                Plan::new(shot.clone(), &scene, &opts).is_err(),
+                "{coarse} {fine}"
+            );
+        }
+        assert_eq!("final".parse::<Quality>(), Ok(Quality::Final));
+        assert!("fast".parse::<Quality>().is_err());
+    }
+
+    #[test]
+    fn the_twin_share_is_of_half_the_floor() {
+        let row = HeldOut {
+            id: "held_out_0".into(),
+            coarse_own_mm: 0.0,
+            coarse_calibrated_mm: 0.0,
+            isr_mm: 0.0,
+            upsampled_mm: 0.0,
+            isr_bend_w1_deg: 0.0,
+            upsampled_bend_w1_deg: 0.0,
+            per_frame: Vec::new(),
+            run_per_frame: vec![(2.0, 4.0), (4.0, 8.0)],
+            twin_per_frame: vec![1.0, 3.0],
+            floor_mm: Some(4.0),
+        };
+        assert_eq!(row.run_means_mm(), (3.0, 6.0));
+        // Against the twin 2 mm; (3 + 2) / 4: no prediction can average below 1 (= 4 / 4).
+        assert_eq!(row.twin_means(), Some((2.0, 1.25)));
+        let no_floor = HeldOut {
+            floor_mm: Some(0.0),
+            ..row
+        };
+        assert_eq!(no_floor.twin_means(), None);
+    }
 }

@@ -11,7 +11,7 @@ use std::time::Instant;
 use nalgebra::Vector3;
 
 use crate::corrector::Corrector;
-use crate::data::{coarse_contact_thickness, coarse_mode, new_simulation};
+use crate::data::{coarse_contact_thickness, new_simulation};
 use crate::error::{Error, Result};
 use crate::garment::Fabric;
 use crate::mesh::ClothMesh;
@@ -20,7 +20,7 @@ use crate::msr::{condition, Isr, SuperResolver};
 use crate::scene::Scene;
 use crate::sim::collide::{push_out, Collider, PushOut};
 use crate::sim::driver::Simulation;
-use crate::sim::step::SimState;
+use crate::sim::step::{SimState, SolverMode};
 
 pub mod calibrate;
 pub mod fit;
@@ -32,13 +32,17 @@ use crate::transfer::Transfer;
 pub use models::{choose_path, CorrectorChoice, ModelPath, ModelsManifest};
 pub use run::{resume_path, run_to_files, Outputs, Preview, Progress, Report};
 
-/// How to set up the coarse simulation.
+/// A run's settings: the shot's variation and how its coarse simulation is set up. One type
+/// for every run: [`Options::default`] is what `clothsr run` and the Python package's `run`
+/// take, `clothsr lab run` sets each field from a flag, and `fit` measures its held-out runs
+/// under it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Options {
     /// Coarse edge length, m (the paper: 20 mm).
     pub coarse_edge_m: f64,
-    /// One Newton step per time step when it is accepted (`clothsr simulate --fast`).
-    pub fast: bool,
+    /// The coarse simulation's solver: [`SolverMode::Fast`] (one Newton step per time step
+    /// when it is accepted, the paper's) or [`SolverMode::Converged`].
+    pub coarse_solver: SolverMode,
     /// Cloth self-collision.
     pub self_collision: bool,
     /// Give the coarse simulation the fine one's contact thickness (as `clothsr lab dataset` does
@@ -56,18 +60,23 @@ pub struct Options {
     /// the cloth wraps (the paper's §4.5 names the penetrations). Off, the network's output
     /// is written as it is.
     pub push_out: bool,
+    /// The shot's variation (as `clothsr lab dataset` makes training sequences), applied to
+    /// the scene as it is loaded ([`shot::run_shot`]; [`Pipeline::new`] takes the scene it is
+    /// given).
+    pub variation: crate::data::Variation,
 }
 
 impl Default for Options {
     fn default() -> Options {
         Options {
             coarse_edge_m: crate::mesh::COARSE_EDGE_M,
-            fast: true,
+            coarse_solver: SolverMode::Fast,
             self_collision: false,
             match_contact_thickness: true,
             dress: true,
             coarse: CoarseCalibration::default(),
             push_out: true,
+            variation: crate::data::Variation::default(),
         }
     }
 }
@@ -90,6 +99,22 @@ pub fn options_for_run(
 }
 
 impl Options {
+    /// Checks the settings before any work.
+    pub fn check(&self) -> Result<()> {
+        if !(self.coarse_edge_m.is_finite() && self.coarse_edge_m > 0.0) {
+            return Err(Error::Usage(
+                "the coarse edge length must be positive".into(),
+            ));
+        }
+        if !matches!(self.coarse_solver, SolverMode::Fast | SolverMode::Converged) {
+            return Err(Error::Usage(format!(
+                "the coarse simulation runs in fast or converged mode, not {}",
+                self.coarse_solver.name()
+            )));
+        }
+        self.coarse.check_flags().map_err(Error::Usage)
+    }
+
     /// These options with each of their coarse settings that is unset taken from `cal`.
     pub fn filled_from(self, cal: &CoarseCalibration) -> Options {
         Options {
@@ -187,7 +212,7 @@ impl<'a> Pipeline<'a> {
             scene,
             fine_edge,
             opts.self_collision,
-            coarse_mode(opts.fast),
+            opts.coarse_solver,
             None,
         )?;
         let dhat = coarse_contact_thickness(&fine_sim, opts.match_contact_thickness);
@@ -195,7 +220,7 @@ impl<'a> Pipeline<'a> {
             scene,
             opts.coarse_edge_m,
             opts.self_collision,
-            coarse_mode(opts.fast),
+            opts.coarse_solver,
             dhat,
         )?;
         if opts.dress && !coarse.sim.model.mesh.seam_pairs.is_empty() {

@@ -9,66 +9,11 @@ use super::{
     choose_path, options_for_run, run_to_files, CoarseCalibration, CorrectorChoice, ModelPath,
     Options, Outputs, Pipeline, Preview, Progress, Report,
 };
-use crate::data::{SceneSource, Variation};
+use crate::data::SceneSource;
 use crate::error::{Error, Result};
 use crate::eval::Animation;
 use crate::msr::Isr;
 use crate::viz::Recorder;
-
-/// The pipeline's research settings (`clothsr lab run`); [`RunSettings::default`] is what a
-/// user's run takes.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RunSettings {
-    /// Coarse edge length, m.
-    pub coarse_edge_m: f64,
-    /// The shot's variation (as `clothsr lab dataset` makes training sequences).
-    pub variation: Variation,
-    /// Sew and settle garments with seams before the first frame.
-    pub dress: bool,
-    /// Iterate Newton to convergence every coarse step instead of the fast one-step solver.
-    pub converged: bool,
-    /// Cloth self-collision in the coarse simulation.
-    pub self_collision: bool,
-    /// The coarse model (unset: the corrector's, else the models folder's `coarse.json`'s,
-    /// else the simulator's).
-    pub coarse: CoarseCalibration,
-    /// Push fine vertices out of the colliders ([`Options::push_out`]).
-    pub push_out: bool,
-    /// Distance shown red in the ground-truth heat map of the Rerun preview, m.
-    pub heat_max_m: f64,
-}
-
-impl Default for RunSettings {
-    fn default() -> Self {
-        RunSettings {
-            coarse_edge_m: crate::mesh::COARSE_EDGE_M,
-            variation: Variation::default(),
-            dress: true,
-            converged: false,
-            self_collision: false,
-            coarse: CoarseCalibration::default(),
-            push_out: true,
-            heat_max_m: 5e-3,
-        }
-    }
-}
-
-impl RunSettings {
-    /// Checks the settings before any work.
-    pub fn check(&self) -> Result<()> {
-        if !(self.coarse_edge_m.is_finite() && self.coarse_edge_m > 0.0) {
-            return Err(Error::Invalid(
-                "the coarse edge length must be positive".into(),
-            ));
-        }
-        if !(self.heat_max_m.is_finite() && self.heat_max_m > 0.0) {
-            return Err(Error::Usage(
-                "the heat map's maximum distance must be positive".into(),
-            ));
-        }
-        self.coarse.check_flags().map_err(Error::Usage)
-    }
-}
 
 /// A models folder loaded for runs: the ISR network, the path taken through the folder and the
 /// pipeline options it gives.
@@ -89,9 +34,9 @@ pub struct RunModels {
 
 impl RunModels {
     /// Loads the folder `dir` (`isr/` required; `corrector/`, `coarse.json` and
-    /// `models.json` optional) for runs under `settings`, taking the path `choice` asks for.
-    pub fn load(dir: &Path, choice: CorrectorChoice, settings: &RunSettings) -> Result<RunModels> {
-        settings.check()?;
+    /// `models.json` optional) for runs under `given`, taking the path `choice` asks for.
+    pub fn load(dir: &Path, choice: CorrectorChoice, given: Options) -> Result<RunModels> {
+        given.check()?;
         let isr_dir = dir.join("isr");
         if !isr_dir.join("config.json").exists() {
             return Err(Error::bad_input(
@@ -105,15 +50,6 @@ impl RunModels {
         let isr = Isr::load(&isr_dir)?;
         let (path, why) = choose_path(dir, choice)?;
         let corrector = (path == ModelPath::Corrector).then(|| dir.join("corrector"));
-        let given = Options {
-            coarse_edge_m: settings.coarse_edge_m,
-            fast: !settings.converged,
-            self_collision: settings.self_collision,
-            match_contact_thickness: true,
-            dress: settings.dress,
-            coarse: settings.coarse,
-            push_out: settings.push_out,
-        };
         let (opts, calibration) = options_for_run(dir, corrector.as_deref(), given)?;
         Ok(RunModels {
             dir: dir.to_path_buf(),
@@ -182,7 +118,13 @@ pub struct ShotFiles {
     /// Seconds between publishing the files and the resume point while running (`None`: every
     /// [`DEFAULT_PUBLISH_EVERY_S`]).
     pub publish_every_s: Option<f64>,
+    /// Distance shown red in the ground-truth heat map of the Rerun preview, m (`None`:
+    /// [`DEFAULT_HEAT_MAX_M`]).
+    pub heat_max_m: Option<f64>,
 }
+
+/// Distance shown red in the Rerun preview's ground-truth heat map unless asked otherwise, m.
+pub const DEFAULT_HEAT_MAX_M: f64 = 5e-3;
 
 /// Seconds between publishing a run's files and resume point unless asked otherwise.
 pub const DEFAULT_PUBLISH_EVERY_S: f64 = 10.0;
@@ -203,14 +145,13 @@ fn absolute(p: &Path) -> Result<PathBuf> {
     std::path::absolute(p).map_err(|e| Error::io(p, e))
 }
 
-/// Runs `frames` frames (default: the shot's range) of the shot `source` with `models` under
-/// `settings` into `files`, calling `progress` after every frame (`Break` stops after
+/// Runs `frames` frames (default: the shot's range) of the shot `source` with `models` (under
+/// their options) into `files`, calling `progress` after every frame (`Break` stops after
 /// publishing the frames so far and a resume point). An interrupted run with the same settings
 /// resumes from its last published frame unless `files.restart`.
 pub fn run_shot(
     models: &RunModels,
     source: &SceneSource,
-    settings: &RunSettings,
     files: &ShotFiles,
     frames: Option<usize>,
     progress: impl FnMut(&Progress) -> ControlFlow<()>,
@@ -227,13 +168,21 @@ pub fn run_shot(
             "the publishing interval must be a number of seconds >= 0".into(),
         ));
     }
+    if files
+        .heat_max_m
+        .is_some_and(|h| !(h.is_finite() && h > 0.0))
+    {
+        return Err(Error::Usage(
+            "the heat map's maximum distance must be positive".into(),
+        ));
+    }
     if files.ground_truth.is_some() && files.rrd.is_none() && !files.spawn {
         return Err(Error::Usage(
             "a ground truth colours the Rerun preview: save or stream one with it".into(),
         ));
     }
     let mut scene = source.load()?;
-    settings.variation.apply(&mut scene);
+    models.opts.variation.apply(&mut scene);
     let frames = frames.unwrap_or((scene.frame_end - scene.frame_start).max(0) as usize);
     if frames == 0 {
         return Err(Error::bad_input(
@@ -272,7 +221,7 @@ pub fn run_shot(
     let preview = rec.as_ref().map(|r| Preview {
         recorder: r,
         ground_truth: gt.as_ref(),
-        heat_max_m: settings.heat_max_m,
+        heat_max_m: files.heat_max_m.unwrap_or(DEFAULT_HEAT_MAX_M),
     });
     let layer = match files.kind {
         OutputKind::Standalone => false,
@@ -284,13 +233,12 @@ pub fn run_shot(
     };
     // Everything that shapes the output: a resume point made with other settings is ignored.
     let fingerprint = format!(
-        "scene={} models={} corrector={} frames={frames} opts={:?} variation={:?} \
+        "scene={} models={} corrector={} frames={frames} opts={:?} \
          colliders={:?} avatar={:?} fabric={} layer={:?}",
         absolute(&source.scene)?.display(),
         absolute(&models.dir)?.display(),
         p.has_corrector(),
         models.opts,
-        settings.variation,
         source.colliders,
         source.avatar,
         source.fabric,

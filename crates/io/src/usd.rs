@@ -550,6 +550,23 @@ fn path_str(path: &Path) -> Result<String> {
     Ok(path.to_string_lossy().into_owned())
 }
 
+/// Takes `meters_per_unit` for every USD file read or layered over from now on in this
+/// process that does not state its units (`metersPerUnit`); `None` (the default) refuses
+/// such files. Reading one logs the value taken.
+pub fn assume_meters_per_unit(meters_per_unit: Option<f64>) -> Result<()> {
+    if let Some(m) = meters_per_unit {
+        if !(m.is_finite() && m > 0.0) {
+            return Err(Error::Usage(format!(
+                "{m} metres per unit: expected a positive number"
+            )));
+        }
+    }
+    with_bridge(|_py, m| {
+        m.call_method1("assume_meters_per_unit", (meters_per_unit,))?;
+        Ok(())
+    })
+}
+
 /// Reads metadata, mesh summaries and garments of a USD file without loading animation.
 pub fn inspect_usd(path: &Path) -> Result<UsdStage<UsdMeshInfo>> {
     let p = path_str(path)?;

@@ -12,8 +12,9 @@ use clothsr::data::SceneSource;
 use clothsr::garment::{Fabric, FabricPreset};
 use clothsr::io::scene_files::{convert as convert_scene, Convert};
 use clothsr::io::SceneFiles;
-use clothsr::pipeline::shot::{run_shot, RunModels, RunSettings, ShotFiles};
+use clothsr::pipeline::shot::{run_shot, RunModels, ShotFiles};
 use clothsr::pipeline::CorrectorChoice;
+use clothsr::pipeline::Options;
 use clothsr::scene::Scene;
 use clothsr::ErrorKind;
 use pyo3::create_exception;
@@ -182,9 +183,8 @@ fn run<'py>(
     };
     let callback = Callback::new(progress);
     let report = py.detach(|| {
-        let settings = RunSettings::default();
-        let models = RunModels::load(&models, choice, &settings)?;
-        run_shot(&models, &source, &settings, &files, frames, |g| {
+        let models = RunModels::load(&models, choice, Options::default())?;
+        run_shot(&models, &source, &files, frames, |g| {
             callback.call(|py| (g.frame, g.frames).into_pyobject(py))
         })
     });

@@ -21,24 +21,24 @@ use nalgebra::Vector3;
 pub struct Args {
     /// What to benchmark: `sim` (the simulator beside Newton 1.8) or `pipeline` (the paper's
     /// Table 1 for a scene: coarse step, corrector, ISR and fine step times).
-    #[arg(default_value = "sim")]
-    what: String,
+    #[arg(value_enum, default_value_t = What::Sim)]
+    what: What,
     /// `pipeline`: the scenes, one row of the table each (default: the three sheet samples).
-    #[arg(
+    #[arg(value_parser = crate::cli::values::input_file,
         long,
         value_delimiter = ',',
         default_value = "samples/sheet_three_balls.usda,samples/sheet_table.usda,samples/sheet_sphere.usda"
     )]
     scene: Vec<std::path::PathBuf>,
     /// `pipeline`: the model directory (`isr/`, optional `corrector/`), as for `clothsr run`.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_dir, long)]
     models: Option<std::path::PathBuf>,
     /// `pipeline`: frames to time (both the pipeline and the fine simulation run them from the
     /// scene's start).
     #[arg(long, default_value_t = 10)]
     frames: usize,
     /// Sheet resolutions as approximate vertex counts.
-    #[arg(long, default_value = "3k,40k", value_delimiter = ',')]
+    #[arg(long, default_value = "3k,40k", value_delimiter = ',', value_parser = size)]
     sizes: Vec<String>,
     /// Timed steps per size (after 20 warm-up steps that bring the sheet onto the sphere).
     #[arg(long, default_value_t = 30)]
@@ -59,17 +59,17 @@ pub struct Args {
     /// `fast` (one full Newton step when the line search accepts it, as in Baraff & Witkin and
     /// Style3D; the pipeline's coarse simulation, which the corrector fixes), `data` (the fine
     /// simulation of data sets: fast sub-steps whose linear solves converged) and `tight`.
-    #[arg(long, default_value = "converged,fast", value_delimiter = ',')]
+    #[arg(long, default_value = "converged,fast", value_delimiter = ',', value_parser = mode)]
     modes: Vec<String>,
     /// Relative residual of the linear solve (default: the simulator's).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::values::positive(1.0))]
     cg_tol: Option<f64>,
     /// Linear-solve iterations at most (default: the simulator's).
     #[arg(long)]
     cg_max: Option<usize>,
     /// Preconditioner: `jacobi`, `two-level` or `cholesky` (default: the simulator's).
-    #[arg(long)]
-    solver: Option<String>,
+    #[arg(long, value_enum)]
+    solver: Option<Preconditioner>,
     /// `two-level`: vertices per aggregate.
     #[arg(long, default_value_t = 16)]
     aggregate: usize,
@@ -78,38 +78,62 @@ pub struct Args {
     refactor_above: usize,
 }
 
+/// What `bench` times.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum What {
+    /// The simulator beside Newton 1.8.
+    Sim,
+    /// The paper's Table 1 for a scene.
+    Pipeline,
+}
+
+/// The linear solve's preconditioner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Preconditioner {
+    /// Jacobi.
+    Jacobi,
+    /// Two-level (aggregates).
+    TwoLevel,
+    /// Incomplete Cholesky.
+    Cholesky,
+}
+
+/// A sheet size: an approximate vertex count (`3k`, `40000`), kept as written for the peer.
+fn size(s: &str) -> Result<String, String> {
+    match parse_vertices(s) {
+        Some(v) if v.is_finite() && (4.0..=1e7).contains(&v) => Ok(s.trim().to_string()),
+        _ => Err(format!(
+            "'{s}': a vertex count from 4 to 10M (e.g. 3k, 40000)"
+        )),
+    }
+}
+
+/// A solver mode's name ([`SolverMode::name`]).
+fn mode(s: &str) -> Result<String, String> {
+    SolverMode::from_name(s.trim())
+        .map(|m| m.name().to_string())
+        .ok_or_else(|| format!("'{s}': fast, data, converged or tight"))
+}
+
 fn parse_size(s: &str) -> anyhow::Result<f64> {
     parse_vertices(s).ok_or_else(|| anyhow::anyhow!("bad size '{s}' (e.g. 3k, 40000)"))
 }
 
 /// Runs `bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.what == "pipeline" {
+    if args.what == What::Pipeline {
         return pipeline(&args);
     }
-    anyhow::ensure!(
-        args.what == "sim",
-        "unknown benchmark '{}' (known: sim, pipeline)",
-        args.what
-    );
-    let solver = match args.solver.as_deref() {
-        None => None,
-        Some("jacobi") => Some(LinearSolver::JacobiPcg),
-        Some("two-level") => Some(LinearSolver::TwoLevelPcg {
+    let solver = args.solver.map(|s| match s {
+        Preconditioner::Jacobi => LinearSolver::JacobiPcg,
+        Preconditioner::TwoLevel => LinearSolver::TwoLevelPcg {
             aggregate: args.aggregate,
             refactor_above: args.refactor_above,
-        }),
-        Some("cholesky") => Some(LinearSolver::CholeskyPcg {
+        },
+        Preconditioner::Cholesky => LinearSolver::CholeskyPcg {
             refactor_above: args.refactor_above,
-        }),
-        Some(s) => anyhow::bail!("unknown solver '{s}' (known: jacobi, two-level, cholesky)"),
-    };
-    for m in &args.modes {
-        anyhow::ensure!(
-            SolverMode::from_name(m).is_some(),
-            "unknown mode '{m}' (known: fast, data, converged, tight)"
-        );
-    }
+        },
+    });
     let cases: Vec<(&str, f64)> = args
         .modes
         .iter()
@@ -378,7 +402,7 @@ fn pipeline_row(
         &scene,
         isr.cfg.pixel_m,
         opts.self_collision,
-        clothsr::data::coarse_mode(opts.fast),
+        opts.coarse_solver,
         None,
     )?;
     let t = Instant::now();

@@ -17,34 +17,34 @@ pub struct Args {
     /// Data set directory (`clothsr lab dataset`) of the scene to calibrate for; repeat it for
     /// several drops (the candidates are ranked on all their frames pooled). Measure the choice
     /// on a drop not given here.
-    #[arg(long, required = true)]
+    #[arg(value_parser = crate::cli::values::input_dir, long, required = true)]
     data: Vec<PathBuf>,
     /// Where to write the chosen calibration: a models folder's `coarse.json`, read by
     /// `clothsr run --models` when no corrector runs. Written only when every run is done.
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_file, short, long)]
     output: PathBuf,
     /// Frames to run of every data set (default: all each has after its first).
     #[arg(long)]
     frames: Option<usize>,
     // The lists' defaults are `Grid::default()`'s (a test checks).
     /// Membrane compression factors to try, in (0, 1] (1: the simulator's).
-    #[arg(long, value_delimiter = ',', default_value = "1,0.1,0.03,0.01")]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long, value_delimiter = ',', default_value = "1,0.1,0.03,0.01")]
     compression: Vec<f64>,
     /// Compression knees to try with each factor below 1, shortenings (0: none).
-    #[arg(long, value_delimiter = ',', default_value = "0")]
+    #[arg(value_parser = crate::cli::values::non_negative(1.0), long, value_delimiter = ',', default_value = "0")]
     compression_knee: Vec<f64>,
     /// Coulomb friction coefficients against bodies to try; `scene` is the scene's own.
-    #[arg(long, value_delimiter = ',', default_value = "scene,1,2.5")]
-    friction: Vec<String>,
+    #[arg(value_parser = friction, long, value_delimiter = ',', default_value = "scene,1,2.5")]
+    friction: Vec<Friction>,
     /// Wrinkle bending gains to try (0: off).
-    #[arg(long, value_delimiter = ',', default_value = "0,1")]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_FACTOR), long, value_delimiter = ',', default_value = "0,1")]
     wrinkle_bending: Vec<f64>,
     /// Bending stiffness factors to try (1: the fabric's).
-    #[arg(long, value_delimiter = ',', default_value = "1")]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_FACTOR), long, value_delimiter = ',', default_value = "1")]
     bending: Vec<f64>,
     /// Crease contacts to try: `on` (the simulator's) and or `off` (coarse edges may cut the
     /// colliders' sharp edges, as M_int's do).
-    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = crate::cli::on_off)]
+    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = crate::cli::values::on_off)]
     crease_contacts: Vec<bool>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where
@@ -52,30 +52,33 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     jitter: usize,
     /// How far `--jitter` moves each start, mm.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_MM), long, default_value_t = 0.1)]
     jitter_mm: f64,
     /// Write every candidate's errors as CSV here.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::output_file, long)]
     csv: Option<PathBuf>,
 }
 
-/// `--friction`'s values: `scene` as `None`, numbers checked.
-fn frictions(given: &[String]) -> anyhow::Result<Vec<Option<f64>>> {
-    given
-        .iter()
-        .map(|v| match v.trim() {
-            "scene" => Ok(None),
-            t => {
-                let mu: f64 = t.parse().with_context(|| {
-                    format!("--friction {t}: not a number (or 'scene' for the scene's own)")
-                })?;
-                clothsr::sim::coarse::check_friction(mu)
-                    .map_err(|e| anyhow::anyhow!("--friction {t}: {e}"))?;
-                Ok(Some(mu))
+/// A `--friction` value: `scene` (the scene's own) or a checked coefficient.
+fn friction(v: &str) -> Result<Friction, String> {
+    match v.trim() {
+        "scene" => Ok(Friction(None)),
+        t => {
+            let mu: f64 = t
+                .parse()
+                .map_err(|_| format!("'{t}': not a number (or 'scene' for the scene's own)"))?;
+            clothsr::sim::coarse::check_friction(mu).map_err(|e| format!("'{t}': {e}"))?;
+            if mu > 100.0 {
+                return Err(format!("'{t}': a friction coefficient is at most 100"));
             }
-        })
-        .collect()
+            Ok(Friction(Some(mu)))
+        }
+    }
 }
+
+/// A friction coefficient to try (`None`: the scene's own).
+#[derive(Debug, Clone, Copy)]
+struct Friction(Option<f64>);
 
 /// A candidate's settings as table cells: compression, knee, friction, gain, bending, creases.
 fn cells(c: &CoarseCalibration) -> [String; 6] {
@@ -172,7 +175,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let grid = Grid {
         compression: args.compression.clone(),
         compression_knee: args.compression_knee.clone(),
-        friction: frictions(&args.friction)?,
+        friction: args.friction.iter().map(|f| f.0).collect(),
         wrinkle_bending: args.wrinkle_bending.clone(),
         bending: args.bending.clone(),
         crease_contacts: args.crease_contacts.clone(),
@@ -334,12 +337,12 @@ mod tests {
     #[test]
     fn the_default_lists_are_the_library_grid() {
         let cli =
-            Cli::try_parse_from(["calibrate", "--data", "d", "-o", "c.json"]).expect("parses");
+            Cli::try_parse_from(["calibrate", "--data", ".", "-o", "c.json"]).expect("parses");
         let a = cli.args;
         let grid = Grid {
             compression: a.compression.clone(),
             compression_knee: a.compression_knee.clone(),
-            friction: frictions(&a.friction).expect("frictions"),
+            friction: a.friction.iter().map(|f| f.0).collect(),
             wrinkle_bending: a.wrinkle_bending.clone(),
             bending: a.bending.clone(),
             crease_contacts: a.crease_contacts.clone(),
@@ -348,23 +351,21 @@ mod tests {
         let cli = Cli::try_parse_from([
             "calibrate",
             "--data",
-            "d",
+            ".",
             "-o",
             "c.json",
             "--friction",
             "0.2,scene",
         ])
         .expect("parses");
-        assert_eq!(
-            frictions(&cli.args.friction).expect("frictions"),
-            vec![Some(0.2), None]
-        );
-        assert!(frictions(&["-1".to_string()]).is_err());
+        let given: Vec<Option<f64>> = cli.args.friction.iter().map(|f| f.0).collect();
+        assert_eq!(given, vec![Some(0.2), None]);
+        assert!(friction("-1").is_err());
         let creases = |v: &str| {
             Cli::try_parse_from([
                 "calibrate",
                 "--data",
-                "d",
+                ".",
                 "-o",
                 "c.json",
                 "--crease-contacts",

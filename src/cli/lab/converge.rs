@@ -15,29 +15,29 @@ pub struct Args {
     shots: Vec<String>,
     /// Output directory: one folder per shot with its runs (a run already there is reused),
     /// `frames.csv`, and `converge.md` with every shot's table.
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
     /// Output frames.
     #[arg(long, default_value_t = 30)]
     frames: usize,
     /// Fine edge length, millimetres.
-    #[arg(long, default_value_t = 2.5)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = 2.5)]
     fine_mm: f64,
     /// The reference's solver mode (`MODE/N`: the scene's time step divided by N).
     #[arg(long, default_value = "tight/4", value_parser = mode_spec)]
     reference: ModeSpec,
     /// The reference solved tighter still, to show it has converged ('none' to skip).
-    #[arg(long, default_value = "tight/8")]
-    check: String,
+    #[arg(long, default_value = "tight/8", value_parser = check_spec)]
+    check: std::option::Option<ModeSpec>,
     /// Solver modes measured at the fine resolution.
     #[arg(long, value_delimiter = ',', default_value = "fast,data", value_parser = mode_spec)]
     modes: Vec<ModeSpec>,
     /// The reference's twin, started this many millimetres higher (0: none).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_MM), long, default_value_t = 0.1)]
     twin_mm: f64,
     /// Coarser resolutions measured against the fine reference, millimetres ('none' for none).
-    #[arg(long, default_value = "20,10,5")]
-    ladder_mm: String,
+    #[arg(long, default_value = "20,10,5", value_parser = ladder)]
+    ladder_mm: std::vec::Vec<f64>,
     /// The solver mode of the ladder's runs.
     #[arg(long, default_value = "data", value_parser = mode_spec)]
     ladder_mode: ModeSpec,
@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long)]
     ladder_own_thickness_only: bool,
     /// Coarse edge length for dressing garments with seams, millimetres.
-    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     #[command(flatten)]
     inputs: crate::cli::SceneInputs,
@@ -56,38 +56,36 @@ fn mode_spec(s: &str) -> Result<ModeSpec, String> {
     ModeSpec::parse(s).map_err(|e| e.to_string())
 }
 
+/// A mode, or `none`.
+fn check_spec(s: &str) -> Result<Option<ModeSpec>, String> {
+    match s {
+        "none" => Ok(None),
+        s => mode_spec(s).map(Some),
+    }
+}
+
+/// Millimetres, comma-separated, or `none`.
+fn ladder(s: &str) -> Result<Vec<f64>, String> {
+    if s == "none" {
+        return Ok(Vec::new());
+    }
+    s.split(',')
+        .map(crate::cli::values::positive(crate::cli::values::MAX_MM))
+        .collect()
+}
+
 /// Runs `converge`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
-    for (flag, v) in [("--fine-mm", args.fine_mm), ("--coarse-mm", args.coarse_mm)] {
-        anyhow::ensure!(v.is_finite() && v > 0.0, "{flag} must be a positive number");
-    }
-    anyhow::ensure!(
-        args.twin_mm.is_finite() && args.twin_mm >= 0.0,
-        "--twin-mm must be a distance ≥ 0"
-    );
-    let ladder_mm: Vec<f64> = match args.ladder_mm.as_str() {
-        "none" => Vec::new(),
-        s => s
-            .split(',')
-            .map(|l| {
-                l.trim().parse::<f64>().map_err(|_| {
-                    anyhow::anyhow!("--ladder-mm: '{l}' is not a number of millimetres")
-                })
-            })
-            .collect::<anyhow::Result<_>>()?,
-    };
-    for &l in &ladder_mm {
+    let ladder_mm = &args.ladder_mm;
+    for &l in ladder_mm {
         anyhow::ensure!(
             l.is_finite() && l > args.fine_mm,
             "--ladder-mm {l}: each level must be coarser than --fine-mm ({})",
             args.fine_mm
         );
     }
-    let check = match args.check.as_str() {
-        "none" => None,
-        s => Some(ModeSpec::parse(s)?),
-    };
+    let check = args.check;
     let plan = Plan {
         frames: args.frames,
         fine_edge_m: args.fine_mm * 1e-3,

@@ -14,13 +14,13 @@ pub struct Args {
     /// Scene: USD, GarmentCode JSON or OBJ cloth.
     scene: PathBuf,
     /// Output directory (created; a run already there with the same settings is resumed).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
     /// Coarse edge length, millimetres.
-    #[arg(long, default_value_t = crate::cli::COARSE_MM)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
     /// Fine edge length, millimetres (the ground truth).
-    #[arg(long, default_value_t = 2.5)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = 2.5)]
     fine_mm: f64,
     /// Output frames (each `1/(fps·dt)` steps).
     #[arg(long)]
@@ -73,7 +73,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.fine_mm
     );
     anyhow::ensure!(args.frames > 0, "--frames must be at least 1");
-    let variation = args.variation.variation()?;
+    let variation = args.variation.variation();
     let scene = args.inputs.load(&args.scene)?;
     let opts = Options {
         coarse_edge_m: args.coarse_mm * 1e-3,

@@ -17,7 +17,7 @@ pub struct Args {
     /// Move the fine garment by x,y,z metres.
     #[arg(
         long,
-        value_parser = crate::cli::triple,
+        value_parser = crate::cli::values::triple,
         allow_hyphen_values = true,
         default_value = "0.0001,0,0"
     )]
@@ -26,7 +26,7 @@ pub struct Args {
     #[arg(long)]
     frames: Option<usize>,
     /// Output directory (created; the same fork already there is resumed).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
 }
 

@@ -20,12 +20,12 @@ use nalgebra::Vector3;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Corrector model directory (`clothsr lab train corrector`).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_dir, long)]
     model: PathBuf,
     /// Data set directory (`clothsr lab dataset`) with the ground truth; not one trained on.
     /// Repeat it for several held-out drops: each is rolled out and reported, then the errors
     /// are pooled over all their frames (one chaotic drop cannot rank two correctors).
-    #[arg(long, required = true)]
+    #[arg(value_parser = crate::cli::values::input_dir, long, required = true)]
     data: Vec<PathBuf>,
     /// Frames to roll out (default: all the data set has after the start).
     #[arg(long)]
@@ -35,7 +35,7 @@ pub struct Args {
     start_frame: usize,
     /// Write per-frame errors as CSV here (with `--horizon`: per frame after the start; with
     /// several `--data`, a first column names each row's data set).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::output_file, long)]
     csv: Option<PathBuf>,
     /// A second data set of the same scene and coarse mesh, started next to the first (a
     /// `clothsr lab dataset` run whose `--garment-offset` differs by a fraction of a millimetre,
@@ -43,7 +43,7 @@ pub struct Args {
     /// fork's frame): the distance between the two ground truths is reported beside the errors
     /// as the predictability floor, which no predictor of the first from its start can be
     /// expected to beat where the scene is chaotic (folds, contact and friction are).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_dir, long)]
     floor: Option<PathBuf>,
     /// Short-horizon mode: instead of one long rollout, roll out this many frames from the
     /// ground truth at every `--every`-th frame from the start and report the errors averaged
@@ -56,7 +56,7 @@ pub struct Args {
     /// Run the corrector with this take-back scale instead of its model's (the gated
     /// decoder's share of each step's velocity change taken back is multiplied by it; in
     /// (0, 1]): to choose the value `train corrector --take-back` saves.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long)]
     take_back: Option<f64>,
     /// Run the corrector with this many rounds of smoothing of its correction instead of its
     /// model's (0: none): to choose the value `train corrector --smoothing` saves.
@@ -73,7 +73,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     jitter: usize,
     /// How far `--jitter` moves each start, mm.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_MM), long, default_value_t = 0.1)]
     jitter_mm: f64,
 }
 

@@ -9,7 +9,7 @@ use clothsr::scene::samples::{sample, SAMPLE_NAMES};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Output directory.
-    #[arg(short, long, default_value = "samples")]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long, default_value = "samples")]
     output: PathBuf,
 }
 

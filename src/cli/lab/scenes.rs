@@ -19,7 +19,7 @@ pub enum Set {
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Output directory (one `NAME.usda` per shot).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
     /// A fixed list of shots.
     #[arg(long, value_enum)]

@@ -14,10 +14,10 @@ use clothsr::msr::Isr;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// ISR model directory (`clothsr lab train isr`).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_dir, long)]
     model: PathBuf,
     /// Data set directory (`clothsr lab dataset`) with the ground truth; not one trained on.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_dir, long)]
     data: PathBuf,
     /// First frame (1-based); it starts from the coarse map, as a new shot.
     #[arg(long, default_value_t = 1)]
@@ -30,7 +30,7 @@ pub struct Args {
     #[arg(long)]
     teacher_forcing: bool,
     /// Write per-frame errors and times as CSV here.
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::output_file, long)]
     csv: Option<PathBuf>,
 }
 

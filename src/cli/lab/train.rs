@@ -31,10 +31,10 @@ enum What {
 #[derive(Debug, clap::Args)]
 pub struct IsrArgs {
     /// Data set directories (`clothsr lab dataset`); repeat for several sequences.
-    #[arg(long, required = true)]
+    #[arg(value_parser = crate::cli::values::input_dir, long, required = true)]
     data: Vec<PathBuf>,
     /// Output model directory (an interrupted run there with the same settings resumes).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
     /// Train on frames 1..=N of each data set only (keep the rest for evaluation).
     #[arg(long)]
@@ -49,13 +49,13 @@ pub struct IsrArgs {
     #[arg(long, default_value_t = 32)]
     patch: usize,
     /// Learning rate at the first step.
-    #[arg(long, default_value_t = 4e-4)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long, default_value_t = 4e-4)]
     lr_start: f64,
     /// Learning rate at the last step (exponential decay).
-    #[arg(long, default_value_t = 1e-5)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long, default_value_t = 1e-5)]
     lr_end: f64,
     /// Weight of the gradient term of the loss (0: positions only).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_FACTOR), long, default_value_t = 10.0)]
     beta: f64,
     /// Leave out the previous frame's output as an input (the ablation of §4.2).
     #[arg(long)]
@@ -85,16 +85,16 @@ pub struct IsrArgs {
     #[arg(long, default_value_t = 1)]
     unshuffle: usize,
     /// σ of the Gaussian smoothing of the training initialisation, pixels.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(value_parser = crate::cli::values::non_negative(1e3), long, default_value_t = 1.0)]
     init_blur_px: f64,
     /// Standard deviation of the noise added to the training initialisation, mm.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_MM), long, default_value_t = 0.1)]
     init_noise_mm: f64,
     /// Pass the previous frame's output as it is, without moving it by the coarse motion.
     #[arg(long)]
     no_init_motion: bool,
     /// Phong tessellation blend of the coarse map (0: piecewise-linear, as the paper).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(value_parser = crate::cli::values::within(0.0, 1.0), long, default_value_t = 0.5)]
     phong_alpha: f64,
     /// Most frames a sample is rolled out through the network before its loss (its
     /// initialisation is then the network's own output; 0: always the data's).
@@ -102,7 +102,7 @@ pub struct IsrArgs {
     unroll_max: usize,
     /// Probability that a training sample's initialisation is the coarse map itself (as on a
     /// shot's first frame) instead of the previous frame's ground truth.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(value_parser = crate::cli::values::within(0.0, 1.0), long, default_value_t = 0.1)]
     coarse_init_prob: f64,
     /// Random seed.
     #[arg(long, default_value_t = 7)]
@@ -113,10 +113,10 @@ pub struct IsrArgs {
 #[derive(Debug, clap::Args)]
 pub struct CorrectorArgs {
     /// Data set directories (`clothsr lab dataset`); repeat for several sequences.
-    #[arg(long, required = true)]
+    #[arg(value_parser = crate::cli::values::input_dir, long, required = true)]
     data: Vec<PathBuf>,
     /// Output model directory (an interrupted run there with the same settings resumes).
-    #[arg(short, long)]
+    #[arg(value_parser = crate::cli::values::output_dir, short, long)]
     output: PathBuf,
     /// Train on frames 1..=N of each data set only (keep the rest for evaluation).
     #[arg(long)]
@@ -128,15 +128,15 @@ pub struct CorrectorArgs {
     #[arg(long, default_value_t = 4)]
     batch: usize,
     /// Learning rate at the first step.
-    #[arg(long, default_value_t = 1e-4)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long, default_value_t = 1e-4)]
     lr_start: f64,
     /// Learning rate at the last phase-1 step (exponential decay).
-    #[arg(long, default_value_t = 1e-6)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long, default_value_t = 1e-6)]
     lr_end: f64,
     /// Training noise, as a multiple of the data's RMS per-step position correction (GNS
     /// style; off by default: on the three-balls drops, 0.3 made the interleaved rollout 6.2×
     /// the simulation alone's error against 3.4× without).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_FACTOR), long, default_value_t = 0.0)]
     noise_ratio: f64,
     /// Vertices per random sub-mesh patch (0: whole meshes).
     #[arg(long, default_value_t = 0)]
@@ -148,14 +148,14 @@ pub struct CorrectorArgs {
     #[arg(long, default_value_t = 8)]
     window: usize,
     /// Phase-2 learning rate.
-    #[arg(long, default_value_t = 1e-5)]
+    #[arg(value_parser = crate::cli::values::non_negative(1.0), long, default_value_t = 1e-5)]
     rollout_lr: f64,
     /// Phase-2 target's pull-back time, steps: the target is the ground truth's velocity plus a
     /// pull towards its positions over this many steps (1: land on them in one step).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_FACTOR), long, default_value_t = 1.0)]
     rollout_tau: f64,
     /// Stop phase 2 once the mean loss of the last 20 windows is below this (0: never).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_FACTOR), long, default_value_t = 0.0)]
     rollout_stop_loss: f64,
     /// Latent width of every MLP.
     #[arg(long, default_value_t = 64)]
@@ -176,13 +176,13 @@ pub struct CorrectorArgs {
     /// vertex's edges after the step rises from 0 to this (the fine cloth's wrinkles take up
     /// compression, not tension); 0: no limit.
     /// [default: 0.01, or the `--init` model's]
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::non_negative(1.0), long)]
     tension_ramp: Option<f64>,
     /// The gated decoder's take-back scale at inference, saved with the model: the share of
     /// the step's velocity change taken back is multiplied by this, in (0, 1] (taking back
     /// most of it also takes back the cloth's restoring force, and the corrected cloth drifts).
     /// [default: 1, or the `--init` model's]
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::positive(1.0), long)]
     take_back: Option<f64>,
     /// Low-pass filter on the correction at inference, saved with the model: this many rounds
     /// of mass-weighted averaging over each vertex and its mesh neighbours before it is applied
@@ -193,14 +193,14 @@ pub struct CorrectorArgs {
     /// The gated decoder's lowest share, fixed when the network is made (not with `--init`):
     /// the learned share of the step's velocity change taken back lies in (m, 1); below 0
     /// the corrector may also amplify the step's response. [default: 0]
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(value_parser = crate::cli::values::within(-crate::cli::values::MAX_FACTOR, 1.0), long, allow_hyphen_values = true)]
     share_min: Option<f64>,
     /// Held-out data sets to select the network on (repeat for several; never a training
     /// set): at the end of each phase (with `--init`, the starting model too) and every
     /// `--validate-every` phase-2 windows the network is rolled out interleaved with the
     /// simulator on them, and the one closest to their ground truth is saved
     /// (`validation.csv` beside the model logs every validation).
-    #[arg(long)]
+    #[arg(value_parser = crate::cli::values::input_dir, long)]
     val_data: Vec<PathBuf>,
     /// Validate every this many phase-2 windows (with `--val-data`).
     #[arg(long, default_value_t = 100)]
@@ -218,7 +218,7 @@ pub struct CorrectorArgs {
     /// Start from this trained corrector (a model directory): its network sizes, decoder,
     /// inference settings, coarse membrane, weights and normalisation, instead of fresh
     /// weights (fine-tuning: more phase-2 windows with `--steps 0`, or new sequences).
-    #[arg(long, value_name = "MODEL", conflicts_with_all = ["latent", "mp_steps", "attention", "decoder"])]
+    #[arg(value_parser = crate::cli::values::input_dir, long, value_name = "MODEL", conflicts_with_all = ["latent", "mp_steps", "attention", "decoder"])]
     init: Option<PathBuf>,
 }
 
