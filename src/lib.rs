@@ -7,7 +7,7 @@
 //! 2. [`garment`] holds panels, seams and fabric; [`mesh`] meshes them at the coarse (20 mm) and
 //!    fine (2.5 mm) resolutions in one shared material space;
 //! 3. [`sim`] simulates cloth; [`transfer`] moves states between the coarse and fine meshes;
-//!    [`data`] makes training data; [`corrector`] turns each coarse step M_c into M_int and the
+//!    [`data`] is the training data's format and [`dataset`] makes it; [`corrector`] turns each coarse step M_c into M_int and the
 //!    simulator goes on from it; [`msr`] turns meshes into coordinate maps and patches and back;
 //! 4. [`pipeline`] runs these stages per frame; [`io`] writes time-sampled USD and [`viz`]
 //!    streams previews to Rerun; [`eval`] measures results against fine simulations.
@@ -15,8 +15,9 @@
 //! The stages below the pipeline are crates of their own, each using only those before it:
 //! `clothsr-geometry` ([`garment`], [`mesh`], [`scene`], [`transfer`], [`metrics`]) →
 //! `clothsr-sim` ([`sim`]) → `clothsr-io` ([`io`], [`data`]) → `clothsr-nn` ([`corrector`],
-//! [`msr`]) → this crate ([`pipeline`], [`eval`], [`viz`]) → the `clothsr` command.
+//! [`msr`]) → this crate ([`dataset`], [`pipeline`], [`eval`], [`viz`]) → the `clothsr` command.
 
+pub mod dataset;
 pub mod eval;
 pub mod pipeline;
 pub mod viz;

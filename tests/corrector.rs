@@ -18,7 +18,8 @@ use clothsr::corrector::training::{
     fit_normalisation, save_model, train, TrainSet, ValidationSet, VALIDATION_LOG,
 };
 use clothsr::corrector::{CorrectorConfig, TrainingConfig};
-use clothsr::data::{coarse_simulation, generate, Options, Variation};
+use clothsr::data::{coarse_simulation, Variation};
+use clothsr::dataset::{generate, Options};
 use clothsr::garment::Fabric;
 use clothsr::nn::common::default_device;
 use clothsr::pipeline::calibrate::{score, sim_alone_errors, CalibrationSet};

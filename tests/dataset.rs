@@ -3,7 +3,8 @@
 
 mod common;
 
-use clothsr::data::{fork, generate, read_frame_positions, read_manifest, Options, Variation};
+use clothsr::data::{read_frame_positions, read_manifest, Variation};
+use clothsr::dataset::{fork, generate, Options};
 use clothsr::io::tensors::TensorReader;
 use clothsr::scene::Scene;
 use nalgebra::Vector3;
@@ -99,7 +100,14 @@ fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
     let m = fork(&whole, 1, Vector3::zeros(), &same).expect("fork");
     assert_eq!(m.frames_done, 1);
     assert_eq!(m.fork.as_ref().map(|f| f.frame), Some(1));
-    generate(&scene(), &m.scene, &m.options(3), &same, |_| {}).expect("continue");
+    generate(
+        &scene(),
+        &m.scene,
+        &Options::of_manifest(&m, 3),
+        &same,
+        |_| {},
+    )
+    .expect("continue");
     let fine = |d: &std::path::Path, k| read_frame_positions(d, k).expect("frame").fine_x.1;
     let gap = |a: &[f32], b: &[f32]| {
         a.iter()
@@ -132,7 +140,14 @@ fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
             a - b
         );
     }
-    generate(&scene(), &m.scene, &m.options(3), &moved, |_| {}).expect("continue");
+    generate(
+        &scene(),
+        &m.scene,
+        &Options::of_manifest(&m, 3),
+        &moved,
+        |_| {},
+    )
+    .expect("continue");
     let g = gap(&fine(&moved, 3), &fine(&whole, 3));
     assert!(g > 1e-3, "3 mm at frame 1 left frame 3 {g} m away");
 
@@ -195,9 +210,15 @@ fn a_fork_continues_a_data_set_from_its_frame_moved_by_the_offset() {
     let mut w = clothsr::io::tensors::TensorWriter::from_reader(&r).expect("copy");
     w.f32("resume_fine_margin", &[1], &[0.01]);
     w.write(&frame1).expect("write");
-    let e = generate(&scene(), &m.scene, &m.options(3), &bad, |_| {})
-        .expect_err("f32 margin")
-        .to_string();
+    let e = generate(
+        &scene(),
+        &m.scene,
+        &Options::of_manifest(&m, 3),
+        &bad,
+        |_| {},
+    )
+    .expect_err("f32 margin")
+    .to_string();
     assert!(
         e.contains("frame_00001") && e.contains("resume_fine_margin"),
         "{e}"

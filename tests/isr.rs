@@ -8,7 +8,8 @@ mod common;
 use std::ops::ControlFlow;
 
 use burn::tensor::{Tensor, TensorData};
-use clothsr::data::{generate, Options, Variation};
+use clothsr::data::Variation;
+use clothsr::dataset::{generate, Options};
 use clothsr::msr::data::IsrSequence;
 use clothsr::msr::eval::evaluate;
 use clothsr::msr::gradients::gradient_l1;

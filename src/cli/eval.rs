@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::eval::{
-    compare, floor_bound, health, plot, summarise, vertex_errors, write_csv, Animation, Bodies,
-    FloorBound, FrameMetrics,
+    floor_bound, health, plot, summarise, vertex_errors, write_csv, Animation, Bodies, FloorBound,
+    FrameMetrics, Series,
 };
 use clothsr::viz::{colours, Recorder};
 
@@ -52,9 +52,6 @@ pub struct Args {
     #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long)]
     heat_max_mm: Option<f64>,
 }
-
-/// A series' label and its per-frame metrics.
-type Series = (String, Vec<FrameMetrics>);
 
 /// `NAME=FILE` or `FILE` (labelled by its name), the file existing.
 fn baseline(s: &str) -> Result<(String, PathBuf), String> {
@@ -182,26 +179,16 @@ fn measure(
     inputs: &[(String, PathBuf)],
     start: f64,
 ) -> anyhow::Result<(Vec<Series>, Vec<Animation>)> {
-    let mut series: Vec<Series> = Vec::new();
-    let mut anims: Vec<Animation> = Vec::new();
-    let mut pred_anim = Some(pred_anim);
-    for (name, path) in inputs {
-        let a = match pred_anim.take() {
-            Some(a) => a,
-            None => Animation::read(path, start)?,
-        };
-        let mut m = compare(gt, &a, path)?;
-        // A baseline counts over the prediction's frames only, so that the ratios compare
-        // like with like (a fork's frames before it was moved count as zero there too).
-        if let Some((_, pred)) = series.first() {
-            m.retain(|f| {
-                pred.iter()
-                    .any(|p| (p.time_code - f.time_code).abs() < 1e-6)
-            });
-        }
-        series.push((name.clone(), m));
-        anims.push(a);
+    let mut anims = vec![pred_anim];
+    for (_, path) in &inputs[1..] {
+        anims.push(Animation::read(path, start)?);
     }
+    let labelled: Vec<(String, &Animation, &Path)> = inputs
+        .iter()
+        .zip(&anims)
+        .map(|((name, path), a)| (name.clone(), a, path.as_path()))
+        .collect();
+    let series = clothsr::eval::measure(gt, &labelled)?;
     Ok((series, anims))
 }
 

@@ -189,7 +189,7 @@ pub(crate) struct CoarseArgs {
     bending: Option<f64>,
     /// Whether coarse cloth edges meet the colliders' sharp edges, `on` or `off`; off, a 20 mm
     /// edge may cut a table's corner as the downsampled fine cloth's do.
-    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = values::on_off)]
+    #[arg(long = "coarse-crease-contacts", value_name = "on|off", value_parser = values::on_off())]
     crease_contacts: Option<bool>,
 }
 

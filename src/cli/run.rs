@@ -46,6 +46,7 @@ pub struct Args {
     /// under /World/Garments and the colliders, in metres with y up. `auto`: on for USD input.
     #[arg(
         long,
+        value_enum,
         value_name = "auto|on|off",
         default_value = "auto",
         num_args = 0..=1,
@@ -70,6 +71,7 @@ pub struct Args {
     /// as better (the corrector where a folder without one has it), `on` or `off` forces it.
     #[arg(
         long,
+        value_enum,
         value_name = "auto|on|off",
         default_value = "auto",
         help_heading = "Models"
@@ -249,7 +251,7 @@ impl Knobs {
 fn run_with(args: Args, knobs: Knobs) -> anyhow::Result<RunSummary> {
     let models_dir = match &args.models {
         Some(m) => m.clone(),
-        None => clothsr::pipeline::models::find_generic_models().map_err(anyhow::Error::msg)?,
+        None => clothsr::pipeline::models::find_generic_models()?,
     };
     anyhow::ensure!(
         args.gt.is_none() || args.rrd.is_some() || args.spawn,

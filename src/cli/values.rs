@@ -66,12 +66,24 @@ pub(crate) fn triple(s: &str) -> Result<[f64; 3], String> {
 }
 
 /// `on` or `off`.
-pub(crate) fn on_off(v: &str) -> Result<bool, String> {
-    match v.trim() {
-        "on" => Ok(true),
-        "off" => Ok(false),
-        t => Err(format!("'{t}': 'on' or 'off'")),
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Switch {
+    /// On.
+    On,
+    /// Off.
+    Off,
+}
+
+impl From<Switch> for bool {
+    fn from(s: Switch) -> bool {
+        s == Switch::On
     }
+}
+
+/// A parser of `on` or `off` into a bool ([`Switch`]).
+pub(crate) fn on_off() -> impl clap::builder::TypedValueParser<Value = bool> {
+    use clap::builder::TypedValueParser;
+    clap::builder::EnumValueParser::<Switch>::new().map(bool::from)
 }
 
 /// A file or folder that exists.

@@ -305,7 +305,7 @@ fn start_state(
             },
         )?;
         let t = Transfer::new(&coarse.sim.model.mesh, &sim.sim.model.mesh)?;
-        crate::data::dress_fine_from_coarse(&mut coarse, &mut sim, &t)?;
+        crate::dataset::dress_fine_from_coarse(&mut coarse, &mut sim, &t)?;
     }
     let mut w = TensorWriter::new();
     w.f64(

@@ -440,9 +440,70 @@ impl FloorBound {
     }
 }
 
+/// One frame of a prediction against a ground truth and its twin ([`floor_frames`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FloorFrame {
+    /// Its time code.
+    pub time_code: f64,
+    /// The two ground truths' mean vertex distance, mm.
+    pub floor_mm: f64,
+    /// The prediction's mean vertex error against the ground truth, mm.
+    pub against_gt_mm: f64,
+    /// The same against the twin, mm.
+    pub against_twin_mm: f64,
+}
+
+/// The floor of `gt` and its `twin` and `pred`'s errors against both, per frame of the
+/// prediction that both have. Fails, naming the file, when the twin or the prediction is
+/// another cloth or no frame is shared.
+pub fn floor_frames(
+    gt: &Animation,
+    twin: &Animation,
+    twin_path: &Path,
+    pred: &Animation,
+    pred_path: &Path,
+) -> Result<Vec<FloorFrame>> {
+    gt.check_same_cloth(twin, twin_path)?;
+    gt.check_same_cloth(pred, pred_path)?;
+    let frames: Vec<FloorFrame> = pred
+        .time_codes
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &t)| {
+            let (i, k) = (gt.frame_at(t)?, twin.frame_at(t)?);
+            Some(FloorFrame {
+                time_code: t,
+                floor_mm: mean_distance_mm(&gt.frames[i], &twin.frames[k]),
+                against_gt_mm: mean_distance_mm(&gt.frames[i], &pred.frames[j]),
+                against_twin_mm: mean_distance_mm(&twin.frames[k], &pred.frames[j]),
+            })
+        })
+        .collect();
+    if frames.is_empty() {
+        return Err(Error::bad_input(
+            twin_path,
+            "no frame of the prediction is in both the ground truth and this twin",
+        ));
+    }
+    Ok(frames)
+}
+
+impl FloorBound {
+    /// The means over `frames` (not empty: [`floor_frames`] gives at least one).
+    pub fn of(frames: &[FloorFrame]) -> FloorBound {
+        let n = frames.len().max(1) as f64;
+        let avg = |f: fn(&FloorFrame) -> f64| frames.iter().map(f).sum::<f64>() / n;
+        FloorBound {
+            frames: frames.len(),
+            floor_mm: avg(|f| f.floor_mm),
+            against_gt_mm: avg(|f| f.against_gt_mm),
+            against_twin_mm: avg(|f| f.against_twin_mm),
+        }
+    }
+}
+
 /// The floor of `gt` and its `twin` and `pred`'s errors against both, over the prediction's
-/// frames that both have ([`FloorBound`]). Fails, naming the file, when the twin or the
-/// prediction is another cloth or no frame is shared.
+/// frames that both have ([`FloorBound`], [`floor_frames`]).
 pub fn floor_bound(
     gt: &Animation,
     twin: &Animation,
@@ -450,30 +511,31 @@ pub fn floor_bound(
     pred: &Animation,
     pred_path: &Path,
 ) -> Result<FloorBound> {
-    gt.check_same_cloth(twin, twin_path)?;
-    gt.check_same_cloth(pred, pred_path)?;
-    let shared: Vec<(usize, usize, usize)> = pred
-        .time_codes
-        .iter()
-        .enumerate()
-        .filter_map(|(j, &t)| Some((gt.frame_at(t)?, twin.frame_at(t)?, j)))
-        .collect();
-    if shared.is_empty() {
-        return Err(Error::bad_input(
-            twin_path,
-            "no frame of the prediction is in both the ground truth and this twin",
-        ));
+    Ok(FloorBound::of(&floor_frames(
+        gt, twin, twin_path, pred, pred_path,
+    )?))
+}
+
+/// A series' label and its per-frame metrics.
+pub type Series = (String, Vec<FrameMetrics>);
+
+/// The errors against `gt` of a prediction and of baselines (`series`: label, animation and
+/// its file, the prediction first), per frame. A baseline counts over the prediction's frames
+/// only, so that the ratios compare like with like (a fork's frames before it was moved count
+/// as zero there too).
+pub fn measure(gt: &Animation, series: &[(String, &Animation, &Path)]) -> Result<Vec<Series>> {
+    let mut out: Vec<Series> = Vec::with_capacity(series.len());
+    for (name, anim, path) in series {
+        let mut m = compare(gt, anim, path)?;
+        if let Some((_, pred)) = out.first() {
+            m.retain(|f| {
+                pred.iter()
+                    .any(|p| (p.time_code - f.time_code).abs() < 1e-6)
+            });
+        }
+        out.push((name.clone(), m));
     }
-    let n = shared.len() as f64;
-    let avg = |f: &dyn Fn(usize, usize, usize) -> f64| {
-        shared.iter().map(|&(i, k, j)| f(i, k, j)).sum::<f64>() / n
-    };
-    Ok(FloorBound {
-        frames: shared.len(),
-        floor_mm: avg(&|i, k, _| mean_distance_mm(&gt.frames[i], &twin.frames[k])),
-        against_gt_mm: avg(&|i, _, j| mean_distance_mm(&gt.frames[i], &pred.frames[j])),
-        against_twin_mm: avg(&|_, k, j| mean_distance_mm(&twin.frames[k], &pred.frames[j])),
-    })
+    Ok(out)
 }
 
 /// Averages over frames of one series.

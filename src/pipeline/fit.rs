@@ -16,7 +16,8 @@ use serde::{Deserialize, Serialize};
 
 use super::calibrate::{best, score, CalibrationSet, Grid, Scored};
 use super::CoarseCalibration;
-use crate::data::{generate, Options, SceneSource, Variation};
+use crate::data::{SceneSource, Variation};
+use crate::dataset::{generate, Options};
 use crate::error::{Error, Result};
 use crate::eval::FrameMetrics;
 use crate::io::write_atomic;
@@ -507,7 +508,7 @@ fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result
         TaskKind::Twin { variation } => {
             let scene = plan.shot.load()?;
             let data = data_dir(dir, variation);
-            let m = crate::data::fork(
+            let m = crate::dataset::fork(
                 &data,
                 1,
                 nalgebra::Vector3::new(1e-4, 0.0, 0.0),
@@ -516,7 +517,7 @@ fn run_task(plan: &Plan, dir: &Path, task: &Task, report: &mut Report) -> Result
             generate(
                 &scene,
                 &m.scene,
-                &m.options(plan.frames),
+                &Options::of_manifest(&m, plan.frames),
                 &twin_dir(dir, variation),
                 |p| {
                     let _ = report(format!("frame {}/{}", p.frames_done, p.frames));
@@ -540,7 +541,7 @@ fn calibration_sets(plan: &Plan, dir: &Path, role: Role) -> Result<Vec<Calibrati
 /// The calibration grid of a fit: the default one.
 fn calibrate(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
     let sets = calibration_sets(plan, dir, Role::Train)?;
-    let candidates = Grid::default().candidates().map_err(Error::Invalid)?;
+    let candidates = Grid::default().candidates()?;
     let _ = report(format!("{} candidates", candidates.len()));
     let scored = score(&sets, &candidates, &[], || {})?;
     let i = best(&scored)
@@ -704,15 +705,16 @@ fn run_held_out(
     }
     run.super_resolve()?;
     let mut out = Vec::with_capacity(gt.frames.len());
-    let mut to_twin = Vec::new();
-    let mut apart_mm = 0.0;
-    for (k, truth) in gt.frames.iter().enumerate() {
+    let mut pred = crate::eval::Animation {
+        parts: gt.parts.clone(),
+        triangles: gt.triangles.clone(),
+        time_codes: gt.time_codes.clone(),
+        frames: Vec::with_capacity(gt.frames.len()),
+    };
+    for truth in &gt.frames {
         let fine = run.advance_frame()?;
-        if let Some(twin) = twin.as_ref().and_then(|t| t.frames.get(k)) {
-            to_twin.push(crate::metrics::mean_distance_mm(twin, fine));
-            apart_mm += crate::metrics::mean_distance_mm(truth, twin);
-        }
         let own = crate::metrics::mean_distance_mm(truth, fine);
+        pred.frames.push(fine.to_vec());
         for _ in 0..paper.coarse.steps_per_frame {
             paper.coarse.step()?;
         }
@@ -721,9 +723,17 @@ fn run_held_out(
             crate::metrics::mean_distance_mm(truth, &paper.upsampled()?),
         ));
     }
-    // Over the same frames as the pipeline's figures, or none.
-    let floor_mm =
-        (twin.is_some() && to_twin.len() == out.len()).then(|| apart_mm / out.len().max(1) as f64);
+    // The floor over the same frames as the pipeline's figures, or none.
+    let (to_twin, floor_mm) = match &twin {
+        Some(twin) => {
+            let frames = crate::eval::floor_frames(&gt, twin, &twin_data, &pred, &data)?;
+            let to_twin: Vec<f64> = frames.iter().map(|f| f.against_twin_mm).collect();
+            let floor =
+                (frames.len() == out.len()).then(|| crate::eval::FloorBound::of(&frames).floor_mm);
+            (to_twin, floor)
+        }
+        None => (Vec::new(), None),
+    };
     Ok(HeldOutRun {
         against_gt: out,
         against_twin: to_twin,

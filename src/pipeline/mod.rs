@@ -112,7 +112,7 @@ impl Options {
                 self.coarse_solver.name()
             )));
         }
-        self.coarse.check_flags().map_err(Error::Usage)
+        self.coarse.check_flags()
     }
 
     /// These options with each of their coarse settings that is unset taken from `cal`.
@@ -255,7 +255,7 @@ impl<'a> Pipeline<'a> {
         let corrector = corrector_dir
             .map(|d| Corrector::load(d, &coarse.sim.model.mesh))
             .transpose()?;
-        opts.coarse.check().map_err(Error::Invalid)?;
+        opts.coarse.check()?;
         // After dressing: sewing is done with the full membrane.
         match &corrector {
             Some(c) => {

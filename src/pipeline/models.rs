@@ -39,7 +39,7 @@ pub fn generic_models_candidates() -> Vec<PathBuf> {
 
 /// The first of [`generic_models_candidates`] that holds an ISR model; otherwise an error
 /// listing where it looked.
-pub fn find_generic_models() -> std::result::Result<PathBuf, String> {
+pub fn find_generic_models() -> Result<PathBuf> {
     let candidates = generic_models_candidates();
     candidates
         .iter()
@@ -47,11 +47,11 @@ pub fn find_generic_models() -> std::result::Result<PathBuf, String> {
         .cloned()
         .ok_or_else(|| {
             let looked: Vec<String> = candidates.iter().map(|d| d.display().to_string()).collect();
-            format!(
+            Error::Usage(format!(
                 "no --models given and no generic models found (looked in {}); pass --models DIR \
                  or set {MODELS_ENV}",
                 looked.join(", ")
-            )
+            ))
         })
 }
 

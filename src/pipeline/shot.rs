@@ -62,29 +62,28 @@ impl RunModels {
     }
 }
 
-/// How a run writes the fine garments.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How a run writes the fine garments: `auto`, `on` (a layer) or `off` (a standalone stage).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum OutputKind {
     /// An override layer for a USD shot, a standalone stage for other inputs.
     #[default]
     Auto,
     /// An override layer for the USD shot ([`crate::io::usd::OverLayer`]): sublayered over
     /// the shot, it replaces each garment with its fine animated mesh at the garment's prim.
+    #[value(name = "on")]
     Layer,
     /// A standalone stage: the fine garments under `/World/Garments`, the colliders under
     /// `/World/Colliders`, in metres with y up.
+    #[value(name = "off")]
     Standalone,
 }
 
 impl std::str::FromStr for OutputKind {
     type Err = String;
+    /// The names the command line takes.
     fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "auto" => Ok(OutputKind::Auto),
-            "on" => Ok(OutputKind::Layer),
-            "off" => Ok(OutputKind::Standalone),
-            _ => Err(format!("layer '{s}': expected auto, on or off")),
-        }
+        <Self as clap::ValueEnum>::from_str(s.trim(), false)
+            .map_err(|_| format!("layer '{s}': expected auto, on or off"))
     }
 }
 

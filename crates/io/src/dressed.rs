@@ -4,9 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::Result;
-use crate::sim::driver::{DressStats, Simulation};
 use crate::tensors::{TensorReader, TensorWriter};
+use clothsr_geometry::error::Result;
+use clothsr_sim::driver::{DressStats, Simulation};
 
 /// Simulated seconds of sewing at most, of settling after it, and the seam gap sewing aims
 /// for, m: how runs and data sets dress a garment ([`Simulation::dress`]).

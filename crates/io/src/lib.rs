@@ -14,15 +14,12 @@ pub mod scene_files;
 pub mod tensors;
 pub mod usd;
 
-pub(crate) use clothsr_geometry::{error, garment, mesh, scene, transfer};
-pub(crate) use clothsr_sim as sim;
-
 pub use scene_files::{FileKind, SceneFiles};
 
 use std::io::Write;
 use std::path::{Component, Path, PathBuf};
 
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 /// Writes `bytes` to `path` through a temporary file in the same directory, renamed into
 /// place: readers never see a partial file, and a failed write leaves the old one.

@@ -10,10 +10,11 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
-/// Whether a run uses the models folder's corrector.
+/// Whether a run uses the models folder's corrector: `auto`, `on` or `off`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum CorrectorChoice {
     /// The path the folder's manifest validated as better; the corrector where a folder
     /// without a manifest has one.
@@ -134,29 +135,32 @@ impl ModelsManifest {
             ));
         }
         let m: ModelsManifest = serde_json::from_value(value).map_err(not)?;
-        m.check(corrector)
-            .map_err(|msg| Error::bad_input(path, msg))?;
+        m.check(corrector).map_err(|e| e.in_file(path))?;
         Ok(m)
     }
 
     /// Why this manifest does not describe a folder that has a corrector (`corrector`) or
     /// not, if it does not.
-    fn check(&self, corrector: bool) -> std::result::Result<(), String> {
+    fn check(&self, corrector: bool) -> Result<()> {
         for (&path, f) in &self.paths {
             let key = path.key();
             let ok = |x: f64| x.is_finite() && x >= 0.0;
             if !ok(f.fine_error_mm) || f.baseline_mm.is_some_and(|b| !ok(b)) {
-                return Err(format!("paths.{key}: figures must be finite and ≥ 0"));
+                return Err(Error::Invalid(format!(
+                    "paths.{key}: figures must be finite and ≥ 0"
+                )));
             }
             if path == ModelPath::Corrector && !corrector {
-                return Err("paths.corrector: the folder has no corrector/".into());
+                return Err(Error::Invalid(
+                    "paths.corrector: the folder has no corrector/".into(),
+                ));
             }
         }
         if !self.paths.contains_key(&self.best) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "best: '{}' is not one of its paths",
                 self.best.key()
-            ));
+            )));
         }
         Ok(())
     }

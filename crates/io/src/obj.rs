@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Vector2, Vector3};
 
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 /// A triangle mesh read from OBJ; vertices are split where texture coordinates differ.
 #[derive(Debug, Clone, PartialEq)]

@@ -19,7 +19,7 @@ use pyo3::exceptions::PyImportError;
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
 
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 /// Name of the bridge package.
 const BRIDGE: &str = "clothsr_usd";

@@ -6,12 +6,12 @@ use std::path::Path;
 
 use nalgebra::{Vector2, Vector3};
 
-use crate::error::{Error, Result};
-use crate::garment::{garmentcode, Fabric};
-use crate::mesh::{cloth_from_corners, flatten, ClothMesh, FlattenOptions, Flattening};
 use crate::obj;
-use crate::scene::{ClothPiece, Collider, PrimSource, Scene};
 use crate::usd::{self, write_usd, MeshOut, SolverSettings, StageOut};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::garment::{garmentcode, Fabric};
+use clothsr_geometry::mesh::{cloth_from_corners, flatten, ClothMesh, FlattenOptions, Flattening};
+use clothsr_geometry::scene::{ClothPiece, Collider, PrimSource, Scene};
 
 /// Reading a [`Scene`] from files and writing it to USD.
 pub trait SceneFiles: Sized {
@@ -227,7 +227,10 @@ fn cloth_from_usd_mesh(path: &Path, m: &usd::UsdMesh, fabric: Fabric) -> Result<
             mesh.seam_pairs = m.seam_pairs.clone().unwrap_or_default();
             mesh.panel_of_vertex = match &m.panel_ids {
                 Some(ids) if ids.len() == mesh.positions.len() => ids.clone(),
-                _ => crate::mesh::connected_components(mesh.positions.len(), &mesh.triangles),
+                _ => clothsr_geometry::mesh::connected_components(
+                    mesh.positions.len(),
+                    &mesh.triangles,
+                ),
             };
             let panels = mesh
                 .panel_of_vertex

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 /// Arrays to write, by name (little-endian, C order).
 #[derive(Debug, Default, Clone)]

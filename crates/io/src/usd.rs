@@ -10,8 +10,10 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use super::python::with_bridge;
-use crate::error::{Error, Result};
-use crate::garment::{Curve, EdgeRef, Fabric, Garment, Panel, PanelEdge, Placement, Seam};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::garment::{
+    Curve, EdgeRef, Fabric, Garment, Panel, PanelEdge, Placement, Seam,
+};
 
 /// What a mesh in a USD stage is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -88,7 +90,7 @@ impl UsdMesh {
                 });
                 if let Some(tris) = corners
                     .as_deref()
-                    .and_then(crate::mesh::triangulate_polygon)
+                    .and_then(clothsr_geometry::mesh::triangulate_polygon)
                 {
                     out.extend(tris.iter().map(|t| t.map(|j| f[j])));
                     continue;
@@ -454,7 +456,7 @@ fn garment_from(
     Ok(garment
         .validate()
         .map(|_| garment.clone())
-        .map_err(|m| Error::bad_input(path, m)))
+        .map_err(|e| e.in_file(path)))
 }
 
 fn garment_to<'py>(py: Python<'py>, g: &Garment) -> PyResult<Bound<'py, PyDict>> {
@@ -861,7 +863,7 @@ impl MeshOut {
     /// A garment mesh: points, material coordinates as `st`, panel ids, seams, fabric.
     pub fn cloth(
         name: &str,
-        mesh: &crate::mesh::ClothMesh,
+        mesh: &clothsr_geometry::mesh::ClothMesh,
         fabric: &Fabric,
         edge_m: f64,
     ) -> MeshOut {
@@ -882,7 +884,7 @@ impl MeshOut {
     }
 
     /// A collider: static points, or one time sample per frame (time codes at `fps`).
-    pub fn collider(c: &crate::scene::Collider, fps: f64) -> MeshOut {
+    pub fn collider(c: &clothsr_geometry::scene::Collider, fps: f64) -> MeshOut {
         MeshOut {
             name: c.name.clone(),
             group: "Colliders".into(),

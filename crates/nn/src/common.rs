@@ -8,8 +8,8 @@ use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Device};
 use serde::Serialize;
 
-use crate::error::{Error, Result};
-use crate::io::write_atomic;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_io::write_atomic;
 
 /// Loads `module`'s weights from the burnpack file at `path`, read whole into memory first.
 /// burn's own `try_load_file` keeps the file open as the tensors' lazy source and reads each one

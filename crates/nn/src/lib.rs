@@ -11,8 +11,3 @@
 pub mod common;
 pub mod corrector;
 pub mod msr;
-
-pub(crate) use clothsr_geometry::{error, mesh, metrics, scene, transfer};
-pub(crate) use clothsr_io as io;
-pub(crate) use clothsr_io::data;
-pub(crate) use clothsr_sim as sim;

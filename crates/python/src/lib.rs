@@ -313,24 +313,23 @@ fn eval<'py>(
     ground_truth: PathBuf,
     baselines: Vec<(String, PathBuf)>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use clothsr::eval::{compare, summarise, Animation};
+    use clothsr::eval::{measure, summarise, Animation};
     let series = py
         .detach(|| -> clothsr::Result<_> {
             let pred = Animation::read_usd(&prediction)?;
             let start = pred.time_codes.first().copied().unwrap_or(0.0);
             let gt = Animation::read(&ground_truth, start)?;
-            let mut series = vec![("prediction".to_string(), compare(&gt, &pred, &prediction)?)];
-            for (name, path) in &baselines {
-                let mut m = compare(&gt, &Animation::read(path, start)?, path)?;
-                let pred_frames = &series[0].1;
-                m.retain(|f| {
-                    pred_frames
-                        .iter()
-                        .any(|p| (p.time_code - f.time_code).abs() < 1e-6)
-                });
-                series.push((name.clone(), m));
+            let mut anims = vec![pred];
+            for (_, path) in &baselines {
+                anims.push(Animation::read(path, start)?);
             }
-            Ok(series)
+            let names = std::iter::once(("prediction".to_string(), prediction.as_path()))
+                .chain(baselines.iter().map(|(n, p)| (n.clone(), p.as_path())));
+            let labelled: Vec<_> = names
+                .zip(&anims)
+                .map(|((name, path), a)| (name, a, path))
+                .collect();
+            measure(&gt, &labelled)
         })
         .map_err(error)?;
     let out = PyDict::new(py);

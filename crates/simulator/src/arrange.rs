@@ -14,7 +14,8 @@ use std::ops::Range;
 use nalgebra::Vector3;
 
 use super::step::ColliderFrame;
-use crate::mesh::ClothMesh;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
 
 /// When and how panels are rolled ([`wrap_panels_around_body`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -127,11 +128,16 @@ pub fn wrap_panels_around_body(
             let wrapped = match wrap_panel(mesh, panel, &verts, x, axis, &band, opts) {
                 // A panel beside the torso (a sleeve in front of or behind an arm) rolls
                 // around the limb it covers instead.
-                Err(why) if why == NOT_FACING => match limb_under(mesh, panel, &verts, x, body) {
-                    Some((limb, points)) => wrap_panel(mesh, panel, &verts, x, limb, &points, opts)
-                        .map_err(|w| format!("{why}, and around the limb under it: {w}")),
-                    None => Err(format!("{why}, and covers no limb")),
-                },
+                Err(Error::Invalid(why)) if why == NOT_FACING => {
+                    match limb_under(mesh, panel, &verts, x, body) {
+                        Some((limb, points)) => {
+                            wrap_panel(mesh, panel, &verts, x, limb, &points, opts).map_err(|w| {
+                                Error::Invalid(format!("{why}, and around the limb under it: {w}"))
+                            })
+                        }
+                        None => Err(Error::Invalid(format!("{why}, and covers no limb"))),
+                    }
+                }
                 other => other,
             };
             match wrapped {
@@ -308,28 +314,32 @@ fn wrap_panel(
     axis: Axis,
     band: &[Vector3<f64>],
     opts: &WrapOptions,
-) -> Result<WrappedPanel, String> {
+) -> Result<WrappedPanel> {
+    let invalid = |why: &str| Error::Invalid(why.into());
     if verts.len() < 3 {
-        return Err("fewer than 3 vertices".into());
+        return Err(invalid("fewer than 3 vertices"));
     }
-    let (c, n) = centre_and_normal(mesh, panel, verts, x).ok_or("no area")?;
+    let (c, n) = centre_and_normal(mesh, panel, verts, x).ok_or_else(|| invalid("no area"))?;
     if verts
         .iter()
         .any(|&i| (x[i] - c).dot(&n).abs() > opts.flatness_m)
     {
-        return Err("not flat".into());
+        return Err(invalid("not flat"));
     }
     let up = axis.up;
     if n.dot(&up).abs() > opts.max_tilt_deg.to_radians().sin() {
-        return Err("not upright".into());
+        return Err(invalid("not upright"));
     }
     let a = axis.across(axis.point);
     let to_centre = (axis.across(c) - a)
         .try_normalize(1e-3)
-        .ok_or("centred on the body's axis")?;
-    let n_h = axis.across(n).try_normalize(1e-12).ok_or("not upright")?;
+        .ok_or_else(|| invalid("centred on the body's axis"))?;
+    let n_h = axis
+        .across(n)
+        .try_normalize(1e-12)
+        .ok_or_else(|| invalid("not upright"))?;
     if n_h.dot(&to_centre).abs() < opts.max_facing_deg.to_radians().cos() {
-        return Err(NOT_FACING.into());
+        return Err(invalid(NOT_FACING));
     }
     // The roll is about the panel's plane's nearest line to the axis: the cylinder touches the
     // plane there, so the panel's distance from the axis and its sideways placement are kept
@@ -337,7 +347,7 @@ fn wrap_panel(
     let r_hat = if n_h.dot(&to_centre) > 0.0 { n_h } else { -n_h };
     let placed_r = (c - a).dot(&r_hat);
     if placed_r < 1e-3 {
-        return Err("its plane passes through the body's axis".into());
+        return Err(invalid("its plane passes through the body's axis"));
     }
     let t_hat = up.cross(&r_hat);
     let u: Vec<f64> = verts.iter().map(|&i| (x[i] - a).dot(&t_hat)).collect();
@@ -382,18 +392,18 @@ fn wrap_panel(
         radius = radius.max(rho + opts.clearance_m);
     }
     if radius > placed_r + opts.max_push_m {
-        return Err(format!(
+        return Err(Error::Invalid(format!(
             "clearing the body would take it from {:.0} to {:.0} mm from the axis",
             placed_r * 1e3,
             radius * 1e3
-        ));
+        )));
     }
     let span = (u_hi - u_lo) / radius;
     if span.to_degrees() > opts.max_span_deg {
-        return Err(format!(
+        return Err(Error::Invalid(format!(
             "would cover {:.0}° around the body",
             span.to_degrees()
-        ));
+        )));
     }
     // Where the plane touches its starting cylinder, at the axis' foot (height 0).
     let touch = a + r_hat * placed_r;
@@ -413,9 +423,9 @@ fn wrap_panel(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::garment::Fabric;
-    use crate::mesh::{mesh_garment, MeshOptions};
-    use crate::scene::samples::two_panel_tube;
+    use clothsr_geometry::garment::Fabric;
+    use clothsr_geometry::mesh::{mesh_garment, MeshOptions};
+    use clothsr_geometry::scene::samples::two_panel_tube;
 
     /// Two `w` × 0.2 m panels facing each other across the y axis at z = ±`d`, sewn along
     /// both vertical sides (as the sewing test's tube), meshed at 2 cm.

@@ -8,11 +8,11 @@ use std::time::Instant;
 use nalgebra::Vector3;
 
 use crate::driver::Simulation;
-use crate::error::Result;
-use crate::garment::Fabric;
-use crate::scene::samples::flat_sheet;
-use crate::scene::{Collider, Scene};
 use crate::step::{PhaseTimes, SimParams};
+use clothsr_geometry::error::Result;
+use clothsr_geometry::garment::Fabric;
+use clothsr_geometry::scene::samples::flat_sheet;
+use clothsr_geometry::scene::{Collider, Scene};
 
 /// Steps run before timing: they bring the sheet down onto the sphere.
 pub const WARM_UP_STEPS: usize = 20;

@@ -4,7 +4,7 @@
 //! record them.
 
 use crate::driver::Simulation;
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 /// The coarse model's settings, each optional (unset: the simulator's own). A models folder's
 /// `coarse.json` holds the calibration its figures were measured with for runs without a
@@ -70,22 +70,25 @@ impl CoarseCalibration {
     pub fn parse(text: &str, path: &std::path::Path) -> Result<CoarseCalibration> {
         let cal: CoarseCalibration = serde_json::from_str(text)
             .map_err(|e| Error::bad_input(path, format!("not a coarse calibration: {e}")))?;
-        cal.check().map_err(|m| Error::bad_input(path, m))?;
+        cal.check().map_err(|e| e.in_file(path))?;
         Ok(cal)
     }
 
     /// Why these settings are unusable, if they are, naming the setting as `coarse.json` does.
-    pub fn check(&self) -> std::result::Result<(), String> {
+    pub fn check(&self) -> Result<()> {
         match self.problem() {
-            Some((key, why)) => Err(format!("{key}{why}")),
+            Some((key, why)) => Err(Error::Invalid(format!("{key}{why}"))),
             None => Ok(()),
         }
     }
 
     /// Why these settings are unusable, if they are, naming the command-line option.
-    pub fn check_flags(&self) -> std::result::Result<(), String> {
+    pub fn check_flags(&self) -> Result<()> {
         match self.problem() {
-            Some((key, why)) => Err(format!("--coarse-{}{why}", key.replace('_', "-"))),
+            Some((key, why)) => Err(Error::Usage(format!(
+                "--coarse-{}{why}",
+                key.replace('_', "-")
+            ))),
             None => Ok(()),
         }
     }
@@ -235,7 +238,7 @@ impl CoarseCalibration {
     /// model), but for an unset friction, which leaves the simulation's as it is (a fresh
     /// simulation's: the scene's).
     pub fn apply(&self, sim: &mut Simulation) -> Result<()> {
-        self.check().map_err(Error::Invalid)?;
+        self.check()?;
         let knee = self.compression_knee.filter(|&k| k != 0.0);
         sim.sim
             .model
@@ -276,20 +279,20 @@ impl std::fmt::Display for CoarseCalibration {
 }
 
 /// Why `mu` is no Coulomb friction coefficient (it must be finite and not negative).
-pub fn check_friction(mu: f64) -> std::result::Result<(), String> {
+pub fn check_friction(mu: f64) -> Result<()> {
     if mu.is_finite() && mu >= 0.0 {
         Ok(())
     } else {
-        Err(format!(
+        Err(Error::Invalid(format!(
             "the friction coefficient must be finite and not negative, got {mu}"
-        ))
+        )))
     }
 }
 
 /// Sets a coarse simulation's Coulomb friction coefficient against bodies
 /// ([`check_friction`]).
 pub fn set_friction(sim: &mut Simulation, mu: f64) -> Result<()> {
-    check_friction(mu).map_err(Error::Invalid)?;
+    check_friction(mu)?;
     sim.sim.params.friction = mu;
     Ok(())
 }
@@ -310,11 +313,11 @@ mod tests {
     fn problems_name_the_setting_as_the_file_or_the_option_does() {
         let bad = cal(Some(2.0), None);
         assert_eq!(
-            bad.check().unwrap_err(),
+            bad.check().unwrap_err().to_string(),
             "compression must be in (0, 1], got 2"
         );
         assert_eq!(
-            bad.check_flags().unwrap_err(),
+            bad.check_flags().unwrap_err().to_string(),
             "--coarse-compression must be in (0, 1], got 2"
         );
         let knee = CoarseCalibration {
@@ -324,6 +327,7 @@ mod tests {
         assert!(knee
             .check_flags()
             .unwrap_err()
+            .to_string()
             .starts_with("--coarse-compression-knee must be"));
         let gain = CoarseCalibration {
             wrinkle_bending: Some(-1.0),
@@ -332,6 +336,7 @@ mod tests {
         assert!(gain
             .check_flags()
             .unwrap_err()
+            .to_string()
             .starts_with("--coarse-wrinkle-bending: the wrinkle bending gain"));
         assert!(cal(Some(0.5), Some(2.0)).check_flags().is_ok());
     }

@@ -7,10 +7,10 @@ use super::arrange::{wrap_panels_around_body, WrapOptions};
 use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
 use super::step::{ColliderFrame, SimParams, SimState, Simulator, StepStats};
-use crate::error::{Error, Result};
-use crate::garment::Fabric;
-use crate::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
-use crate::scene::{ClothPiece, Collider, Scene};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::garment::Fabric;
+use clothsr_geometry::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
+use clothsr_geometry::scene::{ClothPiece, Collider, Scene};
 
 /// Moves the vertices of `x` inside `colliders` (at `points`, one list per collider), or
 /// nearer one than `clearance_m`, out to that distance ([`push_out`]).

@@ -18,8 +18,6 @@ pub mod scatter;
 pub mod sparse;
 pub mod step;
 
-pub(crate) use clothsr_geometry::{error, garment, mesh, scene};
-
 pub use model::{ClothModel, WrinkleBending};
 pub use step::{
     ColliderFrame, LinearSolver, PhaseTimes, Pin, PinTarget, SimParams, SimState, Simulator,

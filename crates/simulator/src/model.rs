@@ -7,9 +7,9 @@ use nalgebra::Vector3;
 
 use super::energy::bending::{self, Hinge};
 use super::energy::membrane::{Membrane, MembraneStiffness};
-use crate::error::{Error, Result};
-use crate::garment::Fabric;
-use crate::mesh::ClothMesh;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::garment::Fabric;
+use clothsr_geometry::mesh::ClothMesh;
 
 /// One garment inside the concatenated model.
 #[derive(Debug, Clone)]
@@ -92,30 +92,30 @@ impl WrinkleBending {
     }
 
     /// A gain as the options take it: checked, and 0 as none.
-    pub fn gain_option(gain: f64) -> std::result::Result<Option<f64>, String> {
+    pub fn gain_option(gain: f64) -> Result<Option<f64>> {
         Self::with_gain(gain).check()?;
         Ok((gain != 0.0).then_some(gain))
     }
 
     /// Why these settings are unusable, if they are.
-    pub fn check(&self) -> std::result::Result<(), String> {
+    pub fn check(&self) -> Result<()> {
         if !(self.gain >= 0.0 && self.gain.is_finite()) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "the wrinkle bending gain must be finite and not negative, got {}",
                 self.gain
-            ));
+            )));
         }
         if !(self.strain > 0.0 && self.strain.is_finite()) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "the wrinkle bending strain must be > 0, got {}",
                 self.strain
-            ));
+            )));
         }
         if !(self.settle_speed_m_s > 0.0 && self.settle_speed_m_s.is_finite()) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "the wrinkle bending settle speed must be > 0, got {}",
                 self.settle_speed_m_s
-            ));
+            )));
         }
         Ok(())
     }
@@ -157,7 +157,7 @@ impl ClothModel {
             (Vec::new(), Vec::new(), Vec::new());
         let (mut hinges, mut hinge_damping_s) = (Vec::new(), Vec::new());
         for (name, m, fabric) in pieces {
-            fabric.validate().map_err(Error::Invalid)?;
+            fabric.validate()?;
             m.validate()?;
             let v0 = mesh.positions.len() as u32;
             let t0 = mesh.triangles.len();
@@ -266,7 +266,7 @@ impl ClothModel {
     /// the hinges' present weights are the ones it scales, and turning it off restores them.
     pub fn set_wrinkle_bending(&mut self, wrinkles: Option<WrinkleBending>) -> Result<()> {
         if let Some(w) = &wrinkles {
-            w.check().map_err(Error::Invalid)?;
+            w.check()?;
         }
         let own = match self.wrinkle_bending.take() {
             Some((_, own)) => own,

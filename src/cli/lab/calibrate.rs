@@ -44,7 +44,7 @@ pub struct Args {
     bending: Vec<f64>,
     /// Crease contacts to try: `on` (the simulator's) and or `off` (coarse edges may cut the
     /// colliders' sharp edges, as M_int's do).
-    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = crate::cli::values::on_off)]
+    #[arg(long, value_delimiter = ',', default_value = "on", value_parser = crate::cli::values::on_off())]
     crease_contacts: Vec<bool>,
     /// Run every data set this many more times per candidate, each from its start moved
     /// rigidly by `--jitter-mm` along another horizontal direction, and rank on all runs: where

@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use clothsr::data::{generate, Manifest, Options};
+use clothsr::data::Manifest;
+use clothsr::dataset::{generate, Options};
 use clothsr::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 

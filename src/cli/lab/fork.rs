@@ -48,7 +48,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     };
     let scene = files.load()?;
-    let m = clothsr::data::fork(&args.data, args.frame, Vector3::from(offset), &args.output)?;
+    let m = clothsr::dataset::fork(&args.data, args.frame, Vector3::from(offset), &args.output)?;
     tracing::info!(
         "forked {} at frame {} (fine garment moved by {:?} m) into {}",
         args.data.display(),
@@ -56,6 +56,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         offset,
         args.output.display()
     );
-    super::dataset::generate_with_progress(&scene, &m.scene, &m.options(frames), &args.output)?;
+    super::dataset::generate_with_progress(
+        &scene,
+        &m.scene,
+        &clothsr::dataset::Options::of_manifest(&m, frames),
+        &args.output,
+    )?;
     Ok(())
 }

@@ -97,7 +97,7 @@ fn load_corrector(args: &Args, mesh: &ClothMesh) -> anyhow::Result<Corrector> {
         corrector.config.smoothing = n;
     }
     let given = args.coarse.calibration();
-    given.check_flags().map_err(anyhow::Error::msg)?;
+    given.check_flags()?;
     let t = &mut corrector.training;
     if let Some(c) = given.replacing(&t.coarse) {
         t.coarse = c;

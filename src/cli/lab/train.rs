@@ -254,7 +254,7 @@ fn training_config(a: &CorrectorArgs) -> anyhow::Result<TrainingConfig> {
     let init = init_config(a)?;
     let model = model_config(a, init.as_ref())?;
     let given = a.coarse.calibration();
-    given.check_flags().map_err(anyhow::Error::msg)?;
+    given.check_flags()?;
     let trained_beside = init.as_ref().map(|c| c.coarse).unwrap_or_default();
     let coarse = given.replacing(&trained_beside).unwrap_or(trained_beside);
     let cfg = TrainingConfig::new(model)

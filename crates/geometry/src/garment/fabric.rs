@@ -6,6 +6,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Error, Result};
+
 /// Physical parameters of one fabric.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fabric {
@@ -139,7 +141,7 @@ impl Fabric {
     }
 
     /// Checks every parameter is finite and positive (damping may be zero).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<()> {
         let fields = [
             ("arealDensity", self.areal_density_kg_m2),
             ("stretchWarp", self.stretch_warp_n_m),
@@ -150,17 +152,17 @@ impl Fabric {
         ];
         for (name, v) in fields {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "fabric '{}': {name} must be finite and > 0, got {v}",
                     self.name
-                ));
+                )));
             }
         }
         if !(self.damping_s.is_finite() && self.damping_s >= 0.0) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "fabric '{}': damping must be finite and >= 0",
                 self.name
-            ));
+            )));
         }
         Ok(())
     }

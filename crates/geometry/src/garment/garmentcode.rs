@@ -121,7 +121,7 @@ pub fn parse(text: &str, name: &str, fabric: Fabric) -> Result<Garment> {
         seams,
         fabric,
     };
-    garment.validate().map_err(Error::Invalid)?;
+    garment.validate()?;
     garment.orient_seams_by_placement();
     Ok(garment)
 }

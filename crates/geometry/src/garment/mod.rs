@@ -10,6 +10,8 @@ pub use fabric::{Fabric, FabricPreset, UnknownFabric};
 
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 
+use crate::error::{Error, Result};
+
 /// Points per curved edge used for outline area and intersection tests.
 const OUTLINE_SAMPLES_PER_CURVE: usize = 64;
 
@@ -133,65 +135,71 @@ impl Panel {
 
     /// Checks the outline: at least one edge, indices in range, finite coordinates, edges forming one
     /// closed loop, non-zero area and no self-intersection. Errors name the panel and edge.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<()> {
         let name = &self.name;
         if self.edges.is_empty() || self.vertices.len() < 2 {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "panel '{name}': needs at least 2 vertices and 1 edge"
-            ));
+            )));
         }
         for (i, v) in self.vertices.iter().enumerate() {
             if !(v.x.is_finite() && v.y.is_finite()) {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "panel '{name}': vertex {i} is not finite ({}, {})",
                     v.x, v.y
-                ));
+                )));
             }
         }
         let n = self.edges.len();
         for (i, e) in self.edges.iter().enumerate() {
             if e.start >= self.vertices.len() || e.end >= self.vertices.len() {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "panel '{name}' edge {i}: endpoint index out of range ({} vertices)",
                     self.vertices.len()
-                ));
+                )));
             }
             let next = &self.edges[(i + 1) % n];
             if e.end != next.start {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "panel '{name}' edge {i}: ends at vertex {} but edge {} starts at vertex {}: \
                      the edges do not form a closed loop",
                     e.end,
                     (i + 1) % n,
                     next.start
-                ));
+                )));
             }
             if e.start == e.end {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "panel '{name}' edge {i}: starts and ends at the same vertex"
-                ));
+                )));
             }
             if !e.curve.params().iter().all(|p| p.is_finite()) {
-                return Err(format!("panel '{name}' edge {i}: curvature is not finite"));
+                return Err(Error::Invalid(format!(
+                    "panel '{name}' edge {i}: curvature is not finite"
+                )));
             }
             let len = self.edge_length(i);
             if !(len.is_finite() && len > 1e-6) {
-                return Err(format!("panel '{name}' edge {i}: zero length"));
+                return Err(Error::Invalid(format!(
+                    "panel '{name}' edge {i}: zero length"
+                )));
             }
         }
         let poly = self.outline_polygon();
         let area = signed_area(&poly).abs();
         let scale = poly.iter().map(|p| p.norm()).fold(0.0, f64::max).max(1e-3);
         if !(area > 1e-8 * scale * scale && area > 1e-10) {
-            return Err(format!("panel '{name}': outline has zero area"));
+            return Err(Error::Invalid(format!(
+                "panel '{name}': outline has zero area"
+            )));
         }
         if let Some((a, b)) = first_self_intersection(&poly) {
             let edge_of = |k: usize| self.edge_of_outline_point(k);
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "panel '{name}': outline self-intersects (edge {} crosses edge {})",
                 edge_of(a),
                 edge_of(b)
-            ));
+            )));
         }
         Ok(())
     }
@@ -263,46 +271,48 @@ impl Garment {
     }
 
     /// Checks panels, seams and fabric; errors name the element at fault.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<()> {
         if self.panels.is_empty() {
-            return Err(format!("garment '{}': no panels", self.name));
+            return Err(Error::Invalid(format!(
+                "garment '{}': no panels",
+                self.name
+            )));
         }
         for (i, p) in self.panels.iter().enumerate() {
             p.validate()?;
             if self.panels[..i].iter().any(|q| q.name == p.name) {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "garment '{}': two panels are named '{}'",
                     self.name, p.name
-                ));
+                )));
             }
         }
         let mut used = std::collections::HashSet::new();
         for (s, seam) in self.seams.iter().enumerate() {
             let mut lengths = [0.0; 2];
             for (k, side) in [seam.a, seam.b].iter().enumerate() {
-                let panel = self
-                    .panels
-                    .get(side.panel)
-                    .ok_or_else(|| format!("seam {s}: panel index {} out of range", side.panel))?;
+                let panel = self.panels.get(side.panel).ok_or_else(|| {
+                    Error::Invalid(format!("seam {s}: panel index {} out of range", side.panel))
+                })?;
                 if side.edge >= panel.edges.len() {
-                    return Err(format!(
+                    return Err(Error::Invalid(format!(
                         "seam {s}: panel '{}' has no edge {} ({} edges)",
                         panel.name,
                         side.edge,
                         panel.edges.len()
-                    ));
+                    )));
                 }
                 if !used.insert(*side) {
-                    return Err(format!(
+                    return Err(Error::Invalid(format!(
                         "seam {s}: edge {} of panel '{}' is already sewn by another seam",
                         side.edge, panel.name
-                    ));
+                    )));
                 }
                 lengths[k] = panel.edge_length(side.edge);
             }
             let ratio = lengths[0].max(lengths[1]) / lengths[0].min(lengths[1]);
             if ratio > MAX_SEAM_LENGTH_RATIO {
-                return Err(format!(
+                return Err(Error::Invalid(format!(
                     "seam {s}: '{}' edge {} is {:.1} mm long but '{}' edge {} is {:.1} mm \
                      (ratio {ratio:.2} > {MAX_SEAM_LENGTH_RATIO})",
                     self.panels[seam.a.panel].name,
@@ -311,7 +321,7 @@ impl Garment {
                     self.panels[seam.b.panel].name,
                     seam.b.edge,
                     lengths[1] * 1e3
-                ));
+                )));
             }
         }
         self.fabric.validate()
@@ -419,7 +429,7 @@ pub(crate) mod tests {
         let mut bowtie = ok.clone();
         bowtie.vertices[2] = Vector2::new(0.0, 0.5);
         bowtie.vertices[3] = Vector2::new(1.2, 0.6);
-        let err = bowtie.validate().expect_err("bow-tie");
+        let err = bowtie.validate().expect_err("bow-tie").to_string();
         assert!(err.contains("self-intersects"), "{err}");
 
         let mut flat = ok.clone();
@@ -428,7 +438,7 @@ pub(crate) mod tests {
         }
         flat.vertices[2].x = 0.7;
         flat.vertices[3].x = 0.3;
-        let err = flat.validate().expect_err("flat");
+        let err = flat.validate().expect_err("flat").to_string();
         assert!(
             err.contains("zero area") || err.contains("self-intersects"),
             "{err}"
@@ -436,11 +446,19 @@ pub(crate) mod tests {
 
         let mut open = ok.clone();
         open.edges[1].end = 3;
-        assert!(open.validate().expect_err("open").contains("closed loop"));
+        assert!(open
+            .validate()
+            .expect_err("open")
+            .to_string()
+            .contains("closed loop"));
 
         let mut nan = ok;
         nan.vertices[1].x = f64::NAN;
-        assert!(nan.validate().expect_err("nan").contains("not finite"));
+        assert!(nan
+            .validate()
+            .expect_err("nan")
+            .to_string()
+            .contains("not finite"));
     }
 
     #[test]
@@ -455,7 +473,11 @@ pub(crate) mod tests {
             }],
             fabric: Fabric::default(),
         };
-        assert!(g.validate().expect_err("ratio").contains("ratio"));
+        assert!(g
+            .validate()
+            .expect_err("ratio")
+            .to_string()
+            .contains("ratio"));
         g.seams[0].a.edge = 1;
         g.validate().expect("0.5 vs 0.3 is within the ratio");
     }

@@ -4,6 +4,7 @@
 
 mod flatten;
 mod from_uv;
+mod locate;
 mod pattern;
 mod polygon;
 mod quality;
@@ -11,6 +12,7 @@ mod remesh;
 
 pub use flatten::{flatten, Distortion, FlattenOptions, Flattening};
 pub use from_uv::{cloth_from_corners, connected_components};
+pub use locate::{barycentric, Embedding, TriLocator};
 pub use pattern::{mesh_garment, MeshOptions, COARSE_EDGE_M, FINE_EDGE_M, MAX_PANEL_VERTICES};
 pub use polygon::triangulate_polygon;
 pub use quality::{MeshStats, SHARP_CORNER_DEG};

@@ -148,7 +148,7 @@ pub(super) type OutlineMesh = (Vec<Vector2<f64>>, Vec<[u32; 3]>);
 type PanelMesh = (Vec<Vector2<f64>>, Vec<[u32; 3]>, Vec<Vec<u32>>);
 
 /// Meshes one panel whose edge `e` is split into `counts[e]` segments (0: merged away).
-fn mesh_panel(panel: &Panel, counts: &[usize], opts: &MeshOptions) -> Result<PanelMesh, String> {
+fn mesh_panel(panel: &Panel, counts: &[usize], opts: &MeshOptions) -> Result<PanelMesh> {
     // Boundary points in loop order; the outline is made counter-clockwise for spade but the
     // per-edge runs keep the pattern's own direction.
     let mut boundary: Vec<Vector2<f64>> = Vec::new();
@@ -165,7 +165,10 @@ fn mesh_panel(panel: &Panel, counts: &[usize], opts: &MeshOptions) -> Result<Pan
     }
     let nb = boundary.len() as u32;
     if nb < 3 {
-        return Err(format!("too small for {:.1} mm edges", opts.edge_m * 1e3));
+        return Err(Error::Invalid(format!(
+            "too small for {:.1} mm edges",
+            opts.edge_m * 1e3
+        )));
     }
     for run in &mut runs {
         if let Some(last) = run.last_mut() {
@@ -188,24 +191,24 @@ pub(super) fn mesh_outline(
     loop_ends: &[usize],
     area: f64,
     opts: &MeshOptions,
-) -> Result<OutlineMesh, String> {
+) -> Result<OutlineMesh> {
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let mut handles = Vec::with_capacity(boundary.len());
     for (i, p) in boundary.iter().enumerate() {
         let hnd = cdt.insert(Point2::new(p.x, p.y)).map_err(|e| {
-            format!(
+            Error::Invalid(format!(
                 "outline point {i} ({}, {}) cannot be inserted: {e:?}",
                 p.x, p.y
-            )
+            ))
         })?;
         if hnd.index() != i {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "outline points {} and {i} coincide at ({:.4}, {:.4}) m: outline too thin for {:.1} mm edges",
                 hnd.index(),
                 p.x,
                 p.y,
                 opts.edge_m * 1e3
-            ));
+            )));
         }
         handles.push(hnd);
     }
@@ -233,7 +236,7 @@ pub(super) fn mesh_outline(
                         c.x, c.y, d.x, d.y
                     )
                 });
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "outline segment {i}, ({:.4}, {:.4})–({:.4}, {:.4}) m, crosses another one{other} \
                  at {:.1} mm edges: the panel is too narrow for this resolution",
                 p.x,
@@ -241,7 +244,7 @@ pub(super) fn mesh_outline(
                 q.x,
                 q.y,
                 opts.edge_m * 1e3
-            ));
+            )));
         }
         cdt.add_constraint(a, b);
     }
@@ -281,7 +284,7 @@ pub(super) fn mesh_outline(
         triangles.push(tri);
     }
     if triangles.is_empty() {
-        return Err("meshing produced no triangles".into());
+        return Err(Error::Invalid("meshing produced no triangles".into()));
     }
     Ok((material, triangles))
 }

@@ -31,9 +31,9 @@ use nalgebra::{Vector2, Vector3};
 
 use super::from_uv::components_of_edges;
 use super::pattern::mesh_outline;
+use super::Embedding;
 use super::{ClothMesh, MeshOptions, MAX_PANEL_VERTICES};
 use crate::error::{Error, Result};
-use crate::transfer::Embedding;
 
 /// Turns of a chart's boundary sharper than this, degrees, stay corners of its outline.
 pub const CORNER_DEG: f64 = 40.0;

@@ -1,5 +1,5 @@
 //! Training and evaluation samples for the corrector, read from data sets made by
-//! [`crate::data::generate`]: per simulator step, M_c (one coarse step from the previous M_int)
+//! `clothsr::dataset::generate`: per simulator step, M_c (one coarse step from the previous M_int)
 //! and M_int (the downsampled fine simulation). The target is the velocity correction
 //! p̄ = v_int − v_c, which also moves M_c onto M_int: x_c + h·p̄ = x_int, since both came from
 //! the same M_int by x = x₀ + h·v.
@@ -10,11 +10,11 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 
 use super::graph::{body_proximity, step_change, MeshGraph};
-use crate::data::{flat32, read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
-use crate::error::{Error, Result};
-use crate::mesh::ClothMesh;
-use crate::sim::driver::Simulation;
-use crate::sim::SimState;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
+use clothsr_io::data::{flat32, read_coarse_mesh, read_coarse_steps, read_manifest, Manifest};
+use clothsr_sim::driver::Simulation;
+use clothsr_sim::SimState;
 
 /// One simulator step of a sequence: flattened (N·3) f32 arrays.
 #[derive(Debug, Clone)]
@@ -71,7 +71,7 @@ pub fn vectors(v: &[f32]) -> Vec<Vector3<f64>> {
 impl Sequence {
     /// Loads frames `frames` (1-based, inclusive; `None`: all complete frames) of the data set
     /// in `dir`, with `sim`, the data set's coarse simulation
-    /// ([`crate::data::coarse_simulation`], not yet stepped: its time is the data set's frame
+    /// ([`clothsr_io::data::coarse_simulation`], not yet stepped: its time is the data set's frame
     /// 0), for its colliders, time and gravity.
     pub fn load(
         dir: &Path,
@@ -135,7 +135,7 @@ impl Sequence {
     }
 
     /// Replaces M_c of every step after the first with a step of `sim` (the data set's coarse
-    /// simulation, [`crate::data::coarse_simulation`], whose time at the data set's frame 0 is
+    /// simulation, [`clothsr_io::data::coarse_simulation`], whose time at the data set's frame 0 is
     /// `t0_s`, possibly set up otherwise) from the previous step's M_int, so that the
     /// corrector learns to correct the simulator it will run with rather than the one that
     /// made the data set. The first step's M_c (from the state before the sequence, which is

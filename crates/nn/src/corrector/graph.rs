@@ -35,10 +35,10 @@ use std::collections::{HashMap, VecDeque};
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 
-use crate::mesh::ClothMesh;
-use crate::scene::Collider;
-use crate::sim::collide::bvh::{Aabb, Bvh};
-use crate::sim::collide::distance::point_triangle;
+use clothsr_geometry::mesh::ClothMesh;
+use clothsr_geometry::scene::Collider;
+use clothsr_sim::collide::bvh::{Aabb, Bvh};
+use clothsr_sim::collide::distance::point_triangle;
 
 /// Body proximity of every point of `x` to `colliders` at time `t_s`:
 /// max(0, 1 − d/`BODY_RADIUS_M`), d the distance to the nearest collider triangle.
@@ -433,9 +433,9 @@ impl MeshGraph {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{mesh_garment, MeshOptions};
-    use crate::scene::samples::flat_sheet;
     use clothsr_geometry::garment::Fabric;
+    use clothsr_geometry::mesh::{mesh_garment, MeshOptions};
+    use clothsr_geometry::scene::samples::flat_sheet;
 
     fn sheet() -> ClothMesh {
         sheet_with(0.05)

@@ -18,11 +18,11 @@ use super::model::{index_tensor, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
 use crate::common::{default_device, load_weights};
-use crate::data::flat32;
-use crate::error::{Error, Result};
-use crate::mesh::ClothMesh;
-use crate::sim::driver::Simulation;
-use crate::sim::SimState;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
+use clothsr_io::data::flat32;
+use clothsr_sim::driver::Simulation;
+use clothsr_sim::SimState;
 
 /// The weights file in a model directory.
 pub const WEIGHTS_FILE: &str = "model.bpk";
@@ -133,10 +133,7 @@ pub fn load_net(
         ));
     }
     let config = TrainingConfig::load(&config_path)?;
-    config
-        .model
-        .check()
-        .map_err(|e| Error::bad_input(&config_path, e))?;
+    config.model.check().map_err(|e| e.in_file(&config_path))?;
     let norm_path = dir.join(NORMALISATION_FILE);
     let norm: Normalisation = read_json(&norm_path)?;
     if norm.nodes.mean.len() != NODE_FEATURES || norm.edges.mean.len() != EDGE_FEATURES {

@@ -7,7 +7,7 @@
 //! * [`normalise`]: data-set statistics;
 //! * [`model`]: the burn network (encode–process–decode, optional attention);
 //! * [`fused`]: the same network's forward pass on the CPU outside burn, for inference;
-//! * [`data`]: samples from data sets made by [`crate::data`];
+//! * [`data`]: samples from data sets made by [`clothsr_io::data`];
 //! * [`training`]: one-step training with noise and patches, then window rollout training;
 //! * [`inference`]: the [`Corrector`] the simulation loop calls after every step;
 //! * [`rollout`]: rollout errors against the ground truth, with the paper's ablations.

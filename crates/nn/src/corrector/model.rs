@@ -35,6 +35,8 @@ use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use clothsr_geometry::error::{Error, Result};
+
 use super::graph::{MeshGraph, BODY_COLUMN, BODY_RADIUS_M, EDGE_FEATURES, NODE_FEATURES};
 
 /// Sizes of the corrector network and its settings at inference (saved in `config.json`
@@ -161,18 +163,24 @@ impl CorrectorConfig {
     }
 
     /// Checks the settings a saved configuration may hold wrong; `Err` names the problem.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<()> {
         let r = self.tension_ramp;
         if !(r.is_finite() && r >= 0.0) {
-            return Err("the tension ramp must not be negative (0: no limit)".into());
+            return Err(Error::Invalid(
+                "the tension ramp must not be negative (0: no limit)".into(),
+            ));
         }
         let k = self.take_back;
         if !(k.is_finite() && k > 0.0 && k <= 1.0) {
-            return Err("the take-back scale must be in (0, 1]".into());
+            return Err(Error::Invalid(
+                "the take-back scale must be in (0, 1]".into(),
+            ));
         }
         let m = self.share_min;
         if !(m.is_finite() && m < 1.0) {
-            return Err("the gated decoder's lowest share must be below 1".into());
+            return Err(Error::Invalid(
+                "the gated decoder's lowest share must be below 1".into(),
+            ));
         }
         Ok(())
     }

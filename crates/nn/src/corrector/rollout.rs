@@ -14,10 +14,10 @@ use std::time::Instant;
 
 use super::data::{vectors, Sequence};
 use super::inference::Corrector;
-use crate::error::{Error, Result};
-use crate::metrics::mean_distance_mm;
-use crate::sim::driver::Simulation;
-use crate::sim::SimState;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::metrics::mean_distance_mm;
+use clothsr_sim::driver::Simulation;
+use clothsr_sim::SimState;
 use nalgebra::Vector3;
 
 /// Per-frame errors of the three variants, mm.
@@ -307,7 +307,7 @@ impl HorizonErrors {
 
 /// Runs the three variants over `frames` frames of `seq` (from its first stored step) with
 /// `sims`, three instances of the data set's coarse simulation
-/// ([`crate::data::coarse_simulation`], whose time at the data set's frame 0 is `t0_s`): one
+/// ([`clothsr_io::data::coarse_simulation`], whose time at the data set's frame 0 is `t0_s`): one
 /// for the simulation alone, one for the interleaved run, one for the one-step check (at each
 /// frame end, a coarse step from the ground truth's previous step, so that the check is of
 /// this simulator, which may differ from the one that made the data set). They must be

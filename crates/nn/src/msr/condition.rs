@@ -5,10 +5,10 @@
 
 use clothsr_geometry::garment::Fabric;
 
-use crate::data::Manifest;
-use crate::error::{Error, Result};
-use crate::mesh::ClothMesh;
-use crate::scene::catalogue;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
+use clothsr_geometry::scene::catalogue;
+use clothsr_io::data::Manifest;
 
 /// Input channels the condition adds ([`Condition::channels`]).
 pub const CONDITION_CHANNELS: usize = 4;

@@ -20,9 +20,9 @@ use nalgebra::{Vector2, Vector3};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result};
-use crate::mesh::ClothMesh;
-use crate::transfer::TriLocator;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
+use clothsr_geometry::mesh::TriLocator;
 
 /// How pixels along panel boundaries are treated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -205,7 +205,7 @@ impl Rasteriser {
     }
 
     /// Rasterises by Phong tessellation of the mesh with blend `alpha`
-    /// ([`crate::transfer::phong_point`]; 0: piecewise-linear, as the paper) instead of linear
+    /// ([`clothsr_geometry::transfer::phong_point`]; 0: piecewise-linear, as the paper) instead of linear
     /// interpolation: a coarse mesh's curvature then shows in its map, not only its chords.
     pub fn with_phong(mut self, alpha: f64) -> Rasteriser {
         self.phong_alpha = alpha;
@@ -221,7 +221,7 @@ impl Rasteriser {
     pub fn rasterise(&self, x: &[Vector3<f64>]) -> Vec<CoordMap> {
         // Vertex normals only for Phong tessellation (alpha 0 is linear interpolation).
         let n = if self.phong_alpha != 0.0 {
-            crate::transfer::vertex_normals(&self.triangles, x)
+            clothsr_geometry::transfer::vertex_normals(&self.triangles, x)
         } else {
             Vec::new()
         };
@@ -239,7 +239,7 @@ impl Rasteriser {
                             + x[v(2)].cast::<f32>() * b[2])
                             .cast::<f64>()
                     } else {
-                        crate::transfer::phong_point(
+                        clothsr_geometry::transfer::phong_point(
                             [x[v(0)], x[v(1)], x[v(2)]],
                             [n[v(0)], n[v(1)], n[v(2)]],
                             b.map(f64::from),
@@ -413,7 +413,7 @@ impl Normalisation {
     pub fn save(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| Error::Invalid(format!("normalisation: {e}")))?;
-        crate::io::write_atomic(path, text.as_bytes())
+        clothsr_io::write_atomic(path, text.as_bytes())
     }
 
     /// Reads JSON.
@@ -426,9 +426,9 @@ impl Normalisation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{mesh_garment, MeshOptions};
-    use crate::scene::samples::flat_sheet;
     use clothsr_geometry::garment::Fabric;
+    use clothsr_geometry::mesh::{mesh_garment, MeshOptions};
+    use clothsr_geometry::scene::samples::flat_sheet;
 
     /// A wrinkled drape over material space: 1 mm wrinkles every 3 cm on a curved sheet.
     fn wrinkled(m: &Vector2<f64>) -> Vector3<f64> {

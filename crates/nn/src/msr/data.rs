@@ -1,5 +1,5 @@
 //! Training and evaluation data for the ISR network, read from data sets made by
-//! [`crate::data::generate`]: per frame, M_int (the downsampled fine simulation at the frame's
+//! `clothsr::dataset::generate`: per frame, M_int (the downsampled fine simulation at the frame's
 //! end) rasterised on the fine mesh's panel grids (the coarse map I_c), the fine simulation M_f
 //! rasterised on the same grids (the ground truth I_gt), and the initialisation of §3.3.3: the
 //! ground-truth map of the frame before, smoothed with a Gaussian kernel.
@@ -12,11 +12,11 @@ use ndarray::{Array2, Array3};
 
 use super::condition::{data_conditions, Condition};
 use super::coordmap::{Boundary, PanelGrid, Rasteriser};
-use crate::data::{
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
+use clothsr_io::data::{
     read_coarse_mesh, read_fine_mesh, read_frame_positions, read_manifest, Manifest,
 };
-use crate::error::{Error, Result};
-use crate::mesh::ClothMesh;
 
 /// One frame's maps, one per panel grid, each (3, H, W) in metres (zero off the mask).
 #[derive(Debug, Clone)]

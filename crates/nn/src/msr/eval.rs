@@ -1,8 +1,8 @@
 //! Evaluating the MSR module on a data set: super-resolve its M_int sequence frame by frame
 //! (each frame initialised with the previous frame's output) and compare the fine mesh with
 //! the fine simulation, next to the upsampled coarse mesh (barycentric interpolation of M_int
-//! at the fine vertices' material points, [`crate::transfer::Transfer::upsample`]) and the
-//! Phong-tessellated one ([`crate::transfer::Transfer::upsample_phong`]).
+//! at the fine vertices' material points, [`clothsr_geometry::transfer::Transfer::upsample`]) and the
+//! Phong-tessellated one ([`clothsr_geometry::transfer::Transfer::upsample_phong`]).
 
 use std::ops::ControlFlow;
 
@@ -10,8 +10,8 @@ use nalgebra::Vector3;
 
 use super::data::IsrSequence;
 use super::inference::{FrameTimes, Isr, SuperResolver};
-use crate::error::Result;
-use crate::transfer::Transfer;
+use clothsr_geometry::error::Result;
+use clothsr_geometry::transfer::Transfer;
 
 /// One frame's errors, mm.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,11 +31,11 @@ pub struct FrameErrors {
     /// The same for the Phong-upsampled M_int.
     pub phong_normal_deg: f64,
     /// The 1-Wasserstein distance between the SR mesh's bend angles and the fine simulation's
-    /// ([`crate::metrics::bend_angles_deg`]), degrees: its folds and wrinkles in kind.
+    /// ([`clothsr_geometry::metrics::bend_angles_deg`]), degrees: its folds and wrinkles in kind.
     pub sr_bend_w1_deg: f64,
     /// The same for the upsampled M_int.
     pub upsampled_bend_w1_deg: f64,
-    /// Temporal jitter ([`crate::metrics::jitter_m`], mean ‖x_t − 2x_{t−1} + x_{t−2}‖ over
+    /// Temporal jitter ([`clothsr_geometry::metrics::jitter_m`], mean ‖x_t − 2x_{t−1} + x_{t−2}‖ over
     /// vertices) of the SR meshes, the Phong-upsampled M_int and the fine simulation, mm;
     /// from the third frame on.
     pub jitter_mm: Option<Jitter>,
@@ -125,7 +125,8 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 
 /// Mean and max vertex distance, mm.
 pub fn vertex_error_mm(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
-    let (mean_m, max_m, _) = crate::metrics::mean_max_std(&crate::metrics::vertex_errors(a, b));
+    let (mean_m, max_m, _) =
+        clothsr_geometry::metrics::mean_max_std(&clothsr_geometry::metrics::vertex_errors(a, b));
     (mean_m * 1e3, max_m * 1e3)
 }
 
@@ -143,7 +144,7 @@ pub fn evaluate(
     let conditions = seq.conditions.clone().unwrap_or_default();
     let mut sr = SuperResolver::new(isr, &seq.coarse_mesh, &seq.fine_mesh, &conditions)?;
     let transfer = Transfer::new(&seq.coarse_mesh, &seq.fine_mesh)?;
-    let hinges = crate::metrics::hinges(&seq.fine_mesh.triangles);
+    let hinges = clothsr_geometry::metrics::hinges(&seq.fine_mesh.triangles);
     let mut out = SequenceErrors::default();
     // The last two frames' SR and Phong meshes, for the jitter.
     type Positions = Vec<Vector3<f64>>;
@@ -157,17 +158,18 @@ pub fn evaluate(
         let upsampled = transfer.upsample(int);
         let (upsampled_mm, _) = vertex_error_mm(&upsampled, gt);
         let bends = |x: &[Vector3<f64>]| {
-            crate::metrics::bend_angles_deg(&seq.fine_mesh.triangles, &hinges, x)
+            clothsr_geometry::metrics::bend_angles_deg(&seq.fine_mesh.triangles, &hinges, x)
         };
         let gt_bends = bends(gt);
-        let sr_bend_w1_deg = crate::metrics::wasserstein1_sorted(&bends(&fine), &gt_bends);
+        let sr_bend_w1_deg =
+            clothsr_geometry::metrics::wasserstein1_sorted(&bends(&fine), &gt_bends);
         let upsampled_bend_w1_deg =
-            crate::metrics::wasserstein1_sorted(&bends(&upsampled), &gt_bends);
+            clothsr_geometry::metrics::wasserstein1_sorted(&bends(&upsampled), &gt_bends);
         let phong = transfer.upsample_phong(int, &seq.coarse_mesh.triangles, isr.cfg.phong_alpha);
         let (phong_mm, _) = vertex_error_mm(&phong, gt);
         let tris = &seq.fine_mesh.triangles;
-        let sr_normal_deg = crate::metrics::normal_angle_deg(tris, gt, &fine);
-        let phong_normal_deg = crate::metrics::normal_angle_deg(tris, gt, &phong);
+        let sr_normal_deg = clothsr_geometry::metrics::normal_angle_deg(tris, gt, &fine);
+        let phong_normal_deg = clothsr_geometry::metrics::normal_angle_deg(tris, gt, &phong);
         let jitter_mm = (k >= 2).then(|| {
             let ((s2, p2), (s1, p1)) = (&history[0], &history[1]);
             let (g2, g1) = (&seq.fine_x[k - 2], &seq.fine_x[k - 1]);
@@ -175,12 +177,13 @@ pub fn evaluate(
                 a.iter().zip(b).map(|(a, b)| a - b).collect()
             };
             let error = |x2: &[Vector3<f64>], x1: &[Vector3<f64>], x0: &[Vector3<f64>]| {
-                crate::metrics::jitter_m(&minus(x2, g2), &minus(x1, g1), &minus(x0, gt)) * 1e3
+                clothsr_geometry::metrics::jitter_m(&minus(x2, g2), &minus(x1, g1), &minus(x0, gt))
+                    * 1e3
             };
             Jitter {
-                sr: crate::metrics::jitter_m(s2, s1, &fine) * 1e3,
-                phong: crate::metrics::jitter_m(p2, p1, &phong) * 1e3,
-                gt: crate::metrics::jitter_m(g2, g1, gt) * 1e3,
+                sr: clothsr_geometry::metrics::jitter_m(s2, s1, &fine) * 1e3,
+                phong: clothsr_geometry::metrics::jitter_m(p2, p1, &phong) * 1e3,
+                gt: clothsr_geometry::metrics::jitter_m(g2, g1, gt) * 1e3,
                 sr_err: error(s2, s1, &fine),
                 phong_err: error(p2, p1, &phong),
             }

@@ -16,8 +16,8 @@ use super::coordmap::{Boundary, PanelGrid, Rasteriser, Readout};
 use super::model::IsrNet;
 use super::patches::{blend_patches, split_patches, PatchLayout, DEFAULT_OVERLAP, DEFAULT_SIGMA};
 use super::training::IsrTrainingConfig;
-use crate::error::{Error, Result};
-use crate::mesh::ClothMesh;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::mesh::ClothMesh;
 
 /// The training settings and network sizes in a model directory.
 pub const CONFIG_FILE: &str = "config.json";
@@ -244,9 +244,7 @@ impl Isr {
         let cfg = <IsrTrainingConfig as burn::config::Config>::load(&cfg_path)
             .map_err(|e| Error::bad_input(&cfg_path, e.to_string()))?;
         unknown_fields(&cfg_path, &cfg)?;
-        cfg.model
-            .check()
-            .map_err(|e| Error::bad_input(&cfg_path, e))?;
+        cfg.model.check().map_err(|e| e.in_file(&cfg_path))?;
         let m = cfg.model.patch_multiple();
         if cfg.patch == 0 || !cfg.patch.is_multiple_of(m) {
             return Err(Error::bad_input(

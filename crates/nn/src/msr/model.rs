@@ -33,6 +33,8 @@ use burn::tensor::module::attention;
 use burn::tensor::ops::AttentionModuleOptions;
 use burn::tensor::{Device, Int, Tensor, TensorData};
 
+use clothsr_geometry::error::{Error, Result};
+
 /// Sizes of the ISR network (saved with the training settings in `config.json`).
 #[derive(Config, Debug, PartialEq)]
 pub struct IsrConfig {
@@ -112,24 +114,26 @@ impl IsrConfig {
     }
 
     /// Checks the sizes; `Err` names the problem.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<()> {
         if self.embed_dim == 0 || self.heads == 0 || !self.embed_dim.is_multiple_of(self.heads) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "embed_dim ({}) must be a positive multiple of heads ({})",
                 self.embed_dim, self.heads
-            ));
+            )));
         }
         if self.window < 2 || self.depths.is_empty() || self.depths.contains(&0) {
-            return Err("window must be at least 2 and every depth at least 1".into());
+            return Err(Error::Invalid(
+                "window must be at least 2 and every depth at least 1".into(),
+            ));
         }
         if !(self.mlp_ratio.is_finite() && self.mlp_ratio > 0.0) {
-            return Err("mlp_ratio must be positive".into());
+            return Err(Error::Invalid("mlp_ratio must be positive".into()));
         }
         if !(1..=8).contains(&self.unshuffle_factor()) {
-            return Err(format!(
+            return Err(Error::Invalid(format!(
                 "unshuffle must lie in 1..=8, got {}",
                 self.unshuffle_factor()
-            ));
+            )));
         }
         Ok(())
     }

@@ -49,7 +49,7 @@ use super::inference::{
 };
 use super::model::{IsrConfig, IsrNet};
 use crate::common::write_json;
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 /// How to train (saved as `config.json`, with the network's sizes).
 #[derive(Config, Debug, PartialEq)]
@@ -214,7 +214,7 @@ struct RawPatch {
 fn check(cfg: &IsrTrainingConfig, seqs: &[IsrSequence]) -> Result<()> {
     let bad = |m: String| Err(Error::Invalid(format!("ISR training configuration: {m}")));
     if let Err(e) = cfg.model.check() {
-        return bad(e);
+        return bad(e.to_string());
     }
     if seqs.is_empty() || seqs.iter().all(|s| s.frames.is_empty()) {
         return bad("no training data".into());
@@ -466,7 +466,7 @@ impl LossLog {
     /// Opens (or, resuming, appends to) `out/log.csv`.
     fn open(out: &Path, resuming: bool) -> Result<LossLog> {
         let path = out.join("log.csv");
-        let file = crate::io::open_log(
+        let file = clothsr_io::open_log(
             &path,
             resuming,
             "step,lr,loss,position,gradient,coarse_loss,init_loss,seconds",

@@ -148,7 +148,11 @@ mod edge_obstacle_tests {
     fn a_box_edge_between_cloth_vertices_is_a_contact() {
         // A unit cube's top edge along x at (y, z) = (1, 1); a cloth edge crossing it 1 mm above,
         // with both cloth vertices far from every face (so no vertex contact can see it).
-        let cube = crate::scene::Collider::cuboid("cube", Vector3::zeros(), Vector3::repeat(1.0));
+        let cube = clothsr_geometry::scene::Collider::cuboid(
+            "cube",
+            Vector3::zeros(),
+            Vector3::repeat(1.0),
+        );
         let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         let tris = cube.triangles;
         let sharp = sharp_edges(&pts, &tris, SHARP_EDGE_DEG);
@@ -228,7 +232,11 @@ mod edge_obstacle_tests {
     /// has gone into either wall has crossed.
     #[test]
     fn a_concave_crease_holds_edges_in_the_corner_and_lets_crossed_ones_go() {
-        let cube = crate::scene::Collider::cuboid("room", Vector3::zeros(), Vector3::repeat(1.0));
+        let cube = clothsr_geometry::scene::Collider::cuboid(
+            "room",
+            Vector3::zeros(),
+            Vector3::repeat(1.0),
+        );
         let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         let tris: Vec<[u32; 3]> = cube.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect();
         let planes = {

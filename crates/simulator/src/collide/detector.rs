@@ -432,7 +432,7 @@ mod clearance_tests {
     /// found inside and pushed, as a full pass would.
     #[test]
     fn a_vertex_deep_inside_is_found_once_it_comes_within_the_search() {
-        let ball = crate::scene::Collider::sphere("ball", Vector3::zeros(), 0.3, 3);
+        let ball = clothsr_geometry::scene::Collider::sphere("ball", Vector3::zeros(), 0.3, 3);
         let pts: Vec<Vector3<f64>> = ball.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         let params = CollisionParams {
             dhat_m: 0.003,

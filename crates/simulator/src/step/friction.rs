@@ -256,21 +256,28 @@ mod tests {
     /// quarter of the way along, 2.5 mm).
     #[test]
     fn a_crease_contact_grips_its_edges_vertices_moving_with_the_crease() {
-        let scene = crate::scene::samples::sample("sheet_table").expect("sample");
+        let scene = clothsr_geometry::scene::samples::sample("sheet_table").expect("sample");
         let sim = crate::driver::Simulation::new(&scene, 0.04, |_| {}).expect("setup");
         let s = &sim.sim;
         let p = s.params.collision;
         let mu = s.params.friction;
         assert!(mu > 0.0 && p.dhat_m < 0.01, "{mu} {}", p.dhat_m);
-        let cube = crate::scene::Collider::cuboid("box", Vector3::zeros(), Vector3::repeat(1.0));
+        let cube = clothsr_geometry::scene::Collider::cuboid(
+            "box",
+            Vector3::zeros(),
+            Vector3::repeat(1.0),
+        );
         let pts: Vec<Vector3<f64>> = cube.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         let moved: Vec<Vector3<f64>> = pts
             .iter()
             .map(|q| q + Vector3::new(0.01 * q.x, 0.0, 0.0))
             .collect();
         let tris = cube.triangles;
-        let far =
-            crate::scene::Collider::cuboid("far", Vector3::repeat(9.0), Vector3::repeat(10.0));
+        let far = clothsr_geometry::scene::Collider::cuboid(
+            "far",
+            Vector3::repeat(9.0),
+            Vector3::repeat(10.0),
+        );
         let far_pts: Vec<Vector3<f64>> = far.frames[0].iter().map(|p| p.cast::<f64>()).collect();
         // The crease y = z = 1 (along x); the closest point of the cloth edge a quarter of the
         // way from `a`, 0.3 d̂ out along (0, 1, 1)/√2; the edge runs along (0, 1, −1)/√2.

@@ -36,7 +36,7 @@ use super::collide::{edge_triangle_crossings, CollisionDetector};
 use super::model::ClothModel;
 use super::scatter::ColouredElements;
 use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg, TwoLevel};
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 use contacts::{seam_rings, self_margin_cap};
 use linear::SERIAL_BELOW_VERTICES;
 use state::BodyMotion;

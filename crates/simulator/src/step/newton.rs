@@ -8,8 +8,8 @@ use super::line_search::{limit_pair_closing, slid_over_crease, Accepted, Closing
 use super::state::BodyMotion;
 use super::{ColliderFrame, SimState, Simulator, StepStats, MAX_OBSTACLE_MARGIN_M};
 use crate::collide::{Contact, StepStart};
-use crate::error::{Error, Result};
 use crate::sparse::CgStats;
+use clothsr_geometry::error::{Error, Result};
 
 /// How deep the deepest cloth vertex is inside a body at positions `x` (the end of a step),
 /// m. A vertex with body contacts: per collider, its depth under the face of its contacts it

@@ -186,7 +186,7 @@ impl SimParams {
     pub fn for_edge(edge_m: f64) -> SimParams {
         let dhat = (0.15 * edge_m).clamp(3e-4, 5e-3);
         SimParams {
-            dt_s: crate::scene::DEFAULT_DT_S,
+            dt_s: clothsr_geometry::scene::DEFAULT_DT_S,
             gravity_m_s2: Vector3::new(0.0, -9.81, 0.0),
             sew_stiffness_n_m: 1000.0,
             sew_speed_m_s: 0.5,
@@ -203,7 +203,7 @@ impl SimParams {
             move_cap_m: f64::INFINITY,
             newton_exact: true,
             // 1 cm/s of velocity error: far below what shows in an animation.
-            newton_tol_m: 3e-2 * crate::scene::DEFAULT_DT_S,
+            newton_tol_m: 3e-2 * clothsr_geometry::scene::DEFAULT_DT_S,
             // 1e-2 costs far fewer iterations but, with one Newton iteration per step, leaves
             // stiff sewing springs short of closing (tests/simulator.rs
             // sewing_closes_a_two_panel_tube stalls).

@@ -11,7 +11,7 @@ use crate::common::write_json;
 use crate::corrector::inference::{CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
 use crate::corrector::model::CorrectorNet;
 use crate::corrector::normalise::Normalisation;
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
 
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub(super) struct Position {

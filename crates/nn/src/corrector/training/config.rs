@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::corrector::model::CorrectorConfig;
-use crate::error::{Error, Result};
-use crate::sim::coarse::CoarseCalibration;
-use crate::sim::driver::Simulation;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_sim::coarse::CoarseCalibration;
+use clothsr_sim::driver::Simulation;
 
 /// The form of a corrector's `config.json` this build reads and writes
 /// ([`TrainingConfig::format_version`]). Files of another form are refused

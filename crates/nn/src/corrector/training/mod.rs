@@ -49,13 +49,13 @@ use super::inference::{read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE}
 use super::model::CorrectorNet;
 use super::normalise::{Normalisation, NormalisationBuilder};
 use crate::common::{default_device, write_json};
-use crate::error::{Error, Result};
-use crate::sim::driver::Simulation;
 use checkpoint::{Position, BEST_FILE, CHECKPOINT_DIR};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_sim::driver::Simulation;
 use start::warm_start;
 
 /// A training sequence and, for phase 2, the coarse simulation it was made with
-/// ([`crate::data::coarse_simulation`]).
+/// ([`clothsr_io::data::coarse_simulation`]).
 pub struct TrainSet {
     /// The sequence.
     pub seq: Sequence,
@@ -168,7 +168,7 @@ fn check(cfg: &TrainingConfig, sets: &[TrainSet], validation: &[ValidationSet]) 
         ));
     }
     if let Err(e) = cfg.model.check() {
-        return bad(&e);
+        return bad(&e.to_string());
     }
     if let Err(e) = cfg.coarse.check() {
         return bad(&format!("coarse: {e}"));
@@ -238,7 +238,7 @@ pub fn train(
         (net, AdamConfig::new().init())
     };
     let log_path = out.join("log.csv");
-    let log = crate::io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
+    let log = clothsr_io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
     let best = match position.best {
         Some(_) if resuming => Some(crate::common::load_weights(
             cfg.model.init(&device),

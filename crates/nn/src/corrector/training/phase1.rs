@@ -13,8 +13,8 @@ use crate::corrector::data::vectors;
 use crate::corrector::graph::MeshGraph;
 use crate::corrector::model::GraphTensors;
 use crate::corrector::normalise::Normalisation;
-use crate::data::flat32;
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_io::data::flat32;
 
 /// One graph sample, raw (unnormalised) inputs and targets plus a loss mask.
 pub(super) struct Sample {

@@ -15,8 +15,8 @@ use crate::corrector::graph::{body_proximity, step_change};
 use crate::corrector::inference::features;
 use crate::corrector::model::{CorrectorNet, GraphTensors};
 use crate::corrector::normalise::Normalisation;
-use crate::data::flat32;
-use crate::error::{Error, Result};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_io::data::flat32;
 
 impl Trainer<'_> {
     pub(super) fn phase2(

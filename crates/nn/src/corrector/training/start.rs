@@ -8,8 +8,8 @@ use super::config::TrainingConfig;
 use crate::corrector::inference::{load_net, CONFIG_FILE};
 use crate::corrector::model::CorrectorNet;
 use crate::corrector::normalise::Normalisation;
-use crate::error::{Error, Result};
-use crate::sim::coarse::{crease_label, CoarseCalibration};
+use clothsr_geometry::error::{Error, Result};
+use clothsr_sim::coarse::{crease_label, CoarseCalibration};
 
 /// The network and statistics of the trained corrector `cfg` starts from
 /// ([`TrainingConfig::init_from`]), checked against `cfg`; `None` without one.

@@ -11,8 +11,8 @@ use crate::common::default_device;
 use crate::corrector::data::Sequence;
 use crate::corrector::inference::Corrector;
 use crate::corrector::rollout::interleaved_errors;
-use crate::error::{Error, Result};
-use crate::scene::Scene;
+use clothsr_geometry::error::{Error, Result};
+use clothsr_geometry::scene::Scene;
 
 /// A held-out sequence training selects its network on ([`TrainingConfig::validate_every`]):
 /// it must not be one of the training sets.
@@ -20,7 +20,7 @@ pub struct ValidationSet {
     /// The sequence (loaded from its frame `first_frame`).
     pub seq: Sequence,
     /// The scene it was made from: every validation starts a fresh coarse simulation of it
-    /// ([`crate::data::coarse_simulation`]; a simulator carries warm starts from step to step,
+    /// ([`clothsr_io::data::coarse_simulation`]; a simulator carries warm starts from step to step,
     /// and a network's score must not depend on what ran before).
     pub scene: Scene,
 }
@@ -63,7 +63,8 @@ impl Trainer<'_> {
         let (mut sum, mut frames, mut diverged) = (0.0, 0usize, false);
         let mut rows = Vec::new();
         for v in validation {
-            let mut sim = crate::data::coarse_simulation(&v.scene, &v.seq.dir, v.seq.first_frame)?;
+            let mut sim =
+                clothsr_io::data::coarse_simulation(&v.scene, &v.seq.dir, v.seq.first_frame)?;
             self.cfg.prepare_coarse(&mut sim)?;
             let t0 = sim.state.t_s;
             let corrector = Corrector::new(
