@@ -47,6 +47,7 @@ pub struct Args {
     #[arg(
         long,
         value_enum,
+        hide_possible_values = true,
         value_name = "auto|on|off",
         default_value = "auto",
         num_args = 0..=1,
@@ -72,6 +73,7 @@ pub struct Args {
     #[arg(
         long,
         value_enum,
+        hide_possible_values = true,
         value_name = "auto|on|off",
         default_value = "auto",
         help_heading = "Models"

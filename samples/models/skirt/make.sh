@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Makes samples/models/skirt/ (this folder) with `clothsr fit` (plan.json, report.md): the pencil
-# skirt dressed on the walking avatar. Committed are its plan, models, report, task markers and
-# data-set manifests. Delete the folder first to make it again (a fit whose tasks are done does
+# skirt dressed on the walking avatar. Committed are its plan, models, report and
+# data-set manifests (task markers stay local). Delete the folder first to make it again (a fit whose tasks are done does
 # nothing). CLOTHSR=path/to/clothsr chooses the binary.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
