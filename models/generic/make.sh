@@ -35,7 +35,7 @@ JOBS=${JOBS:-1}
 TRAIN_FRAMES=${TRAIN_FRAMES:-30}
 HELD_FRAMES=${HELD_FRAMES:-150}
 STAGE=${1:-all}
-COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
+COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --self-collision off)
 # The avatar of the avatar shots: the walk baked to a point cache (2 s).
 AVATAR=tests/data/avatars/mh_walk_train_baked_2s.usdc
 # The held-out starts: the shot as written, and turned and moved.

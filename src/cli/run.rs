@@ -131,9 +131,9 @@ pub struct Knobs {
     /// sample models were trained beside.
     #[arg(long)]
     converged: bool,
-    /// Cloth self-collision in the coarse simulation.
-    #[arg(long)]
-    self_collision: bool,
+    /// Cloth self-collision in the coarse simulation, `on` or `off` [default: off].
+    #[arg(long, value_name = "on|off", value_parser = crate::cli::values::on_off(), action = clap::ArgAction::Set)]
+    self_collision: Option<bool>,
     // The coarse model (unset: the corrector's, else the models folder's `coarse.json`'s, else
     // the simulator's; a corrector trained beside another is an error).
     #[command(flatten)]
@@ -240,7 +240,7 @@ impl Knobs {
             } else {
                 d.coarse_solver
             },
-            self_collision: self.self_collision || d.self_collision,
+            self_collision: self.self_collision.unwrap_or(d.self_collision),
             match_contact_thickness: d.match_contact_thickness,
             dress: d.dress && !self.no_dress,
             coarse: self.coarse.calibration(),

@@ -49,9 +49,9 @@ pub struct Args {
     /// Coulomb friction coefficient against colliders (default 0.3)
     #[arg(value_parser = crate::cli::values::non_negative(100.0), long)]
     friction: Option<f64>,
-    /// Disable cloth self-collision.
-    #[arg(long)]
-    no_self_collision: bool,
+    /// Cloth self-collision, `on` or `off`.
+    #[arg(long, default_value = "on", value_name = "on|off", value_parser = crate::cli::values::on_off(), action = clap::ArgAction::Set)]
+    self_collision: bool,
     /// Write text USD even for a .usd file.
     #[arg(long)]
     ascii: bool,
@@ -138,9 +138,9 @@ fn load_scene(args: &Args) -> anyhow::Result<Scene> {
 
 /// The simulation of `scene` at `--edge-mm` under the solver flags given.
 fn new_simulation(scene: &Scene, args: &Args) -> anyhow::Result<Simulation> {
-    let (no_self, fast) = (args.no_self_collision, args.fast);
+    let (self_collision, fast) = (args.self_collision, args.fast);
     let sim = Simulation::new(scene, args.edge_mm * 1e-3, |p| {
-        p.collision.self_collision = !no_self;
+        p.collision.self_collision = self_collision;
         p.newton_exact = !fast;
         if let Some(k) = args.contact_stiffness {
             p.collision.kappa = k;

@@ -50,10 +50,11 @@ pub struct Args {
     /// Skip the Newton 1.8 side-by-side run.
     #[arg(long)]
     no_peer: bool,
-    /// Cloth self-collision on, on both sides (clothsr's vertex-triangle and edge-edge
-    /// repulsion; Style3D's default self-collision, XPBD's particle contacts). Off by default:
-    /// the sheet on a sphere barely touches itself, so the default times the solvers alone.
-    #[arg(long)]
+    /// Cloth self-collision, `on` or `off`, on both sides (clothsr's vertex-triangle and
+    /// edge-edge repulsion; Style3D's default self-collision, XPBD's particle contacts). Off
+    /// by default: the sheet on a sphere barely touches itself, so the default times the
+    /// solvers alone.
+    #[arg(long, default_value = "off", value_name = "on|off", value_parser = crate::cli::values::on_off(), action = clap::ArgAction::Set)]
     self_collision: bool,
     /// Solver modes to time: `converged` (Newton to tolerance, the simulator's default),
     /// `fast` (one full Newton step when the line search accepts it, as in Baraff & Witkin and

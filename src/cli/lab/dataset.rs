@@ -30,9 +30,9 @@ pub struct Args {
     inputs: crate::cli::SceneInputs,
     #[command(flatten)]
     variation: crate::cli::VariationArgs,
-    /// Disable cloth self-collision.
-    #[arg(long)]
-    no_self_collision: bool,
+    /// Cloth self-collision at both resolutions, `on` or `off`.
+    #[arg(long, default_value = "on", value_name = "on|off", value_parser = crate::cli::values::on_off(), action = clap::ArgAction::Set)]
+    self_collision: bool,
     /// Skip sewing and settling before frame 0.
     #[arg(long)]
     no_dress: bool,
@@ -81,7 +81,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fine_edge_m: args.fine_mm * 1e-3,
         frames: args.frames,
         dress: !args.no_dress,
-        self_collision: !args.no_self_collision,
+        self_collision: args.self_collision,
         variation,
         fast: args.fast,
         fine_mode: args.fine_mode,

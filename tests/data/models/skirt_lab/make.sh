@@ -20,7 +20,7 @@ PATTERN=tests/data/patterns/mh_pencil_skirt/mh_pencil_skirt_specification.json
 AVATAR=$DATA/mh_walk_train_baked.usdc
 mkdir -p "$DATA"
 [ -f "$AVATAR" ] || .venv/bin/python tests/data/avatars/bake.py tests/data/avatars/mh_walk_train.usda "$AVATAR"
-COMMON=(--avatar "$AVATAR" --coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
+COMMON=(--avatar "$AVATAR" --coarse-mm 20 --fine-mm 2.5 --fast --self-collision off)
 
 "$BIN" lab dataset "$PATTERN" "${COMMON[@]}" --frames 45 -o "$DATA/walk"
 # A second sequence, never trained on: dressed 2 s into the walk (the garment is carried to

@@ -17,7 +17,7 @@ BIN=${CLOTHSR:-clothsr}
 DATA=${DATA:-data/three_balls}
 OUT=${OUT:-tests/data/models/three_balls_lab}
 SCENE=samples/sheet_three_balls.usda
-COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --no-self-collision)
+COMMON=(--coarse-mm 20 --fine-mm 2.5 --fast --self-collision off)
 
 # Two training drops and one held-out test drop (other yaw and offset), as in the paper's §4:
 # "we modify the initial states of the cloth pieces to generate distinct simulation data".
