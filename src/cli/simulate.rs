@@ -56,7 +56,7 @@ pub struct Args {
     #[arg(long)]
     ascii: bool,
     /// One Newton iteration per step when its full step is accepted (Baraff & Witkin style,
-    /// ~3× faster) instead of iterating to convergence.
+    /// faster: `docs/benchmarks.md`) instead of iterating to convergence.
     #[arg(long)]
     fast: bool,
     /// Skip dressing: by default garments with seams are first sewn with gravity off and the

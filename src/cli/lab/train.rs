@@ -134,8 +134,8 @@ pub struct CorrectorArgs {
     #[arg(value_parser = crate::cli::values::positive(1.0), long, default_value_t = 1e-6)]
     lr_end: f64,
     /// Training noise, as a multiple of the data's RMS per-step position correction (GNS
-    /// style; off by default: on the three-balls drops, 0.3 made the interleaved rollout 6.2×
-    /// the simulation alone's error against 3.4× without).
+    /// style; off by default, as it measured worse on the three balls' drops:
+    /// `docs/experiments/three_balls.md`).
     #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_FACTOR), long, default_value_t = 0.0)]
     noise_ratio: f64,
     /// Vertices per random sub-mesh patch (0: whole meshes).
