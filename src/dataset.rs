@@ -308,6 +308,7 @@ pub fn dress_fine_from_coarse(
         c.seam_gap_m * 1e3,
         x.len()
     );
+    closed("coarse", c.seam_gap_m)?;
     let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
     tracing::info!(
         "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
@@ -315,6 +316,22 @@ pub fn dress_fine_from_coarse(
         f.settle_steps,
         f.seam_gap_m * 1e3
     );
+    closed("fine", f.seam_gap_m)
+}
+
+/// The widest seam gap a dressed garment may keep for a data set, m: an open garment is no
+/// ground truth (a run only warns, as the garment is the user's).
+const MAX_DRESSED_SEAM_GAP_M: f64 = 0.01;
+
+/// Fails when dressing at `level` left a seam open by `gap_m`.
+fn closed(level: &str, gap_m: f64) -> Result<()> {
+    if gap_m > MAX_DRESSED_SEAM_GAP_M {
+        return Err(Error::Simulation(format!(
+            "dressing left a seam {:.1} mm open at the {level} level (the widest is named \
+             above): a data set of an open garment is no ground truth",
+            gap_m * 1e3
+        )));
+    }
     Ok(())
 }
 
@@ -612,3 +629,20 @@ const FINE_SEWING_S: f64 = 0.1;
 /// Phong blend of the coarse dressed garment carried onto the fine mesh (¾, Phong
 /// tessellation's usual choice).
 const DRESS_PHONG_ALPHA: f64 = 0.75;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_dressing_that_leaves_a_seam_open_makes_no_data_set() {
+        assert!(closed("coarse", 0.0).is_ok());
+        assert!(closed("fine", 0.009).is_ok());
+        let e = closed("coarse", 0.0992).expect_err("open");
+        assert_eq!(e.kind(), crate::ErrorKind::Failure);
+        assert!(
+            e.to_string().contains("99.2 mm open at the coarse level"),
+            "{e}"
+        );
+    }
+}
