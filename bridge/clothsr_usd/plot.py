@@ -1,10 +1,13 @@
 """Plots for ``clothsr eval``: error over time for a prediction and its baselines (the paper's Fig. 11).
 
 Written with matplotlib's Agg backend (no display needed) to a temporary file, then renamed into
-place, so a failed plot never leaves a partial PNG.
+place, so a failed plot never leaves a partial PNG; the temporary files of a killed plot are
+removed by the next one.
 """
 import os
-import tempfile
+import pathlib
+
+from .write import _temp_path
 
 
 def plot_errors(path, frames, series, title):
@@ -33,9 +36,7 @@ def plot_errors(path, frames, series, title):
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=directory)
-    os.close(fd)
+    tmp = str(_temp_path(pathlib.Path(os.path.abspath(path))))
     try:
         fig.savefig(tmp, format="png")
         os.chmod(tmp, 0o644)

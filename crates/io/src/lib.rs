@@ -22,23 +22,59 @@ use std::path::{Component, Path, PathBuf};
 use clothsr_geometry::error::{Error, Result};
 
 /// Writes `bytes` to `path` through a temporary file in the same directory, renamed into
-/// place: readers never see a partial file, and a failed write leaves the old one.
+/// place: readers never see a partial file, and a failed write leaves the old one. The
+/// temporary file is `.{stem}.clothsr-tmp-{pid}{.ext}`, the name the USD bridge uses too, so
+/// that the next writer of `path` removes what a killed one left.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = temp_path(path);
+    let written = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written.map_err(|e| Error::io(path, e))
+}
+
+/// The temporary file a write of `path` by this process goes through, after removing those
+/// that writers of `path` which are gone left behind.
+pub fn temp_path(path: &Path) -> PathBuf {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(path, e))?;
-    tmp.write_all(bytes).map_err(|e| Error::io(path, e))?;
-    // Temporary files are private (0600); what we publish is an ordinary file.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| Error::io(path, e))?;
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    let prefix = format!(".{stem}.clothsr-tmp-");
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let Some(pid) = name
+                .strip_prefix(&prefix)
+                .and_then(|r| r.strip_suffix(ext.as_str()))
+                .and_then(|p| p.parse::<u32>().ok())
+            else {
+                continue;
+            };
+            // A process that is gone has no /proc entry (Linux); elsewhere nothing is removed.
+            if pid != std::process::id()
+                && Path::new("/proc/self").exists()
+                && !Path::new(&format!("/proc/{pid}")).exists()
+            {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
     }
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
+    dir.join(format!("{prefix}{}{ext}", std::process::id()))
 }
 
 /// A training run's CSV log at `path`: a resumed run (`resuming`) appends to the log it left,
@@ -107,5 +143,28 @@ mod tests {
         assert_eq!(resolve_against(scene, base), absolute(scene));
         let cwd = std::env::current_dir().expect("cwd");
         assert_eq!(absolute(Path::new("a/../b")), cwd.join("b"));
+    }
+
+    /// A write killed mid-way leaves its temporary file: the next write of the same file
+    /// removes it (its process is gone), keeps a live writer's, and leaves only the target.
+    #[test]
+    fn a_killed_writers_temporary_file_is_removed_by_the_next_write() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let target = dir.path().join("report.md");
+        let dead = dir.path().join(".report.clothsr-tmp-4000000000.md");
+        let other = dir.path().join(".plot.clothsr-tmp-4000000000.png");
+        std::fs::write(&dead, b"partial").expect("write");
+        std::fs::write(&other, b"partial").expect("write");
+        write_atomic(&target, b"whole").expect("write_atomic");
+        assert_eq!(std::fs::read(&target).expect("read"), b"whole");
+        assert!(!dead.exists(), "the dead writer's file stays");
+        assert!(other.exists(), "another file's temporary was removed");
+        let mut names: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("read_dir")
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, [".plot.clothsr-tmp-4000000000.png", "report.md"]);
     }
 }
