@@ -301,9 +301,10 @@ pub fn dress_fine_from_coarse(
         DRESS_PHONG_ALPHA,
     );
     tracing::info!(
-        "dressed the coarse mesh ({} sewing, {} settling steps, seams {:.1} mm); dressing \
-         the fine mesh ({} vertices) from it",
+        "dressed the coarse mesh ({} sewing, {} worn to the start, {} settling steps, seams \
+         {:.1} mm); dressing the fine mesh ({} vertices) from it",
         c.sew_steps,
+        c.preroll_steps,
         c.settle_steps,
         c.seam_gap_m * 1e3,
         x.len()

@@ -77,7 +77,7 @@ fn restore(sim: &mut Simulation, path: &Path, key: &str) -> Result<bool> {
 }
 
 /// FNV-1a over what dressing depends on: the mesh at rest, the parts' fabrics, the solver
-/// settings and the colliders at the start.
+/// settings, the colliders at the start and the pre-roll.
 fn fingerprint(sim: &Simulation) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut eat = |bytes: &[u8]| {
@@ -105,6 +105,16 @@ fn fingerprint(sim: &Simulation) -> u64 {
     for points in sim.collider_points() {
         for p in points {
             p.iter().for_each(|c| eat(&c.to_le_bytes()));
+        }
+    }
+    // A pre-roll dresses on the bodies as they were then.
+    if sim.preroll_s > 0.0 {
+        eat(&sim.preroll_s.to_le_bytes());
+        let mut then = Vec::new();
+        for c in &sim.colliders {
+            c.positions_at(sim.state.t_s - sim.preroll_s, &mut then);
+            then.iter()
+                .for_each(|p| p.iter().for_each(|c| eat(&c.to_le_bytes())));
         }
     }
     h

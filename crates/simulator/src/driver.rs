@@ -10,7 +10,7 @@ use super::step::{ColliderFrame, SimParams, SimState, Simulator, StepStats};
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::garment::Fabric;
 use clothsr_geometry::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
-use clothsr_geometry::scene::{ClothPiece, Collider, Scene};
+use clothsr_geometry::scene::{root_motion, ClothPiece, Collider, Scene};
 
 /// Moves the vertices of `x` inside `colliders` (at `points`, one list per collider), or
 /// nearer one than `clearance_m`, out to that distance ([`push_out`]).
@@ -59,6 +59,8 @@ pub struct Simulation {
     pub fps: f64,
     /// Mean edge length of the cloth mesh, m.
     pub edge_m: f64,
+    /// Garments are dressed this long before the start ([`Scene::preroll_s`]), s.
+    pub preroll_s: f64,
     buffers: [Vec<Vec<Vector3<f64>>>; 2],
 }
 
@@ -100,6 +102,9 @@ pub struct DressStats {
     pub welded_gap_m: f64,
     /// Seam pairs welded (the others, still open, stay on their sewing springs).
     pub welded_pairs: usize,
+    /// Steps run wearing the garment through the bodies' motion from where it was dressed to
+    /// the start ([`Scene::preroll_s`]).
+    pub preroll_steps: usize,
 }
 
 /// A mesh garment's mesh at `edge_m`: remeshed chart by chart like a pattern
@@ -153,6 +158,12 @@ impl Simulation {
                 params.dt_s
             )));
         }
+        if !(scene.preroll_s >= 0.0 && scene.preroll_s.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the pre-roll must be zero or more seconds, got {}",
+                scene.preroll_s
+            )));
+        }
         let steps_per_frame = ((1.0 / scene.fps) / params.dt_s).round().max(1.0) as usize;
         let sim = Simulator::new(model, params);
         let mut state = sim.initial_state();
@@ -164,6 +175,7 @@ impl Simulation {
             steps_per_frame,
             fps: scene.fps,
             edge_m: mean_edge,
+            preroll_s: scene.preroll_s,
             buffers: [Vec::new(), Vec::new()],
         };
         // Garments with seams are dressed (`dress`), which places them around the body.
@@ -262,7 +274,41 @@ impl Simulation {
     /// seams close), then `settle_s` of draping under gravity, still on the first frame's
     /// colliders. The state's time goes back to the start, with zero velocity. Stops sewing
     /// once every seam pair is within `gap_m` or after `max_s` of simulated time.
+    ///
+    /// With a pre-roll ([`Self::preroll_s`]) the garments are dressed that long before the
+    /// start instead, on the bodies as they were then and moved back with their walk
+    /// ([`root_motion`]); they are then worn through the bodies' motion up to the start
+    /// (gravity, friction, the run's settings) and settle `settle_s` there.
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
+        if self.preroll_s <= 0.0 {
+            return self.dress_here(max_s, settle_s, gap_m);
+        }
+        let t_start = self.state.t_s;
+        let t_dress = t_start - self.preroll_s;
+        let back = root_motion(&self.colliders, t_dress, t_start);
+        self.state.x.iter_mut().for_each(|p| *p -= back);
+        self.state.t_s = t_dress;
+        let mut out = self.dress_here(max_s, settle_s, gap_m)?;
+        let steps = (self.preroll_s / self.sim.params.dt_s).round() as usize;
+        for _ in 0..steps {
+            self.step()?;
+        }
+        tracing::info!(
+            "dressing: worn through {:.2} s of the bodies' motion to the start ({steps} steps)",
+            self.preroll_s
+        );
+        self.state.t_s = t_start;
+        let held = self.collider_points();
+        let settled = self.sew_and_settle(&held, DressStats::default(), 0.0, settle_s, gap_m)?;
+        out.preroll_steps = steps;
+        out.settle_steps += settled.settle_steps;
+        out.seam_gap_m = settled.seam_gap_m;
+        out.max_penetration_m = settled.max_penetration_m;
+        Ok(out)
+    }
+
+    /// [`Self::dress`] at the state's time, without a pre-roll.
+    fn dress_here(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
         let held = self.collider_points();
         let frames = collider_frames(&self.colliders, &held);
         let mut out = DressStats::default();

@@ -204,6 +204,30 @@ pub struct Scene {
     /// Where the garments and cloth meshes read from a USD stage are in it, by name: a
     /// layered output writes each fine mesh back at its prim.
     pub sources: std::collections::BTreeMap<String, PrimSource>,
+    /// Garments with seams are dressed this long before the first frame, on the bodies as
+    /// they were then (an easier pose than mid-stride: legs together, arms down), carried back
+    /// with the bodies' walk ([`root_motion`]), and then worn through the motion up to the
+    /// first frame, s. Zero: dressed on the first frame.
+    pub preroll_s: f64,
+}
+
+/// The horizontal (x, z) move of the animated colliders' point centroid from time `from_s` to
+/// `to_s`, m (zero without animated colliders): how far the bodies walked.
+pub fn root_motion(colliders: &[Collider], from_s: f64, to_s: f64) -> Vector3<f64> {
+    let (mut start, mut then, mut n) = (Vector3::zeros(), Vector3::zeros(), 0usize);
+    let mut buf = Vec::new();
+    for c in colliders.iter().filter(|c| c.is_animated()) {
+        c.positions_at(from_s, &mut buf);
+        start += buf.iter().sum::<Vector3<f64>>();
+        c.positions_at(to_s, &mut buf);
+        then += buf.iter().sum::<Vector3<f64>>();
+        n += buf.len();
+    }
+    if n == 0 {
+        return Vector3::zeros();
+    }
+    let d = (then - start) / n as f64;
+    Vector3::new(d.x, 0.0, d.z)
 }
 
 /// A garment's prim in the USD file it was read from.
@@ -279,6 +303,7 @@ impl Default for Scene {
             frame_start: 0,
             frame_end: 0,
             sources: Default::default(),
+            preroll_s: 0.0,
         }
     }
 }

@@ -31,7 +31,7 @@ use crate::tensors::TensorReader;
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::garment::Fabric;
 use clothsr_geometry::mesh::ClothMesh;
-use clothsr_geometry::scene::Scene;
+use clothsr_geometry::scene::{root_motion, Scene};
 use clothsr_sim::driver::Simulation;
 use clothsr_sim::step::SolverMode;
 
@@ -78,13 +78,17 @@ impl Variation {
         // Garments are placed around the animated bodies as they are at the clip's start (a
         // GarmentCode pattern around the rest pose): started later in the clip, they go where
         // the bodies have walked to (the horizontal move of their centroid), or they are
-        // dressed around empty space and fall.
+        // dressed around empty space and fall. Those that are dressed are dressed at the
+        // clip's start and worn through the motion up to the variation's first frame
+        // (`Scene::preroll_s`): sewn mid-stride, a skirt's front panel met the forward leg.
         let mut g = Vector3::from(self.garment_offset_m);
         if self.clip_start_s != 0.0 {
-            g += root_motion(&scene.colliders, self.clip_start_s);
+            let t0 = scene.frame_start as f64 / scene.fps;
+            g += root_motion(&scene.colliders, t0, t0 + self.clip_start_s);
             for c in &mut scene.colliders {
                 c.times_s.iter_mut().for_each(|t| *t -= self.clip_start_s);
             }
+            scene.preroll_s = self.clip_start_s.max(0.0);
         }
         for garment in &mut scene.garments {
             for p in &mut garment.panels {
@@ -102,26 +106,6 @@ impl Variation {
                 .collect();
         }
     }
-}
-
-/// The horizontal (x, z) move of the animated colliders' point centroid from their clip's
-/// start to `t_s` into it, m (zero without animated colliders).
-fn root_motion(colliders: &[clothsr_geometry::scene::Collider], t_s: f64) -> Vector3<f64> {
-    let (mut start, mut then, mut n) = (Vector3::zeros(), Vector3::zeros(), 0usize);
-    let mut buf = Vec::new();
-    for c in colliders.iter().filter(|c| c.is_animated()) {
-        let t0 = c.times_s.first().copied().unwrap_or(0.0);
-        c.positions_at(t0, &mut buf);
-        start += buf.iter().sum::<Vector3<f64>>();
-        c.positions_at(t0 + t_s, &mut buf);
-        then += buf.iter().sum::<Vector3<f64>>();
-        n += buf.len();
-    }
-    if n == 0 {
-        return Vector3::zeros();
-    }
-    let d = (then - start) / n as f64;
-    Vector3::new(d.x, 0.0, d.z)
 }
 
 /// What a data set holds (`manifest.json`).
@@ -623,6 +607,8 @@ mod tests {
             let d = a - b;
             assert!((d - Vector3::new(0.5, 0.0, 0.25)).norm() < 1e-6, "{d:?}");
         }
+        // Dressed at the clip's start, and worn from there.
+        assert_eq!(scene.preroll_s, 0.5);
         // From the start of the clip nothing moves.
         let mut still = Scene {
             garments: vec![g.clone()],
@@ -631,5 +617,6 @@ mod tests {
         };
         Variation::default().apply(&mut still);
         assert_eq!(still.garments[0].panels[0].placement, g.panels[0].placement);
+        assert_eq!(still.preroll_s, 0.0);
     }
 }
