@@ -294,15 +294,17 @@ pub fn dress_fine_from_coarse(
     transfer: &Transfer,
 ) -> Result<()> {
     let (max_s, settle_s, gap_m) = clothsr_io::dressed::DRESSING;
+    let clock = std::time::Instant::now();
     let c = coarse.dress(max_s, settle_s, gap_m)?;
+    let coarse_s = clock.elapsed().as_secs_f64();
     let x = transfer.upsample_phong(
         &coarse.state.x,
         &coarse.sim.model.mesh.triangles,
         DRESS_PHONG_ALPHA,
     );
     tracing::info!(
-        "dressed the coarse mesh ({} sewing, {} worn to the start, {} settling steps, seams \
-         {:.1} mm); dressing the fine mesh ({} vertices) from it",
+        "dressed the coarse mesh in {coarse_s:.1} s ({} sewing, {} worn to the start, {} \
+         settling steps, seams {:.1} mm); dressing the fine mesh ({} vertices) from it",
         c.sew_steps,
         c.preroll_steps,
         c.settle_steps,
@@ -310,9 +312,11 @@ pub fn dress_fine_from_coarse(
         x.len()
     );
     closed("coarse", c.seam_gap_m)?;
+    let clock = std::time::Instant::now();
     let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
     tracing::info!(
-        "dressed the fine mesh ({} sewing, {} settling steps, seams {:.1} mm)",
+        "dressed the fine mesh in {:.1} s ({} sewing, {} settling steps, seams {:.1} mm)",
+        clock.elapsed().as_secs_f64(),
         f.sew_steps,
         f.settle_steps,
         f.seam_gap_m * 1e3

@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 use super::arrange::{wrap_panels_around_body, WrapOptions};
 use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
-use super::step::{ColliderFrame, SimParams, SimState, Simulator, StepStats};
+use super::step::{ColliderFrame, SimParams, SimState, Simulator, SolverMode, StepStats};
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::garment::Fabric;
 use clothsr_geometry::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
@@ -278,8 +278,26 @@ impl Simulation {
     /// With a pre-roll ([`Self::preroll_s`]) the garments are dressed that long before the
     /// start instead, on the bodies as they were then and moved back with their walk
     /// ([`root_motion`]); they are then worn through the bodies' motion up to the start
-    /// (gravity, friction, the run's settings) and settle `settle_s` there.
+    /// (gravity, friction, the run's contact settings) and settle `settle_s` there. Dressing
+    /// runs in fast mode whatever the solver's mode (it is set-up, not the trajectory).
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
+        self.in_fast_mode(|sim| sim.dress_fast(max_s, settle_s, gap_m))
+    }
+
+    /// Runs `f` with the simulator's solver in fast mode, then puts its settings back.
+    /// Dressing is set-up, not part of the trajectory: it runs in fast mode in every
+    /// solver mode (four strict sub-steps a step cost a fine mesh minutes of settling), so a
+    /// garment is dressed the same way for every mode.
+    fn in_fast_mode<T>(&mut self, f: impl FnOnce(&mut Self) -> Result<T>) -> Result<T> {
+        let params = self.sim.params.clone();
+        SolverMode::Fast.apply(&mut self.sim.params);
+        let out = f(self);
+        self.sim.params = params;
+        out
+    }
+
+    /// [`Self::dress`], in whatever mode the solver is in.
+    fn dress_fast(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
         if self.preroll_s <= 0.0 {
             return self.dress_here(max_s, settle_s, gap_m);
         }
@@ -299,7 +317,8 @@ impl Simulation {
         );
         self.state.t_s = t_start;
         let held = self.collider_points();
-        let settled = self.sew_and_settle(&held, DressStats::default(), 0.0, settle_s, gap_m)?;
+        let settled =
+            self.sew_and_settle(&held, DressStats::default(), 0.0, settle_s, gap_m, true)?;
         out.preroll_steps = steps;
         out.settle_steps += settled.settle_steps;
         out.seam_gap_m = settled.seam_gap_m;
@@ -334,7 +353,7 @@ impl Simulation {
             // rest lengths kept from the flat placement would push the rolled panels apart.
             self.seams_at_rest_where_they_are()?;
         }
-        self.sew_and_settle(&held, out, max_s, settle_s, gap_m)
+        self.sew_and_settle(&held, out, max_s, settle_s, gap_m, true)
     }
 
     /// Dresses the garments from positions `x` where the garment is already nearly sewn and
@@ -343,7 +362,10 @@ impl Simulation {
     /// simulated time, gravity off), then `settle_s` of draping, as in [`Self::dress`]. A fine
     /// mesh dressed from its flat pattern spends most of its time on seams tens of
     /// centimetres open, where the move limits hold every vertex back and steps are halved;
-    /// from a coarse dressing it only settles the detail the coarse mesh could not hold.
+    /// from a coarse dressing it only settles the detail the coarse mesh could not hold, at
+    /// the run's move limits (its seams are closed: nothing flings the cloth, and at half its
+    /// thin contact thickness an iteration the first steps were halved for minutes while the
+    /// fine membrane relaxed from the coarse shape).
     pub fn dress_from(
         &mut self,
         x: Vec<Vector3<f64>>,
@@ -362,7 +384,9 @@ impl Simulation {
         self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
         self.seams_at_rest_where_they_are()?;
         let held = self.collider_points();
-        self.sew_and_settle(&held, DressStats::default(), max_s, settle_s, gap_m)
+        self.in_fast_mode(|sim| {
+            sim.sew_and_settle(&held, DressStats::default(), max_s, settle_s, gap_m, false)
+        })
     }
 
     /// The colliders' points at the state's time (dressing holds them there).
@@ -387,8 +411,9 @@ impl Simulation {
         self.sim.set_seam_rest(&gaps)
     }
 
-    /// Dressing's sewing (gravity and friction off, slow moves) and settling on the colliders
-    /// held at `held`; the state's time goes back to where it was, with zero velocity.
+    /// Dressing's sewing (gravity and friction off, slow moves when `slow`) and settling on the
+    /// colliders held at `held`; the state's time goes back to where it was, with zero
+    /// velocity.
     fn sew_and_settle(
         &mut self,
         held: &[Vec<Vector3<f64>>],
@@ -396,6 +421,7 @@ impl Simulation {
         max_s: f64,
         settle_s: f64,
         gap_m: f64,
+        slow: bool,
     ) -> Result<DressStats> {
         let t_start = self.state.t_s;
         let gravity = self.sim.params.gravity_m_s2;
@@ -413,6 +439,13 @@ impl Simulation {
         // to the cloth's speed). Uncapped, seam springs pulled tight fling the light panels
         // together and they crumple.
         let move_cap = self.sim.params.move_cap_m;
+        let capped = |dhat: f64| {
+            if slow {
+                move_cap.min(0.5 * dhat)
+            } else {
+                move_cap
+            }
+        };
         // Dressing works at the mesh's own contact thickness even when the run's is thinner
         // (a coarse mesh given the fine one's): each iteration's moves are capped at half of
         // it, and at a fine mesh's thickness a coarse garment took minutes to close its seams.
@@ -429,7 +462,7 @@ impl Simulation {
         let thicker = own_dhat > run_contact.0;
         self.sim.params.collision.dhat_m = own_dhat;
         self.sim.params.detection_margin_m = run_contact.1.max(own_dhat);
-        self.sim.params.move_cap_m = move_cap.min(0.5 * own_dhat);
+        self.sim.params.move_cap_m = capped(own_dhat);
         // Sewing ends once every seam is within `gap_m`, or within the contact thickness
         // (where a body between the two sides, an armpit, holds them that far apart), or
         // when the widest gap, within a few thicknesses, has stopped closing; then the seams
@@ -486,7 +519,7 @@ impl Simulation {
                 if k == settle_steps {
                     self.sim.params.collision.dhat_m = run_contact.0;
                     self.sim.params.detection_margin_m = run_contact.1;
-                    self.sim.params.move_cap_m = move_cap.min(0.5 * run_contact.0);
+                    self.sim.params.move_cap_m = capped(run_contact.0);
                 }
                 let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
                 self.state = next;
