@@ -84,12 +84,9 @@ impl Recorder {
         if !dir.is_dir() {
             return Err(Error::bad_input(path, "the folder does not exist"));
         }
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        remove_stale_partials(dir, &name);
-        let tmp = dir.join(format!(".{name}.{}.partial", std::process::id()));
+        // Written under the house's temporary name, which the next recording of `path`
+        // removes when its process is gone.
+        let tmp = crate::io::temp_path(path);
         let rec = rerun::RecordingStreamBuilder::new(application)
             .save(&tmp)
             .map_err(|e| Error::bad_input(path, format!("cannot start the recording: {e}")))?;
@@ -217,31 +214,6 @@ impl Drop for Recorder {
     }
 }
 
-/// Removes the partial recordings of `name` that killed processes left in `dir`.
-fn remove_stale_partials(dir: &Path, name: &str) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    let prefix = format!(".{name}.");
-    for e in entries.flatten() {
-        let file = e.file_name().to_string_lossy().into_owned();
-        let Some(pid) = file
-            .strip_prefix(&prefix)
-            .and_then(|r| r.strip_suffix(".partial"))
-            .and_then(|p| p.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        // A process that is gone has no /proc entry (Linux); elsewhere nothing is removed.
-        if pid != std::process::id()
-            && Path::new("/proc/self").exists()
-            && !Path::new(&format!("/proc/{pid}")).exists()
-        {
-            let _ = std::fs::remove_file(e.path());
-        }
-    }
-}
-
 /// A colour scale for errors: `t` = 0 blue, 0.5 green-yellow, 1 (and beyond) red, as RGBA.
 pub fn heat_colour(t: f64) -> u32 {
     let t = if t.is_finite() {
@@ -353,7 +325,7 @@ mod tests {
         assert_eq!(left.len(), 1, "temporary files left: {left:?}");
 
         // A partial recording of a process that is gone is removed by the next recording.
-        let stale = dir.path().join(".t.rrd.2147483600.partial");
+        let stale = dir.path().join(".t.clothsr-tmp-2147483600.rrd");
         std::fs::write(&stale, b"partial").unwrap();
         let r = Recorder::save("clothsr_test", &path).unwrap();
         assert!(!stale.exists());
