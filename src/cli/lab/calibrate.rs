@@ -52,7 +52,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     jitter: usize,
     /// How far `--jitter` moves each start, mm.
-    #[arg(value_parser = crate::cli::values::non_negative(crate::cli::values::MAX_MM), long, default_value_t = 0.1)]
+    #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = 0.1)]
     jitter_mm: f64,
     /// Write every candidate's errors as CSV here.
     #[arg(value_parser = crate::cli::values::output_file, long)]
@@ -121,27 +121,6 @@ fn check_lists(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Checks that `path` can be written as a file: not a folder, and no file where its folder
-/// would be.
-fn check_writable(option: &str, path: &Path) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        path.file_name().is_some() && !path.is_dir(),
-        "{option} {}: not a file name",
-        path.display()
-    );
-    let mut dir = path.parent();
-    while let Some(d) = dir.filter(|d| !d.as_os_str().is_empty()) {
-        anyhow::ensure!(
-            !d.exists() || d.is_dir(),
-            "{option} {}: {} is a file, not a folder",
-            path.display(),
-            d.display()
-        );
-        dir = d.parent();
-    }
-    Ok(())
-}
-
 /// Writes `text` to `path` atomically, creating its folder.
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -162,15 +141,6 @@ fn ratio(x: f64, own: f64) -> String {
 
 /// Runs `calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        args.jitter_mm.is_finite() && args.jitter_mm > 0.0,
-        "--jitter-mm {}: the distance must be positive",
-        args.jitter_mm
-    );
-    check_writable("-o", &args.output)?;
-    if let Some(csv) = &args.csv {
-        check_writable("--csv", csv)?;
-    }
     check_lists(&args)?;
     let grid = Grid {
         compression: args.compression.clone(),
