@@ -281,7 +281,7 @@ impl Simulation {
     /// (gravity, friction, the run's contact settings) and settle `settle_s` there. Dressing
     /// runs in fast mode whatever the solver's mode (it is set-up, not the trajectory).
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
-        self.in_fast_mode(|sim| sim.dress_fast(max_s, settle_s, gap_m))
+        self.in_fast_mode(|sim| sim.dress_with_preroll(max_s, settle_s, gap_m))
     }
 
     /// Runs `f` with the simulator's solver in fast mode, then puts its settings back.
@@ -296,8 +296,8 @@ impl Simulation {
         out
     }
 
-    /// [`Self::dress`], in whatever mode the solver is in.
-    fn dress_fast(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
+    /// [`Self::dress`]'s work (pre-roll included) with the solver's settings as they are.
+    fn dress_with_preroll(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
         if self.preroll_s <= 0.0 {
             return self.dress_here(max_s, settle_s, gap_m);
         }
