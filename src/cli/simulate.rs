@@ -159,13 +159,14 @@ fn dress(sim: &mut Simulation, dress_max_s: f64, settle_s: f64) -> anyhow::Resul
         .dress(dress_max_s, settle_s, 1e-3)
         .context("dressing the garments (sewing before the animation)")?;
     tracing::info!(
-        "dressed: {} panels rolled around the body; {} sewing + {} settling steps in {:.1} s; widest seam gap {:.1} → {:.2} mm, penetration {:.2} mm",
+        "dressed: {} panels rolled around the body; {} sewing + {} settling steps in {:.1} s; widest seam gap {:.1} → {:.2} mm, seams pulled up to {}× as hard, penetration {:.2} mm",
         d.wrapped_panels,
         d.sew_steps,
         d.settle_steps,
         t.elapsed().as_secs_f64(),
         d.initial_seam_gap_m * 1e3,
         d.seam_gap_m * 1e3,
+        1u32 << d.harder_pulls,
         d.max_penetration_m * 1e3
     );
     Ok(())

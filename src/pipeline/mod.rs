@@ -227,13 +227,14 @@ impl<'a> Pipeline<'a> {
             if let Some(d) = crate::io::dressed::dress_or_restore(&mut coarse, dress_cache)? {
                 tracing::info!(
                     "dressed: {} sewing + {} settling steps, {} of {} seam pairs welded (from up \
-                     to {:.1} mm apart), widest seam gap {:.1} mm",
+                     to {:.1} mm apart), widest seam gap {:.1} mm, seams pulled up to {}× as hard",
                     d.sew_steps,
                     d.settle_steps,
                     d.welded_pairs,
                     coarse.sim.model.mesh.seam_pairs.len(),
                     d.welded_gap_m * 1e3,
-                    d.seam_gap_m * 1e3
+                    d.seam_gap_m * 1e3,
+                    1u32 << d.harder_pulls
                 );
             }
             // The first frame starts the same whether dressed now or restored.

@@ -82,6 +82,10 @@ const SEWING_STALL_S: f64 = 0.2;
 /// within it (a garment's widest gap may pause for a while as panels slide around a body).
 const WELD_MAX_DHAT: f64 = 3.0;
 
+/// How often sewing pulls harder on seams that stopped closing short of welding distance
+/// (each time doubling the seam springs' stiffness and how far they may stretch).
+const SEWING_PULL_DOUBLINGS: u32 = 4;
+
 /// What dressing did ([`Simulation::dress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DressStats {
@@ -105,6 +109,9 @@ pub struct DressStats {
     /// Steps run wearing the garment through the bodies' motion from where it was dressed to
     /// the start ([`Scene::preroll_s`]).
     pub preroll_steps: usize,
+    /// Times sewing doubled the seams' pull after their widest gap stopped closing short of
+    /// welding distance.
+    pub harder_pulls: u32,
 }
 
 /// A mesh garment's mesh at `edge_m`: remeshed chart by chart like a pattern
@@ -471,6 +478,14 @@ impl Simulation {
         let weld_max = WELD_MAX_DHAT * own_dhat;
         let stall_steps = ((SEWING_STALL_S / dt).ceil() as usize).max(1);
         let mut progress = (f64::INFINITY, 0usize);
+        // A seam that stops closing further out is held by the cloth around it (a hood's
+        // corner pulled round the nape against its own stiffness): the springs then pull
+        // harder, as a tailor would, a few times over.
+        let pull = (
+            self.sim.params.sew_stiffness_n_m,
+            self.sim.params.sew_max_stretch_m,
+        );
+        let mut doublings = 0u32;
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
@@ -479,12 +494,26 @@ impl Simulation {
                 }
                 if out.seam_gap_m < 0.99 * progress.0 {
                     progress = (out.seam_gap_m, out.sew_steps);
-                } else if out.seam_gap_m <= weld_max && out.sew_steps - progress.1 >= stall_steps {
-                    tracing::info!(
-                        "dressing: the widest seam gap stopped closing at {:.1} mm",
-                        out.seam_gap_m * 1e3
-                    );
-                    break;
+                } else if out.sew_steps - progress.1 >= stall_steps {
+                    if out.seam_gap_m <= weld_max {
+                        tracing::info!(
+                            "dressing: the widest seam gap stopped closing at {:.1} mm",
+                            out.seam_gap_m * 1e3
+                        );
+                        break;
+                    }
+                    if doublings < SEWING_PULL_DOUBLINGS {
+                        doublings += 1;
+                        self.sim.params.sew_stiffness_n_m *= 2.0;
+                        self.sim.params.sew_max_stretch_m *= 2.0;
+                        progress = (out.seam_gap_m, out.sew_steps);
+                        tracing::info!(
+                            "dressing: the widest seam gap stopped closing at {:.1} mm; \
+                             pulling the seams {}× as hard",
+                            out.seam_gap_m * 1e3,
+                            1 << doublings
+                        );
+                    }
                 }
                 let (next, st) = self.sim.step(&self.state, &frames, &frames)?;
                 self.state = next;
@@ -505,6 +534,11 @@ impl Simulation {
         })();
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
+        (
+            self.sim.params.sew_stiffness_n_m,
+            self.sim.params.sew_max_stretch_m,
+        ) = pull;
+        out.harder_pulls = doublings;
         if sewing.is_ok() {
             let welded = self.sim.weld_seams(&mut self.state, weld_max);
             (out.welded_pairs, out.welded_gap_m) = (welded.pairs, welded.widest_gap_m);
