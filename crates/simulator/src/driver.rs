@@ -486,6 +486,7 @@ impl Simulation {
             self.sim.params.sew_max_stretch_m,
         );
         let mut doublings = 0u32;
+        let mut before_pulling = None;
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
@@ -503,6 +504,13 @@ impl Simulation {
                         break;
                     }
                     if doublings < SEWING_PULL_DOUBLINGS {
+                        if doublings == 0 {
+                            before_pulling = Some((
+                                self.state.clone(),
+                                self.sim.seam_rest().to_vec(),
+                                self.sim.obstacle_margin_m(),
+                            ));
+                        }
                         doublings += 1;
                         self.sim.params.sew_stiffness_n_m *= 2.0;
                         self.sim.params.sew_max_stretch_m *= 2.0;
@@ -515,7 +523,26 @@ impl Simulation {
                         );
                     }
                 }
-                let (next, st) = self.sim.step(&self.state, &frames, &frames)?;
+                let (next, st) = match self.sim.step(&self.state, &frames, &frames) {
+                    Ok(step) => step,
+                    // Pulled harder, cloth pressed between its own layers can leave the
+                    // solver no way down: sewing stops where it was before pulling.
+                    Err(e) => match before_pulling.take() {
+                        Some((state, rest, margin)) => {
+                            tracing::warn!(
+                                "dressing: pulling the seams harder failed ({e}); \
+                                 going on from where they stalled"
+                            );
+                            self.state = state;
+                            self.sim.set_seam_rest(&rest)?;
+                            self.sim.set_obstacle_margin_m(margin);
+                            doublings = 0;
+                            out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
+                            break;
+                        }
+                        None => return Err(e),
+                    },
+                };
                 self.state = next;
                 out.sew_steps += 1;
                 if out.sew_steps.is_multiple_of(30) {
