@@ -141,6 +141,26 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
     );
     let report = String::from_utf8(read(a.join("report.md"))).expect("utf-8");
     assert!(report.contains("| held_out_0 |"), "{report}");
+    // Pictures of the held-out variation's first, middle and last frames, the fine simulation
+    // beside the fit's models, where Blender is installed (`bash .ci/setup` makes .venv-bpy).
+    if clothsr::io::render::renderer().is_ok() {
+        let pictures: Vec<&str> = report
+            .lines()
+            .filter_map(|l| l.strip_prefix("![held_out_0 ")?.split("](").nth(1))
+            .map(|l| l.trim_end_matches(')'))
+            .collect();
+        assert_eq!(pictures.len(), 3, "{report}");
+        for p in pictures {
+            let png = read(a.join(p));
+            assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{p}");
+            let size =
+                |at: usize| u32::from_be_bytes([png[at], png[at + 1], png[at + 2], png[at + 3]]);
+            // Two panels side by side, each taller than wide.
+            assert!(size(16) > size(20), "{p}: {} × {}", size(16), size(20));
+        }
+    } else {
+        assert!(report.contains("held_out_0: no pictures"), "{report}");
+    }
     assert!(!a.join("isr/checkpoint").exists());
     // A finished fit leaves no lock files.
     let locks = std::fs::read_dir(a.join("tasks"))

@@ -630,6 +630,8 @@ struct HeldOut {
     twin_per_frame: Vec<f64>,
     /// The predictability floor, where measured ([`HeldOutRun::floor_mm`]).
     floor_mm: Option<f64>,
+    /// Pictures of its frames ([`HeldOutRun::pictures`]).
+    pictures: std::result::Result<Vec<PathBuf>, String>,
 }
 
 impl HeldOut {
@@ -662,6 +664,8 @@ struct HeldOutRun {
     /// and its twin's over the same frames (the shared first frame is zero, as `clothsr eval
     /// --floor` counts it); `None` without a twin.
     floor_mm: Option<f64>,
+    /// Pictures of the fine simulation beside the fit's models, or why there are none.
+    pictures: std::result::Result<Vec<PathBuf>, String>,
 }
 
 /// The whole pipeline on held-out variation `v` with the fit's ISR and coarse model `cal`,
@@ -737,11 +741,87 @@ fn run_held_out(
         }
         None => (Vec::new(), None),
     };
+    let pictures = render_held_out(dir, &v.id, &scene, &gt, &pred);
     Ok(HeldOutRun {
         against_gt: out,
         against_twin: to_twin,
         floor_mm,
+        pictures,
     })
+}
+
+/// Renders the held-out variation `id`'s first, middle and last frames: its fine simulation
+/// beside the fit's models, with the scene's bodies (`{id}_f{frame}.png` in the fit's folder,
+/// [`crate::io::render`]); the images, or why there are none (no Blender here).
+fn render_held_out(
+    dir: &Path,
+    id: &str,
+    scene: &crate::scene::Scene,
+    gt: &crate::eval::Animation,
+    pred: &crate::eval::Animation,
+) -> std::result::Result<Vec<PathBuf>, String> {
+    use crate::io::usd::{MeshOut, StageOut};
+    if let Err(why) = crate::io::render::renderer() {
+        tracing::warn!("{id}: no pictures of the held-out frames: {why}");
+        return Err(why);
+    }
+    // What went wrong is logged; the report, which is committed, says only that it did.
+    let failed = |what: &str, e: Error| {
+        tracing::warn!("{id}: no pictures of the held-out frames: {what}: {e}");
+        format!("{what} failed; the fit's log says why")
+    };
+    let n = gt.frames.len().min(pred.frames.len());
+    if n == 0 {
+        return Err("no frames".into());
+    }
+    let mut picks = vec![0, n / 2, n - 1];
+    picks.dedup();
+    // Frame k of a data set ends at the scene's time code start + k + 1, where the bodies'
+    // samples are.
+    let code = |k: usize| scene.frame_start as f64 + (k + 1) as f64;
+    let tmp = tempfile::tempdir().map_err(|e| failed("a temporary folder", Error::io(dir, e)))?;
+    let write = |anim: &crate::eval::Animation, name: &str| -> Result<PathBuf> {
+        let mut meshes = vec![MeshOut {
+            name: "garment".into(),
+            group: "Garments".into(),
+            triangles: anim.triangles.clone(),
+            frames: picks
+                .iter()
+                .map(|&k| anim.frames[k].iter().map(|p| p.cast::<f32>()).collect())
+                .collect(),
+            time_codes: Some(picks.iter().map(|&k| code(k)).collect()),
+            ..Default::default()
+        }];
+        meshes.extend(
+            scene
+                .colliders
+                .iter()
+                .map(|c| MeshOut::collider(c, scene.fps)),
+        );
+        let path = tmp.path().join(format!("{name}.usdc"));
+        crate::io::usd::write_usd(
+            &path,
+            &StageOut {
+                fps: scene.fps,
+                start: code(0),
+                end: code(n - 1),
+                meshes,
+                ..Default::default()
+            },
+        )?;
+        Ok(path)
+    };
+    let files = write(gt, "fine").and_then(|a| Ok((a, write(pred, "fit")?)));
+    let (fine, fit) = files.map_err(|e| failed("writing the frames", e))?;
+    let frames: Vec<u32> = picks.iter().map(|&k| code(k).round() as u32).collect();
+    crate::io::render::side_by_side(
+        &[("fine simulation", &fine), ("fit's models", &fit)],
+        &frames,
+        &crate::io::render::RenderSettings::default(),
+        dir,
+        id,
+    )
+    .map_err(|e| failed("rendering", e))
 }
 
 fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()> {
@@ -783,6 +863,7 @@ fn evaluate_held_out(plan: &Plan, dir: &Path, report: &mut Report) -> Result<()>
             run_per_frame: run.against_gt,
             twin_per_frame: run.against_twin,
             floor_mm: run.floor_mm,
+            pictures: run.pictures,
         });
     }
     write_atomic(&dir.join("held_out.csv"), csv(&rows).as_bytes())?;
@@ -938,6 +1019,23 @@ fn report_text(plan: &Plan, chosen: &CoarseCalibration, rows: &[HeldOut], plotte
     if plotted {
         s += "\n![Error over time](held_out.png)\n";
     }
+    s += "\n## Pictures, held out\n\nThe fine simulation (left) and the fit's models (right) \
+          at the first, middle and last frames, through one camera.\n";
+    for r in rows {
+        match &r.pictures {
+            Ok(files) => {
+                s += &format!("\n{}:\n\n", r.id);
+                for f in files {
+                    let name = f
+                        .file_name()
+                        .map(|n| n.to_string_lossy())
+                        .unwrap_or_default();
+                    s += &format!("![{} {name}]({name})\n", r.id);
+                }
+            }
+            Err(why) => s += &format!("\n{}: no pictures ({why}).\n", r.id),
+        }
+    }
     s
 }
 
@@ -1078,6 +1176,7 @@ mod tests {
             run_per_frame: vec![(2.0, 4.0), (4.0, 8.0)],
             twin_per_frame: vec![1.0, 3.0],
             floor_mm: Some(4.0),
+            pictures: Err("no renderer".into()),
         };
         assert_eq!(row.run_means_mm(), (3.0, 6.0));
         // Against the twin 2 mm; (3 + 2) / 4: no prediction can average below 1 (= 4 / 4).

@@ -10,6 +10,7 @@ pub mod dressed;
 pub mod models;
 pub mod obj;
 pub mod python;
+pub mod render;
 pub mod scene_files;
 pub mod tensors;
 pub mod usd;
