@@ -155,8 +155,13 @@ fn a_fit_plans_deterministically_resumes_after_stops_and_reports() {
             assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{p}");
             let size =
                 |at: usize| u32::from_be_bytes([png[at], png[at + 1], png[at + 2], png[at + 3]]);
-            // Two panels side by side, each taller than wide.
-            assert!(size(16) > size(20), "{p}: {} × {}", size(16), size(20));
+            // Two panels of 320 × 400 pixels side by side, under their labels.
+            assert!(
+                size(16) >= 2 * 320 && size(20) >= 400 && size(16) < 3 * 320,
+                "{p}: {} × {}",
+                size(16),
+                size(20)
+            );
         }
     } else {
         assert!(report.contains("held_out_0: no pictures"), "{report}");

@@ -813,7 +813,19 @@ fn render_held_out(
     };
     let files = write(gt, "fine").and_then(|a| Ok((a, write(pred, "fit")?)));
     let (fine, fit) = files.map_err(|e| failed("writing the frames", e))?;
-    let frames: Vec<u32> = picks.iter().map(|&k| code(k).round() as u32).collect();
+    let frames: Vec<i64> = picks
+        .iter()
+        .map(|&k| scene.frame_start + k as i64 + 1)
+        .collect();
+    // Pictures of an earlier evaluation (other frames) go.
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with(&format!("{id}_f")) && name.ends_with(".png") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
     crate::io::render::side_by_side(
         &[("fine simulation", &fine), ("fit's models", &fit)],
         &frames,

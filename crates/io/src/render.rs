@@ -9,11 +9,36 @@ use clothsr_geometry::error::{Error, Result};
 
 use crate::python::repo_root;
 
+/// Where the camera looks from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum View {
+    /// The avatar's front.
+    Front,
+    /// 35° round from the front.
+    ThreeQuarter,
+    /// The side.
+    Side,
+    /// The back.
+    Back,
+}
+
+impl View {
+    /// The renderer's name for it (also in its images' names).
+    pub fn name(self) -> &'static str {
+        match self {
+            View::Front => "front",
+            View::ThreeQuarter => "three-quarter",
+            View::Side => "side",
+            View::Back => "back",
+        }
+    }
+}
+
 /// How [`side_by_side`] renders.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
-    /// Camera: `front`, `three-quarter`, `side` or `back`.
-    pub view: String,
+    /// Camera.
+    pub view: View,
     /// Image size of each input's panel, pixels.
     pub size: (u32, u32),
     /// Cycles samples per pixel (denoised).
@@ -23,7 +48,7 @@ pub struct RenderSettings {
 impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
-            view: "three-quarter".into(),
+            view: View::ThreeQuarter,
             size: (320, 400),
             samples: 16,
         }
@@ -58,10 +83,11 @@ pub fn renderer() -> std::result::Result<(PathBuf, PathBuf), String> {
 /// Renders the USD files `inputs` (`(label, file)`, each with its garments and colliders) side
 /// by side at each of `frames` (time codes), through one camera, into `out_dir` as
 /// `{name}_f{frame}.png`; returns the images' paths. The single images stay in a temporary
-/// folder; each picture is published whole (written beside, then renamed).
+/// folder; the pictures are published only when all were made, each whole (written beside,
+/// then renamed).
 pub fn side_by_side(
     inputs: &[(&str, &Path)],
-    frames: &[u32],
+    frames: &[i64],
     settings: &RenderSettings,
     out_dir: &Path,
     name: &str,
@@ -72,6 +98,11 @@ pub fn side_by_side(
             "side by side needs two inputs or more and a frame ({} inputs, {} frames)",
             inputs.len(),
             frames.len()
+        )));
+    }
+    if let Some((label, _)) = inputs.iter().find(|(l, _)| l.contains(',')) {
+        return Err(Error::Invalid(format!(
+            "label '{label}': the renderer takes labels without commas"
         )));
     }
     let tmp = tempfile::tempdir().map_err(|e| Error::io(out_dir, e))?;
@@ -87,13 +118,13 @@ pub fn side_by_side(
         named.push(link);
     }
     let labels: Vec<&str> = inputs.iter().map(|(l, _)| *l).collect();
-    let frame_list: Vec<String> = frames.iter().map(u32::to_string).collect();
+    let frame_list: Vec<String> = frames.iter().map(i64::to_string).collect();
     let out = Command::new(&python)
         .arg(&script)
         .args(&named)
         .args(["--side-by-side", "--labels", &labels.join(",")])
         .args(["--frames", &frame_list.join(",")])
-        .args(["--view", &settings.view])
+        .args(["--view", settings.view.name()])
         .args([
             "--size",
             &format!("{}x{}", settings.size.0, settings.size.1),
@@ -116,13 +147,18 @@ pub fn side_by_side(
         .map(|k| format!("in{k}"))
         .collect::<Vec<_>>()
         .join("_vs_");
-    let mut written = Vec::new();
+    let mut made = Vec::new();
     for f in frames {
-        let made = tmp
+        let image = tmp
             .path()
-            .join(format!("{joined}_f{f}_{}.png", settings.view));
-        let bytes = std::fs::read(&made).map_err(|e| Error::io(&made, e))?;
-        let dest = out_dir.join(format!("{name}_f{f}.png"));
+            .join(format!("{joined}_f{f}_{}.png", settings.view.name()));
+        made.push((
+            out_dir.join(format!("{name}_f{f}.png")),
+            std::fs::read(&image).map_err(|e| Error::io(&image, e))?,
+        ));
+    }
+    let mut written = Vec::new();
+    for (dest, bytes) in made {
         crate::write_atomic(&dest, &bytes)?;
         written.push(dest);
     }

@@ -504,13 +504,11 @@ impl Simulation {
                         break;
                     }
                     if doublings < SEWING_PULL_DOUBLINGS {
-                        if doublings == 0 {
-                            before_pulling = Some((
-                                self.state.clone(),
-                                self.sim.seam_rest().to_vec(),
-                                self.sim.obstacle_margin_m(),
-                            ));
-                        }
+                        before_pulling = Some((
+                            self.state.clone(),
+                            self.sim.seam_rest().to_vec(),
+                            self.sim.obstacle_margin_m(),
+                        ));
                         doublings += 1;
                         self.sim.params.sew_stiffness_n_m *= 2.0;
                         self.sim.params.sew_max_stretch_m *= 2.0;
@@ -526,7 +524,7 @@ impl Simulation {
                 let (next, st) = match self.sim.step(&self.state, &frames, &frames) {
                     Ok(step) => step,
                     // Pulled harder, cloth pressed between its own layers can leave the
-                    // solver no way down: sewing stops where it was before pulling.
+                    // solver no way down: sewing stops where it was before the last doubling.
                     Err(e) => match before_pulling.take() {
                         Some((state, rest, margin)) => {
                             tracing::warn!(
@@ -536,7 +534,7 @@ impl Simulation {
                             self.state = state;
                             self.sim.set_seam_rest(&rest)?;
                             self.sim.set_obstacle_margin_m(margin);
-                            doublings = 0;
+                            doublings -= 1;
                             out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
                             break;
                         }
