@@ -778,7 +778,8 @@ fn render_held_out(
     picks.dedup();
     // Frame k of a data set ends at the scene's time code start + k + 1, where the bodies'
     // samples are.
-    let code = |k: usize| scene.frame_start as f64 + (k + 1) as f64;
+    let frame = |k: usize| scene.frame_start + k as i64 + 1;
+    let code = |k: usize| frame(k) as f64;
     let tmp = tempfile::tempdir().map_err(|e| failed("a temporary folder", Error::io(dir, e)))?;
     let write = |anim: &crate::eval::Animation, name: &str| -> Result<PathBuf> {
         let mut meshes = vec![MeshOut {
@@ -813,15 +814,13 @@ fn render_held_out(
     };
     let files = write(gt, "fine").and_then(|a| Ok((a, write(pred, "fit")?)));
     let (fine, fit) = files.map_err(|e| failed("writing the frames", e))?;
-    let frames: Vec<i64> = picks
-        .iter()
-        .map(|&k| scene.frame_start + k as i64 + 1)
-        .collect();
+    let frames: Vec<i64> = picks.iter().map(|&k| frame(k)).collect();
     // Pictures of an earlier evaluation (other frames) go.
+    let earlier = format!("{id}_f");
     if let Ok(entries) = std::fs::read_dir(dir) {
         for e in entries.flatten() {
             let name = e.file_name().to_string_lossy().into_owned();
-            if name.starts_with(&format!("{id}_f")) && name.ends_with(".png") {
+            if name.starts_with(&earlier) && name.ends_with(".png") {
                 let _ = std::fs::remove_file(e.path());
             }
         }
