@@ -48,7 +48,7 @@ use super::inference::{
     geometry_channels, patch_input, CONFIG_FILE, CURVATURE_STENCIL_PX, WEIGHTS_FILE,
 };
 use super::model::{IsrConfig, IsrNet};
-use crate::common::write_json;
+use crate::common::{read_resume_point, write_json, write_resume_point, ResumePoint};
 use clothsr_geometry::error::{Error, Result};
 
 /// How to train (saved as `config.json`, with the network's sizes).
@@ -276,17 +276,19 @@ pub fn train(
     mut progress: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Summary> {
     check(cfg, seqs)?;
-    let (mut position, resuming) = open_run(cfg, out)?;
+    let resume = open_run(cfg, out)?;
+    let resuming = resume.is_some();
     let device = crate::common::default_device()?.autodiff();
     device.seed(cfg.seed);
     let mut net = cfg.model.init(&device);
     let mut optim = AdamConfig::new().init();
-    if resuming {
-        let dir = out.join(CHECKPOINT_DIR);
-        net = crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))?;
+    let mut position = Position::default();
+    if let Some(point) = resume {
+        net = crate::common::load_weights(net, &point.weights)?;
         optim = optim
-            .load(dir.join("optim.bpk"))
-            .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+            .load(&point.optim)
+            .map_err(|e| Error::bad_input(&point.optim, e.to_string()))?;
+        position = point.position;
         tracing::info!("resuming at step {}", position.done);
     } else if let Some(from) = &cfg.fine_tune_from {
         net = start_from(net, &cfg.model, &out.join(from))?;
@@ -350,20 +352,19 @@ pub fn train(
         return Ok(summary);
     }
     save_model(out, cfg, &net)?;
-    std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+    crate::common::remove_checkpoint(&out.join(CHECKPOINT_DIR))?;
     Ok(summary)
 }
 
-/// Opens the run in `out`: the position to start from and whether it resumes one there
-/// (a new run writes its configuration). Refuses an output holding a run with another
-/// configuration, or a finished model.
-fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
-    std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+/// Opens the run in `out`: the resume point there, if any (a new run writes its
+/// configuration). Refuses an output holding a run with another configuration, or a
+/// finished model.
+fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<Option<ResumePoint<Position>>> {
+    let dir = out.join(CHECKPOINT_DIR);
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(out, e))?;
     let config_path = out.join(CONFIG_FILE);
-    let state_path = out.join(CHECKPOINT_DIR).join("state.json");
-    let resuming = state_path.exists();
-    let mut position = Position::default();
-    if resuming {
+    let resume = read_resume_point(&dir)?;
+    if resume.is_some() {
         let old = IsrTrainingConfig::load(&config_path)
             .map_err(|e| Error::bad_input(&config_path, e.to_string()))?;
         // A run saved before an optional input existed has `None`, which means off.
@@ -378,9 +379,6 @@ fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
                 "a training run with another configuration is here; choose another output",
             ));
         }
-        let text = std::fs::read_to_string(&state_path).map_err(|e| Error::io(&state_path, e))?;
-        position = serde_json::from_str(&text)
-            .map_err(|e| Error::bad_input(&state_path, e.to_string()))?;
     } else if out.join(WEIGHTS_FILE).exists() {
         return Err(Error::bad_input(
             out.join(WEIGHTS_FILE),
@@ -389,7 +387,7 @@ fn open_run(cfg: &IsrTrainingConfig, out: &Path) -> Result<(Position, bool)> {
     } else {
         write_json(&config_path, cfg)?;
     }
-    Ok((position, resuming))
+    Ok(resume)
 }
 
 /// `net` with the weights of the trained model in `dir`, whose network must be `model`.
@@ -531,17 +529,14 @@ fn checkpoint(
     optim: &burn::optim::ModuleOptimizer,
     position: Position,
 ) -> Result<()> {
-    let dir = out.join(CHECKPOINT_DIR);
-    let (w, o) = (dir.join("model.bpk.tmp"), dir.join("optim.bpk.tmp"));
-    net.clone()
-        .save_file(&w)
-        .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
-    optim
-        .save(&o)
-        .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))?;
-    std::fs::rename(&w, dir.join(WEIGHTS_FILE)).map_err(|e| Error::io(&w, e))?;
-    std::fs::rename(&o, dir.join("optim.bpk")).map_err(|e| Error::io(&o, e))?;
-    write_json(&dir.join("state.json"), &position)
+    write_resume_point(&out.join(CHECKPOINT_DIR), &position, |w, o| {
+        net.clone()
+            .save_file(w)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
+        optim
+            .save(o)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))
+    })
 }
 
 /// The rows (or columns) of a `p`-long window starting at `r0` (possibly negative) that lie

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::TrainingConfig;
 use super::Trainer;
-use crate::common::write_json;
+use crate::common::{write_json, write_resume_point};
 use crate::corrector::inference::{CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
 use crate::corrector::model::CorrectorNet;
 use crate::corrector::normalise::Normalisation;
@@ -57,17 +57,14 @@ pub(super) fn write_weights(net: &CorrectorNet, path: &Path) -> Result<()> {
 
 impl Trainer<'_> {
     pub(super) fn checkpoint(&self) -> Result<()> {
-        let dir = self.out.join(CHECKPOINT_DIR);
-        let (w, o) = (dir.join("model.bpk.tmp"), dir.join("optim.bpk.tmp"));
-        self.net
-            .clone()
-            .save_file(&w)
-            .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
-        self.optim
-            .save(&o)
-            .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))?;
-        std::fs::rename(&w, dir.join(WEIGHTS_FILE)).map_err(|e| Error::io(&w, e))?;
-        std::fs::rename(&o, dir.join("optim.bpk")).map_err(|e| Error::io(&o, e))?;
-        write_json(&dir.join("state.json"), &self.position)
+        write_resume_point(&self.out.join(CHECKPOINT_DIR), &self.position, |w, o| {
+            self.net
+                .clone()
+                .save_file(w)
+                .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
+            self.optim
+                .save(o)
+                .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))
+        })
     }
 }

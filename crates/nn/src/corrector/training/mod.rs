@@ -48,7 +48,7 @@ use super::data::{vectors, Sequence};
 use super::inference::{read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
 use super::model::CorrectorNet;
 use super::normalise::{Normalisation, NormalisationBuilder};
-use crate::common::{default_device, write_json};
+use crate::common::{default_device, read_resume_point, write_json, ResumePoint};
 use checkpoint::{Position, BEST_FILE, CHECKPOINT_DIR};
 use clothsr_geometry::error::{Error, Result};
 use clothsr_sim::driver::Simulation;
@@ -202,7 +202,9 @@ pub fn train(
     // A run refused before it trained (an `--init` model it cannot start from) leaves no
     // folder it made behind.
     let made_out = !out.exists();
-    let (position, resuming) = open_run(cfg, out)?;
+    let resume = open_run(cfg, out)?;
+    let resuming = resume.is_some();
+    let position = resume.as_ref().map(|r| r.position).unwrap_or_default();
     let norm_path = out.join(NORMALISATION_FILE);
     let device = default_device()?.autodiff();
     device.seed(cfg.seed);
@@ -232,8 +234,8 @@ pub fn train(
         Some((net, _)) => net,
         None => cfg.model.init(&device),
     };
-    let (net, optim) = if resuming {
-        resume_weights(out, net, &position)?
+    let (net, optim) = if let Some(point) = &resume {
+        resume_weights(net, point)?
     } else {
         (net, AdamConfig::new().init())
     };
@@ -267,15 +269,14 @@ pub fn train(
     t.run(sets, validation, &mut progress)
 }
 
-/// Opens the run in `out`: the position to start from and whether it resumes one there.
-/// Refuses an output holding a run with another configuration, or a finished model.
-fn open_run(cfg: &TrainingConfig, out: &Path) -> Result<(Position, bool)> {
-    std::fs::create_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(out, e))?;
+/// Opens the run in `out`: the resume point there, if any. Refuses an output holding a run
+/// with another configuration, or a finished model.
+fn open_run(cfg: &TrainingConfig, out: &Path) -> Result<Option<ResumePoint<Position>>> {
+    let dir = out.join(CHECKPOINT_DIR);
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(out, e))?;
     let config_path = out.join(CONFIG_FILE);
-    let state_path = out.join(CHECKPOINT_DIR).join("state.json");
-    let mut position = Position::default();
-    let resuming = state_path.exists();
-    if resuming {
+    let resume = read_resume_point(&dir)?;
+    if resume.is_some() {
         let old = TrainingConfig::load(&config_path)?;
         if &old != cfg {
             return Err(Error::bad_input(
@@ -283,14 +284,13 @@ fn open_run(cfg: &TrainingConfig, out: &Path) -> Result<(Position, bool)> {
                 "a training run with another configuration is here; choose another output",
             ));
         }
-        position = read_json(&state_path)?;
     } else if out.join(WEIGHTS_FILE).exists() {
         return Err(Error::bad_input(
             out.join(WEIGHTS_FILE),
             "a finished model is already here; choose another output",
         ));
     }
-    Ok((position, resuming))
+    Ok(resume)
 }
 
 /// The model training starts from (none when `resuming`), checked against `cfg`, and its
@@ -309,20 +309,18 @@ fn starting_model(
 
 /// The checkpointed network and optimiser state of a resumed run.
 fn resume_weights(
-    out: &Path,
     net: CorrectorNet,
-    position: &Position,
+    point: &ResumePoint<Position>,
 ) -> Result<(CorrectorNet, burn::optim::ModuleOptimizer)> {
-    let dir = out.join(CHECKPOINT_DIR);
-    let net = crate::common::load_weights(net, &dir.join(WEIGHTS_FILE))?;
+    let net = crate::common::load_weights(net, &point.weights)?;
     let optim = AdamConfig::new()
         .init()
-        .load(dir.join("optim.bpk"))
-        .map_err(|e| Error::bad_input(dir.join("optim.bpk"), e.to_string()))?;
+        .load(&point.optim)
+        .map_err(|e| Error::bad_input(&point.optim, e.to_string()))?;
     tracing::info!(
         "resuming: phase 1 at step {}, phase 2 at window {}",
-        position.phase1_done,
-        position.phase2_done
+        point.position.phase1_done,
+        point.position.phase2_done
     );
     Ok((net, optim))
 }
@@ -365,7 +363,7 @@ impl Trainer<'_> {
             None => self.net.clone(),
         };
         save_model(&out, cfg, &self.norm, &kept)?;
-        std::fs::remove_dir_all(out.join(CHECKPOINT_DIR)).map_err(|e| Error::io(&out, e))?;
+        crate::common::remove_checkpoint(&out.join(CHECKPOINT_DIR))?;
         Ok(summary)
     }
 }
