@@ -99,6 +99,66 @@ fn tiny_config() -> TrainingConfig {
         .with_checkpoint_every(25)
 }
 
+/// A training stopped in phase 1 and resumed from its checkpoint (training noise on, so that
+/// every random draw counts) ends with the network of one that never stopped: the two correct
+/// a coarse step alike, to float rounding of threaded sums.
+#[test]
+fn a_stopped_training_resumes_to_the_uninterrupted_network() {
+    let seq = load(None);
+    let out = tempfile::tempdir().expect("tmp");
+    let cfg = tiny_config().with_noise_ratio(0.5);
+    let mut sets = vec![TrainSet {
+        seq: seq.clone(),
+        sim: None,
+    }];
+    let straight = out.path().join("straight");
+    train(&cfg, &mut sets, &[], &straight, |_| {
+        ControlFlow::Continue(())
+    })
+    .expect("straight");
+    let stopped = out.path().join("stopped");
+    let first = train(&cfg, &mut sets, &[], &stopped, |p| {
+        if p.step == 37 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .expect("first part");
+    assert!(first.interrupted);
+    train(
+        &cfg,
+        &mut sets,
+        &[],
+        &stopped,
+        |_| ControlFlow::Continue(()),
+    )
+    .expect("resumed");
+    let sim = coarse_simulation(&scene(), &dataset(), 1).expect("coarse simulation");
+    let corrected = |dir: &std::path::Path| {
+        let c = Corrector::load(dir, &seq.mesh).expect("load");
+        let (k, st) = (2, &seq.steps[2]);
+        let mut state = clothsr::sim::SimState {
+            x: vectors(&st.coarse_x),
+            v: vectors(&st.coarse_v),
+            t_s: seq.step_time_s(k),
+        };
+        let before = state.x.clone();
+        c.correct(&vectors(&seq.steps[k - 1].int_v), &mut state, &sim)
+            .expect("correct");
+        (before, state.x)
+    };
+    let ((before, a), (_, b)) = (corrected(&straight), corrected(&stopped));
+    let moved = dist(&a, &before);
+    let apart = dist(&a, &b);
+    eprintln!("correction {moved:e} m, resumed vs straight {apart:e} m");
+    assert!(moved > 0.0, "the corrector corrects");
+    assert!(
+        apart <= 1e-4 * moved,
+        "resumed {apart:e} m from straight (correction {moved:e} m)"
+    );
+}
+
 #[test]
 fn training_lowers_the_loss_and_the_saved_model_loads() {
     let seq = load(None);

@@ -124,7 +124,9 @@ pub fn write_resume_point<P: Serialize>(
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => 0,
         Err(e) => return Err(Error::io(&path, e)),
     };
-    let generation = previous + 1;
+    let generation = previous
+        .checked_add(1)
+        .ok_or_else(|| Error::bad_input(&path, "its generation is at the largest number"))?;
     let (weights, optim) = generation_files(dir, Some(generation));
     write(&weights, &optim)?;
     write_json(
@@ -138,9 +140,9 @@ pub fn write_resume_point<P: Serialize>(
     for entry in std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))? {
         let file = entry.map_err(|e| Error::io(dir, e))?.path();
         let name = file.file_name().and_then(|n| n.to_str()).unwrap_or("");
-        let stale = (name.starts_with("model.") || name.starts_with("optim."))
-            && name.ends_with(".bpk")
-            && !keep.contains(&file);
+        // Other generations, and the temporary files of writes that a kill interrupted.
+        let stale =
+            (name.starts_with("model.") || name.starts_with("optim.")) && !keep.contains(&file);
         if stale {
             std::fs::remove_file(&file).map_err(|e| Error::io(&file, e))?;
         }
@@ -211,6 +213,10 @@ mod tests {
             .collect();
         names.sort();
         assert_eq!(names, ["model.3.bpk", "optim.3.bpk", "state.json"]);
+        // A write killed midway leaves its temporary file; the next point removes it.
+        std::fs::write(dir.path().join("model.4.bpk.123-0.tmp"), "partial").expect("tmp");
+        save(dir.path(), 1000).expect("fourth");
+        assert!(!dir.path().join("model.4.bpk.123-0.tmp").exists());
     }
 
     #[test]

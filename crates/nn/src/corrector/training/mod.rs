@@ -251,9 +251,7 @@ pub fn train(
     let mut t = Trainer {
         cfg,
         out: out.to_path_buf(),
-        rng: StdRng::seed_from_u64(
-            cfg.seed ^ (position.phase1_done as u64) << 20 ^ position.phase2_done as u64,
-        ),
+        rng: step_rng(cfg.seed, 1, position.phase1_done),
         device,
         net,
         optim,
@@ -267,6 +265,13 @@ pub fn train(
         validations: Vec::new(),
     };
     t.run(sets, validation, &mut progress)
+}
+
+/// The random draws of step `step` of `phase` (its samples, noise and windows): they depend
+/// on the step alone, so that a run resumed from any checkpoint draws as one that never
+/// stopped.
+fn step_rng(seed: u64, phase: u8, step: usize) -> StdRng {
+    StdRng::seed_from_u64(seed ^ (u64::from(phase) << 56) ^ ((step as u64) << 20))
 }
 
 /// Opens the run in `out`: the resume point there, if any. Refuses an output holding a run

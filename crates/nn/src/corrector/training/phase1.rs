@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::{first_last, mean, Progress, TrainSet, Trainer};
+use super::{first_last, mean, step_rng, Progress, TrainSet, Trainer};
 use crate::corrector::data::vectors;
 use crate::corrector::graph::MeshGraph;
 use crate::corrector::model::GraphTensors;
@@ -150,6 +150,7 @@ impl Trainer<'_> {
         let mut window = Vec::new();
         while self.position.phase1_done < cfg.steps {
             let step = self.position.phase1_done;
+            self.rng = step_rng(cfg.seed, 1, step);
             let lr = cfg.lr_start
                 * (cfg.lr_end / cfg.lr_start).powf(step as f64 / cfg.steps.max(1) as f64);
             let samples: Vec<Sample> = (0..cfg.batch).map(|_| self.sample(sets)).collect();

@@ -9,7 +9,7 @@ use rand::Rng;
 
 use super::config::TrainingConfig;
 use super::validation::ValidationSet;
-use super::{first_last, mean, Progress, TrainSet, Trainer};
+use super::{first_last, mean, step_rng, Progress, TrainSet, Trainer};
 use crate::corrector::data::vectors;
 use crate::corrector::graph::{body_proximity, step_change};
 use crate::corrector::inference::features;
@@ -31,6 +31,7 @@ impl Trainer<'_> {
             .collect();
         let mut losses = Vec::new();
         while self.position.phase2_done < cfg.rollout_iters && !usable.is_empty() {
+            self.rng = step_rng(cfg.seed, 2, self.position.phase2_done);
             let k = usable[self.rng.random_range(0..usable.len())];
             let set = &mut sets[k];
             let start = self.rng.random_range(0..set.seq.steps.len() - cfg.window);
