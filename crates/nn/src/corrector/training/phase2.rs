@@ -125,6 +125,12 @@ pub(super) fn rollout_window(
     let Some((sim, t0)) = set.sim.as_mut() else {
         return Err(Error::Invalid("phase 2 needs a coarse simulator".into()));
     };
+    // Each window steps as a new simulator started at its first state would: without the
+    // caches, warm starts and adapted margin of the window before, so that a resumed training
+    // rolls its windows out as one that never stopped.
+    sim.sim.forget_history();
+    let margin = sim.sim.params.detection_margin_m;
+    sim.sim.set_obstacle_margin_m(margin);
     let h = seq.manifest.dt_s;
     let mut state = seq.int_state(start, *t0);
     let mut total: Option<Tensor<1>> = None;
