@@ -208,6 +208,31 @@ fn a_hood_seam_that_stalls_is_pulled_harder_until_it_closes() {
     assert_eq!(d.welded_pairs, sim.sim.model.mesh.seam_pairs.len(), "{d:?}");
 }
 
+/// Issue 66: the strapped dress sewn without cloth–cloth contact (as `run` dresses) folded
+/// its right bodice panels through themselves on the way over the shoulder, and the strap
+/// closed folded onto the chest after a harder pull. With contact within each panel while
+/// sewing, it closes without one and no panel ends crossed through itself.
+#[test]
+#[ignore = "heavy: dresses a strapped dress on the walking avatar (run by .ci/run)"]
+fn a_strap_is_sewn_over_the_shoulder_without_folding_through_its_panel() {
+    let mut sim =
+        on_the_walking_avatar("patterns/mh_dress_straps/mh_dress_straps_specification.json");
+    sim.sim.params.collision.self_collision = false;
+    let dhat_m = sim.sim.params.collision.dhat_m;
+    let (max_s, settle_s, gap_m) = clothsr::io::dressed::DRESSING;
+    let d = sim.dress(max_s, settle_s, gap_m).expect("dressing");
+    assert_eq!(d.harder_pulls, 0, "{d:?}");
+    closed_and_outside(&d, dhat_m);
+    assert_eq!(d.welded_pairs, sim.sim.model.mesh.seam_pairs.len(), "{d:?}");
+    // Sewing's own contact is off again for the run.
+    assert!(!sim.sim.params.collision.self_collision);
+    let crossed = sim.sim.self_intersections(&sim.state.x);
+    assert!(
+        crossed <= 10,
+        "{crossed} edges through the dress's own cloth"
+    );
+}
+
 /// Issue 66: the pencil skirt started half a second into the walk (mid-stride, as `fit`'s
 /// second variation starts it, turned 5°) could not be dressed there: the front panel, rolled
 /// around the body, would have met the forward leg, so it stayed flat and its side seams

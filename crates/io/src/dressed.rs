@@ -87,7 +87,7 @@ fn fingerprint(sim: &Simulation) -> u64 {
         }
     };
     // 2: seams that stall are pulled harder.
-    eat(b"clothsr dressed 2");
+    eat(b"clothsr dressed 3");
     let model = &sim.sim.model;
     for p in &sim.state.x {
         p.iter().for_each(|c| eat(&c.to_le_bytes()));

@@ -487,6 +487,17 @@ impl Simulation {
         );
         let mut doublings = 0u32;
         let mut before_pulling = None;
+        // Sewn without cloth–cloth contact, a strap's panel folded through itself on its way
+        // over the shoulder and closed folded onto the chest. A dresser's panels do not pass
+        // through themselves: while sewing from the flat pattern, contact within each panel is
+        // on (between panels it stays as the run has it: the legs of a jumpsuit hooked on each
+        // other at the crotch with it).
+        let self_collision = self.sim.params.collision.self_collision;
+        let within_panels = slow && !self_collision;
+        if within_panels {
+            self.sim.set_contacts_within_panels(true);
+            self.sim.params.collision.self_collision = true;
+        }
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
@@ -557,6 +568,10 @@ impl Simulation {
             }
             Ok(())
         })();
+        if within_panels {
+            self.sim.set_contacts_within_panels(false);
+            self.sim.params.collision.self_collision = self_collision;
+        }
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
         (

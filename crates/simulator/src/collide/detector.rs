@@ -81,6 +81,9 @@ pub struct CollisionDetector {
     /// Keep each collider's edges where its surface turns, for
     /// [`CollisionDetector::crease_within`] (default false: only fast mode asks).
     pub surface_turns: bool,
+    /// The panel of each cloth vertex, when cloth–cloth contacts are kept within panels: pairs
+    /// from two panels are then not reported (see [`Self::keep_self_pair`]).
+    pub within_panels: Option<std::sync::Arc<[u32]>>,
     colliders: Vec<CachedBvh>,
     clearance: Vec<Clearance>,
     clearance_x: Vec<Vector3<f64>>,
@@ -123,6 +126,7 @@ impl CollisionDetector {
     pub fn new() -> CollisionDetector {
         CollisionDetector {
             rebuild_every: 16,
+            within_panels: None,
             obstacle_extra_m: 0.0,
             skip_clear_vertices: true,
             crease_contacts: true,

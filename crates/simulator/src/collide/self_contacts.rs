@@ -30,6 +30,8 @@ impl CollisionDetector {
             return out;
         }
         let rebuild_every = self.rebuild_every;
+        let within = self.within_panels.clone();
+        let keep = |a: &[u32], b: &[u32]| Self::keep_self_pair(within.as_deref(), a, b);
         let swept = |ids: &[u32], pad: f64| {
             Aabb::from_points(ids.iter().flat_map(|&i| [&x0[i as usize], &x1[i as usize]]))
                 .inflate(pad)
@@ -60,7 +62,7 @@ impl CollisionDetector {
                         }
                         let [a, b, c] = tri_points(x0, &t);
                         let d = point_triangle(&x0[v as usize], &a, &b, &c).dist;
-                        if d - closing(&[v], &t) < r {
+                        if d - closing(&[v], &t) < r && keep(&[v], &t) {
                             found.push(Contact::VertexTriangle { v, t });
                         }
                     });
@@ -80,11 +82,18 @@ impl CollisionDetector {
                 }
                 let x = |k: u32| &x0[k as usize];
                 let d = segment_segment(x(a[0]), x(a[1]), x(b[0]), x(b[1])).dist;
-                (d - closing(&a, &b) < r).then_some(Contact::EdgeEdge { a, b })
+                (d - closing(&a, &b) < r && keep(&a, &b)).then_some(Contact::EdgeEdge { a, b })
             });
             out.extend(ee);
         }
         out
+    }
+
+    /// Whether a cloth–cloth pair between the features `a` and `b` (vertex ids) is reported:
+    /// always, unless contacts are kept within panels (`within`: each vertex's panel) and the
+    /// two lie in different ones.
+    fn keep_self_pair(within: Option<&[u32]>, a: &[u32], b: &[u32]) -> bool {
+        within.is_none_or(|panel| panel[a[0] as usize] == panel[b[0] as usize])
     }
 
     pub(super) fn find_self_contacts_into(
@@ -97,6 +106,8 @@ impl CollisionDetector {
     ) {
         let dhat = params.dhat_m.max(0.0);
         let rebuild_every = self.rebuild_every;
+        let within = self.within_panels.clone();
+        let keep = |a: &[u32], b: &[u32]| Self::keep_self_pair(within.as_deref(), a, b);
         if params.self_collision && dhat > 0.0 && !cloth_tris.is_empty() {
             self.cloth_tris.update(
                 cloth_tris.as_flattened(),
@@ -116,7 +127,7 @@ impl CollisionDetector {
                             return;
                         }
                         let [a, b, c] = tri_points(cloth_x, &t);
-                        if point_triangle(p, &a, &b, &c).dist < dhat {
+                        if point_triangle(p, &a, &b, &c).dist < dhat && keep(&[v], &t) {
                             out.push(Contact::VertexTriangle { v, t });
                         }
                     });
@@ -138,7 +149,7 @@ impl CollisionDetector {
                 }
                 let x = |k: u32| &cloth_x[k as usize];
                 let d = segment_segment(x(a[0]), x(a[1]), x(b[0]), x(b[1])).dist;
-                (d < dhat).then_some(Contact::EdgeEdge { a, b })
+                (d < dhat && keep(&a, &b)).then_some(Contact::EdgeEdge { a, b })
             });
             contacts.extend(ee);
         }

@@ -184,6 +184,14 @@ impl Simulator {
             .max(self.params.detection_margin_m)
     }
 
+    /// Keeps cloth–cloth contacts within panels (`true`: pairs from two panels are not
+    /// detected), or detects them all again (`false`). Whether there are any is still
+    /// `params.collision.self_collision`.
+    pub fn set_contacts_within_panels(&mut self, within: bool) {
+        self.detector.within_panels =
+            within.then(|| self.model.mesh.panel_of_vertex.as_slice().into());
+    }
+
     /// Drops what steps carry from one to the next besides the state, the seam rest lengths
     /// and the detection margin (cached hierarchies, clearances, preconditioner factors), so
     /// that the next step is the one a new simulator restored to the same state would take.
