@@ -150,6 +150,24 @@ pub fn write_resume_point<P: Serialize>(
     Ok(())
 }
 
+/// Writes a training's resume point into the checkpoint folder `dir`
+/// ([`write_resume_point`]): `net`'s weights and `optim`'s state beside `position`.
+pub fn write_training_checkpoint<P: Serialize, M: Module>(
+    dir: &Path,
+    position: &P,
+    net: &M,
+    optim: &burn::optim::ModuleOptimizer,
+) -> Result<()> {
+    write_resume_point(dir, position, |w, o| {
+        net.clone()
+            .save_file(w)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
+        optim
+            .save(o)
+            .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))
+    })
+}
+
 /// Removes a finished training's checkpoint folder `dir`, its `state.json` first: a run killed
 /// while the folder goes never finds a resume point whose files are gone.
 pub fn remove_checkpoint(dir: &Path) -> Result<()> {

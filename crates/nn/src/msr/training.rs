@@ -48,7 +48,7 @@ use super::inference::{
     geometry_channels, patch_input, CONFIG_FILE, CURVATURE_STENCIL_PX, WEIGHTS_FILE,
 };
 use super::model::{IsrConfig, IsrNet};
-use crate::common::{read_resume_point, write_json, write_resume_point, ResumePoint};
+use crate::common::{read_resume_point, write_json, write_training_checkpoint, ResumePoint};
 use clothsr_geometry::error::{Error, Result};
 
 /// How to train (saved as `config.json`, with the network's sizes).
@@ -529,14 +529,7 @@ fn checkpoint(
     optim: &burn::optim::ModuleOptimizer,
     position: Position,
 ) -> Result<()> {
-    write_resume_point(&out.join(CHECKPOINT_DIR), &position, |w, o| {
-        net.clone()
-            .save_file(w)
-            .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
-        optim
-            .save(o)
-            .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))
-    })
+    write_training_checkpoint(&out.join(CHECKPOINT_DIR), &position, net, optim)
 }
 
 /// The rows (or columns) of a `p`-long window starting at `r0` (possibly negative) that lie

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::TrainingConfig;
 use super::Trainer;
-use crate::common::{write_json, write_resume_point};
+use crate::common::{write_json, write_training_checkpoint};
 use crate::corrector::inference::{CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
 use crate::corrector::model::CorrectorNet;
 use crate::corrector::normalise::Normalisation;
@@ -57,14 +57,11 @@ pub(super) fn write_weights(net: &CorrectorNet, path: &Path) -> Result<()> {
 
 impl Trainer<'_> {
     pub(super) fn checkpoint(&self) -> Result<()> {
-        write_resume_point(&self.out.join(CHECKPOINT_DIR), &self.position, |w, o| {
-            self.net
-                .clone()
-                .save_file(w)
-                .map_err(|e| Error::Invalid(format!("{}: {e}", w.display())))?;
-            self.optim
-                .save(o)
-                .map_err(|e| Error::Invalid(format!("{}: {e}", o.display())))
-        })
+        write_training_checkpoint(
+            &self.out.join(CHECKPOINT_DIR),
+            &self.position,
+            &self.net,
+            &self.optim,
+        )
     }
 }
