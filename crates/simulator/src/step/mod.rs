@@ -74,6 +74,8 @@ pub struct Simulator {
     cholesky: Option<CholeskyPreconditioner>,
     two_level: Option<TwoLevel>,
     last_cg_iters: usize,
+    /// Solves left that go straight to a Cholesky factor after a rescued one.
+    rescue_sticky: usize,
     /// Rest length of each seam pair after the last successful step, m.
     seam_rest_m: Vec<f64>,
     /// Rest lengths of the step being solved, m.
@@ -115,6 +117,7 @@ impl Simulator {
             cholesky: None,
             two_level: None,
             last_cg_iters: usize::MAX,
+            rescue_sticky: 0,
             seam_rest_step_m: Vec::new(),
             seam_rest_m: model
                 .mesh
@@ -199,6 +202,7 @@ impl Simulator {
     pub fn forget_history(&mut self) {
         self.detector.forget();
         self.last_cg_iters = usize::MAX;
+        self.rescue_sticky = 0;
         if let Some(c) = self.cholesky.as_mut() {
             c.forget();
         }
@@ -381,6 +385,7 @@ impl Simulator {
         self.cholesky = None;
         self.two_level = None;
         self.last_cg_iters = usize::MAX;
+        self.rescue_sticky = 0;
         for (r, p) in self.seam_rest_m.iter_mut().zip(&self.model.mesh.seam_pairs) {
             if weld[p[0] as usize] == weld[p[1] as usize] {
                 *r = 0.0;

@@ -64,6 +64,12 @@ pub struct SimParams {
     /// accepted; at the last halving it is taken and counted in [`StepStats`](super::StepStats).
     /// Off, such steps are only counted.
     pub strict_solves: bool,
+    /// A linear solve stopped at `cg_max_iters` above `cg_rel_tol` carries on preconditioned
+    /// by a sparse Cholesky factor of its own matrix before it counts as capped (and, with
+    /// `strict_solves`, halves the step): stiff fabrics at millimetre resolution outgrow what
+    /// PCG reaches in its cap, where a factor solves in a few iterations. The next few solves
+    /// then factor straight away.
+    pub rescue_capped_solves: bool,
 }
 
 /// How accurately each step is solved: the presets behind the pipeline's coarse simulation, the
@@ -75,9 +81,9 @@ pub enum SolverMode {
     /// tolerance or cap (Baraff & Witkin): the pipeline's coarse simulation.
     Fast,
     /// The fine simulation behind data sets, fits and floors: four sub-steps a step, each
-    /// taken as in `Fast` but only when its linear solve converged (otherwise halved): stiff
-    /// fabrics at millimetre resolution stay on the converged solution at about fast mode's
-    /// cost.
+    /// taken as in `Fast` but only when its linear solve converged (a solve stopped at its cap
+    /// carries on with a sparse Cholesky factor; one that still fails halves the sub-step):
+    /// stiff fabrics at millimetre resolution stay on the converged solution.
     Data,
     /// Newton to `newton_tol_m` at the scene's time step (the simulator's default).
     Converged,
@@ -121,12 +127,14 @@ impl SolverMode {
         p.max_halvings = defaults.max_halvings;
         p.substeps = 1;
         p.strict_solves = false;
+        p.rescue_capped_solves = false;
         match self {
             SolverMode::Fast => p.newton_exact = false,
             SolverMode::Data => {
                 p.newton_exact = false;
                 p.substeps = DATA_SUBSTEPS;
                 p.strict_solves = true;
+                p.rescue_capped_solves = true;
                 p.max_halvings = 6;
             }
             SolverMode::Converged => p.newton_exact = true,
@@ -217,6 +225,7 @@ impl SimParams {
             linear_solver: LinearSolver::Auto,
             substeps: 1,
             strict_solves: false,
+            rescue_capped_solves: false,
         }
     }
 }
