@@ -434,3 +434,61 @@ fn a_modelled_skirt_without_uvs_is_remeshed_and_runs_on_the_walking_avatar() {
         h.deepest_m * 1e3
     );
 }
+
+/// Edges of one garment of `sim` through a triangle of another at its present state.
+fn layers_crossed(sim: &Simulation) -> usize {
+    let x = &sim.state.x;
+    let parts = sim.sim.model.part_ranges();
+    let part = |v: u32| parts.iter().position(|r| r.contains(&(v as usize)));
+    let tris = &sim.sim.model.mesh.triangles;
+    let edges = clothsr::mesh::unique_edges(tris);
+    clothsr::sim::collide::edge_triangle_crossings(x, tris, &edges, |e, t| part(e[0]) != part(t[0]))
+        .len()
+}
+
+/// Issue 66: an outfit (GarmentCode's trousers and T-shirt on one avatar) failed while sewing
+/// with cloth–cloth contact (both garments rolled around the body at once, their panels
+/// overlapping, the seams dragging them through each other), and without it the layers
+/// passed through each other. Dressed from the inside out (the trousers, then the T-shirt
+/// around them), every seam closes and, in contact with each other, no layer passes through
+/// the other, dressed or walking.
+#[test]
+#[ignore = "heavy: dresses an outfit on the walking avatar (run by .ci/run)"]
+fn an_outfit_is_dressed_inside_out_and_its_layers_never_cross() {
+    let fabric = Fabric::preset("cotton").expect("preset");
+    let pattern = |name: &str| {
+        Scene::load(
+            &fixture(&format!("patterns/{name}/{name}_specification.json")),
+            &fabric,
+        )
+        .expect("pattern")
+    };
+    let mut scene = pattern("mh_pants");
+    scene.garments.extend(pattern("mh_tshirt").garments);
+    scene
+        .add_collider_file(&fixture("avatars/mh_walk_train_baked_2s.usdc"))
+        .expect("avatar");
+    let mut sim = Simulation::new(&scene, 0.02, |p| {
+        p.newton_exact = false;
+        p.collision.self_collision = false;
+    })
+    .expect("set-up");
+    assert_eq!(sim.sim.model.parts.len(), 2);
+    let dhat_m = sim.sim.params.collision.dhat_m;
+    let (max_s, settle_s, gap_m) = clothsr::io::dressed::DRESSING;
+    let d = sim.dress(max_s, settle_s, gap_m).expect("dressing");
+    closed_and_outside(&d, dhat_m);
+    assert_eq!(d.welded_pairs, sim.sim.model.mesh.seam_pairs.len(), "{d:?}");
+    assert_eq!(layers_crossed(&sim), 0, "dressed");
+    // The garments meet each other in the run too, self-collision off as asked.
+    assert!(!sim.sim.params.collision.self_collision && sim.sim.cloth_contacts_on());
+    for frame in 1..=10 {
+        let f = sim.advance_frame(|_| {}).expect("walking");
+        assert!(
+            f.max_penetration_m < dhat_m,
+            "frame {frame}: {:.2} mm inside the body",
+            f.max_penetration_m * 1e3
+        );
+        assert_eq!(layers_crossed(&sim), 0, "frame {frame}");
+    }
+}

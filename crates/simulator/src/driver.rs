@@ -6,7 +6,9 @@ use nalgebra::Vector3;
 use super::arrange::{wrap_panels_around_body, WrapOptions};
 use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
-use super::step::{ColliderFrame, SimParams, SimState, Simulator, SolverMode, StepStats};
+use super::step::{
+    ColliderFrame, Pin, PinTarget, SimParams, SimState, Simulator, SolverMode, StepStats,
+};
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::garment::Fabric;
 use clothsr_geometry::mesh::{mesh_garment, remesh, ClothMesh, MeshOptions};
@@ -41,6 +43,13 @@ fn collider_frames<'a>(
             triangles: &c.triangles,
         })
         .collect()
+}
+
+/// [`Simulation::set_cloth_contacts`] on `sim`.
+fn cloth_contacts(sim: &mut Simulator, sewing: bool, active: Option<Vec<bool>>) {
+    let outfit = sim.model.parts.len() > 1;
+    let pairs = (sewing || outfit || active.is_some()).then_some((sewing, outfit, active));
+    sim.set_cloth_pairs(pairs);
 }
 
 /// A scene ready to simulate (a clone carries the simulator's warm starts and caches, so a
@@ -185,11 +194,21 @@ impl Simulation {
             preroll_s: scene.preroll_s,
             buffers: [Vec::new(), Vec::new()],
         };
+        out.set_cloth_contacts(false, None);
         // Garments with seams are dressed (`dress`), which places them around the body.
         if out.sim.model.mesh.seam_pairs.is_empty() {
             out.start_outside_bodies();
         }
         Ok(out)
+    }
+
+    /// Sets which cloth–cloth contacts the simulator detects. Without self-collision, the
+    /// garments of an outfit (two or more) still meet each other, so that no layer passes
+    /// through another, and while `sewing` from the flat pattern each panel meets itself (a
+    /// dresser's panels do not pass through themselves). `active`: the garments taking part
+    /// (the others are parked while layers are dressed one by one); all when `None`.
+    fn set_cloth_contacts(&mut self, sewing: bool, active: Option<Vec<bool>>) {
+        cloth_contacts(&mut self.sim, sewing, active);
     }
 
     /// Moves the cloth out of the bodies it starts in (a garment placed slightly into the
@@ -336,9 +355,12 @@ impl Simulation {
     /// [`Self::dress`] at the state's time, without a pre-roll.
     fn dress_here(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
         let held = self.collider_points();
+        let garments = self.sim.model.part_ranges();
+        if garments.len() > 1 && !self.sim.model.mesh.seam_pairs.is_empty() {
+            return self.dress_in_layers(&held, &garments, max_s, settle_s, gap_m);
+        }
         let frames = collider_frames(&self.colliders, &held);
         let mut out = DressStats::default();
-        let garments = self.sim.model.part_ranges();
         let wrapped = wrap_panels_around_body(
             &self.sim.model.mesh,
             &garments,
@@ -361,6 +383,103 @@ impl Simulation {
             self.seams_at_rest_where_they_are()?;
         }
         self.sew_and_settle(&held, out, max_s, settle_s, gap_m, true)
+    }
+
+    /// Dresses an outfit as a dresser would, from the inside out, the garments in the scene's
+    /// order (the first innermost): each is rolled around the body and the garments already
+    /// on it, and sewn with those held where they are and the later ones parked (held flat,
+    /// touching nothing); then every seam is welded and all settle together, each garment in
+    /// contact with the others. Sewn at once, the panels of two garments overlap around the
+    /// body and the seams drag them through each other.
+    fn dress_in_layers(
+        &mut self,
+        held: &[Vec<Vector3<f64>>],
+        garments: &[std::ops::Range<usize>],
+        max_s: f64,
+        settle_s: f64,
+        gap_m: f64,
+    ) -> Result<DressStats> {
+        let pins = self.sim.pins().to_vec();
+        let t_start = self.state.t_s;
+        let layered: Result<DressStats> = (|| {
+            let mut out = DressStats::default();
+            for (k, g) in garments.iter().enumerate() {
+                let frames = collider_frames(&self.colliders, held);
+                // The garments already on are a body this one is rolled around.
+                let inner_x = self.state.x.clone();
+                let inner: Vec<[u32; 3]> = self
+                    .sim
+                    .model
+                    .mesh
+                    .triangles
+                    .iter()
+                    .filter(|t| (t[0] as usize) < g.start)
+                    .copied()
+                    .collect();
+                let mut bodies = frames.clone();
+                if !inner.is_empty() {
+                    bodies.push(ColliderFrame {
+                        points: &inner_x,
+                        triangles: &inner,
+                    });
+                }
+                let wrapped = wrap_panels_around_body(
+                    &self.sim.model.mesh,
+                    std::slice::from_ref(g),
+                    &mut self.state.x,
+                    &bodies,
+                    &WrapOptions::default(),
+                );
+                for w in &wrapped {
+                    tracing::info!(
+                        "dressing layer {}: panel '{}' rolled around the body (radius {:.0} mm, {:.0}°)",
+                        k + 1,
+                        self.sim.model.mesh.panel_names[w.panel],
+                        w.radius_m * 1e3,
+                        w.span_deg
+                    );
+                }
+                out.wrapped_panels += wrapped.len();
+                self.seams_at_rest_where_they_are()?;
+                // Every other garment is held where it is.
+                let mut layer_pins = pins.clone();
+                let pinned: std::collections::HashSet<u32> = pins.iter().map(|p| p.v).collect();
+                for v in (0..self.state.x.len()).filter(|v| !g.contains(v)) {
+                    if !pinned.contains(&(v as u32)) {
+                        layer_pins.push(Pin {
+                            v: v as u32,
+                            target: PinTarget::Fixed(self.state.x[v]),
+                        });
+                    }
+                }
+                self.sim.set_pins(layer_pins);
+                let active = (0..garments.len()).map(|j| j <= k).collect();
+                let layer = DressStats::default();
+                let sewn = self.sew_layer(held, layer, max_s, gap_m, active)?;
+                tracing::info!(
+                    "dressing layer {}: sewn in {} steps, widest seam gap {:.1} mm",
+                    k + 1,
+                    sewn.sew_steps,
+                    sewn.seam_gap_m * 1e3
+                );
+                out.sew_steps += sewn.sew_steps;
+                out.harder_pulls += sewn.harder_pulls;
+                out.initial_seam_gap_m = out.initial_seam_gap_m.max(sewn.initial_seam_gap_m);
+                self.state.t_s = t_start;
+            }
+            self.sim.set_pins(pins.clone());
+            let settled =
+                self.sew_and_settle(held, DressStats::default(), 0.0, settle_s, gap_m, true)?;
+            out.settle_steps = settled.settle_steps;
+            out.seam_gap_m = settled.seam_gap_m;
+            out.max_penetration_m = settled.max_penetration_m;
+            out.welded_pairs = settled.welded_pairs;
+            out.welded_gap_m = settled.welded_gap_m;
+            Ok(out)
+        })();
+        self.sim.set_pins(pins);
+        self.set_cloth_contacts(false, None);
+        layered
     }
 
     /// Dresses the garments from positions `x` where the garment is already nearly sewn and
@@ -424,12 +543,41 @@ impl Simulation {
     fn sew_and_settle(
         &mut self,
         held: &[Vec<Vector3<f64>>],
-        mut out: DressStats,
+        out: DressStats,
         max_s: f64,
         settle_s: f64,
         gap_m: f64,
         slow: bool,
     ) -> Result<DressStats> {
+        self.sew_then(held, out, max_s, settle_s, gap_m, slow, None)
+    }
+
+    /// Sews one layer of an outfit ([`Self::dress_in_layers`]): the garments `active` only
+    /// (the others take part in no cloth–cloth contact), no welding, no settling.
+    fn sew_layer(
+        &mut self,
+        held: &[Vec<Vector3<f64>>],
+        out: DressStats,
+        max_s: f64,
+        gap_m: f64,
+        active: Vec<bool>,
+    ) -> Result<DressStats> {
+        self.sew_then(held, out, max_s, 0.0, gap_m, true, Some(active))
+    }
+
+    /// [`Self::sew_and_settle`]; with `layer` (the garments taking part), it only sews.
+    #[allow(clippy::too_many_arguments)]
+    fn sew_then(
+        &mut self,
+        held: &[Vec<Vector3<f64>>],
+        mut out: DressStats,
+        max_s: f64,
+        settle_s: f64,
+        gap_m: f64,
+        slow: bool,
+        layer: Option<Vec<bool>>,
+    ) -> Result<DressStats> {
+        let finish = layer.is_none();
         let t_start = self.state.t_s;
         let gravity = self.sim.params.gravity_m_s2;
         let dt = self.sim.params.dt_s;
@@ -490,14 +638,9 @@ impl Simulation {
         // Sewn without cloth–cloth contact, a strap's panel folded through itself on its way
         // over the shoulder and closed folded onto the chest. A dresser's panels do not pass
         // through themselves: while sewing from the flat pattern, contact within each panel is
-        // on (between panels it stays as the run has it: the legs of a jumpsuit hooked on each
-        // other at the crotch with it).
-        let self_collision = self.sim.params.collision.self_collision;
-        let within_panels = slow && !self_collision;
-        if within_panels {
-            self.sim.set_contacts_within_panels(true);
-            self.sim.params.collision.self_collision = true;
-        }
+        // on (between panels of one garment it stays as the run has it: the legs of a jumpsuit
+        // hooked on each other at the crotch with it).
+        cloth_contacts(&mut self.sim, slow, layer);
         let sewing: Result<()> = (|| {
             while out.sew_steps < max_steps {
                 out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
@@ -568,10 +711,7 @@ impl Simulation {
             }
             Ok(())
         })();
-        if within_panels {
-            self.sim.set_contacts_within_panels(false);
-            self.sim.params.collision.self_collision = self_collision;
-        }
+        cloth_contacts(&mut self.sim, false, None);
         self.sim.params.gravity_m_s2 = gravity;
         self.sim.params.friction = friction;
         (
@@ -579,6 +719,16 @@ impl Simulation {
             self.sim.params.sew_max_stretch_m,
         ) = pull;
         out.harder_pulls = doublings;
+        if !finish {
+            self.sim.params.move_cap_m = move_cap;
+            self.sim.params.collision.dhat_m = run_contact.0;
+            self.sim.params.detection_margin_m = run_contact.1;
+            sewing?;
+            out.seam_gap_m = self.sim.max_seam_gap_m(&self.state.x);
+            self.state.t_s = t_start;
+            self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
+            return Ok(out);
+        }
         if sewing.is_ok() {
             let welded = self.sim.weld_seams(&mut self.state, weld_max);
             (out.welded_pairs, out.welded_gap_m) = (welded.pairs, welded.widest_gap_m);

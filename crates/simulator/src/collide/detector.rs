@@ -81,9 +81,11 @@ pub struct CollisionDetector {
     /// Keep each collider's edges where its surface turns, for
     /// [`CollisionDetector::crease_within`] (default false: only fast mode asks).
     pub surface_turns: bool,
-    /// The panel of each cloth vertex, when cloth–cloth contacts are kept within panels: pairs
-    /// from two panels are then not reported (see [`Self::keep_self_pair`]).
-    pub within_panels: Option<std::sync::Arc<[u32]>>,
+    /// Which cloth–cloth pairs are reported ([`ClothPairs`]); `None`: every pair.
+    pub cloth_pairs: Option<std::sync::Arc<ClothPairs>>,
+    /// Every cloth–cloth pair between the garments `cloth_pairs` keeps active is reported
+    /// (self-collision asked for), not only those it names.
+    pub every_cloth_pair: bool,
     colliders: Vec<CachedBvh>,
     clearance: Vec<Clearance>,
     clearance_x: Vec<Vector3<f64>>,
@@ -126,7 +128,8 @@ impl CollisionDetector {
     pub fn new() -> CollisionDetector {
         CollisionDetector {
             rebuild_every: 16,
-            within_panels: None,
+            cloth_pairs: None,
+            every_cloth_pair: false,
             obstacle_extra_m: 0.0,
             skip_clear_vertices: true,
             crease_contacts: true,
@@ -491,5 +494,37 @@ mod clearance_tests {
         let c = det.find_contacts(&cloth, &[], &[], &[(&pts, &near)], &params);
         assert_eq!(det.skipped_vertices(), 0);
         assert_eq!(c.len(), 1, "{c:?}");
+    }
+}
+
+/// Which cloth–cloth pairs the detector reports: those within one panel, those between two
+/// garments, or both (every one with [`CollisionDetector::every_cloth_pair`]); pairs with a
+/// vertex of a parked garment (one left out of the simulation for now) never.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClothPairs {
+    /// The panel of each cloth vertex.
+    pub panel: Vec<u32>,
+    /// The garment of each cloth vertex.
+    pub garment: Vec<u32>,
+    /// Per garment: whether it takes part in contacts.
+    pub active: Vec<bool>,
+    /// Pairs within one panel are reported.
+    pub within_panels: bool,
+    /// Pairs between two garments are reported.
+    pub between_garments: bool,
+}
+
+impl ClothPairs {
+    /// Whether the pair of elements starting at vertices `a` and `b` is reported (`every`:
+    /// any pair between active garments).
+    pub fn keep(&self, a: u32, b: u32, every: bool) -> bool {
+        let (a, b) = (a as usize, b as usize);
+        let (ga, gb) = (self.garment[a], self.garment[b]);
+        if !self.active[ga as usize] || !self.active[gb as usize] {
+            return false;
+        }
+        every
+            || (self.within_panels && self.panel[a] == self.panel[b])
+            || (self.between_garments && ga != gb)
     }
 }

@@ -70,7 +70,7 @@ mod tests;
 pub use contact::{find_contacts, Collider, CollisionParams, Contact, StepStart};
 pub use crease::{sharp_edges, SHARP_EDGE_DEG};
 pub use crossings::edge_triangle_crossings;
-pub use detector::{CollisionDetector, SURFACE_TURN_DEG};
+pub use detector::{ClothPairs, CollisionDetector, SURFACE_TURN_DEG};
 pub use inside::{count_inside, max_penetration, push_out, PushOut};
 
 /// How deep (metres) a cloth vertex may be inside a collider and still be found and pushed out;

@@ -8,7 +8,7 @@ use super::bvh::Aabb;
 use super::contact::{CollisionParams, Contact};
 use super::crease::edge_boxes;
 use super::crossings::triangle_boxes;
-use super::detector::CollisionDetector;
+use super::detector::{ClothPairs, CollisionDetector};
 use super::distance::{point_triangle, segment_segment};
 
 impl CollisionDetector {
@@ -30,8 +30,8 @@ impl CollisionDetector {
             return out;
         }
         let rebuild_every = self.rebuild_every;
-        let within = self.within_panels.clone();
-        let keep = |a: &[u32], b: &[u32]| Self::keep_self_pair(within.as_deref(), a, b);
+        let (pairs, every) = (self.cloth_pairs.clone(), self.every_cloth_pair);
+        let keep = |a: &[u32], b: &[u32]| Self::keep_self_pair(pairs.as_deref(), every, a, b);
         let swept = |ids: &[u32], pad: f64| {
             Aabb::from_points(ids.iter().flat_map(|&i| [&x0[i as usize], &x1[i as usize]]))
                 .inflate(pad)
@@ -92,8 +92,8 @@ impl CollisionDetector {
     /// Whether a cloth–cloth pair between the features `a` and `b` (vertex ids) is reported:
     /// always, unless contacts are kept within panels (`within`: each vertex's panel) and the
     /// two lie in different ones.
-    fn keep_self_pair(within: Option<&[u32]>, a: &[u32], b: &[u32]) -> bool {
-        within.is_none_or(|panel| panel[a[0] as usize] == panel[b[0] as usize])
+    fn keep_self_pair(pairs: Option<&ClothPairs>, every: bool, a: &[u32], b: &[u32]) -> bool {
+        pairs.is_none_or(|p| p.keep(a[0], b[0], every))
     }
 
     pub(super) fn find_self_contacts_into(
@@ -106,8 +106,8 @@ impl CollisionDetector {
     ) {
         let dhat = params.dhat_m.max(0.0);
         let rebuild_every = self.rebuild_every;
-        let within = self.within_panels.clone();
-        let keep = |a: &[u32], b: &[u32]| Self::keep_self_pair(within.as_deref(), a, b);
+        let (pairs, every) = (self.cloth_pairs.clone(), self.every_cloth_pair);
+        let keep = |a: &[u32], b: &[u32]| Self::keep_self_pair(pairs.as_deref(), every, a, b);
         if params.self_collision && dhat > 0.0 && !cloth_tris.is_empty() {
             self.cloth_tris.update(
                 cloth_tris.as_flattened(),

@@ -93,12 +93,13 @@ impl Simulator {
     ) -> Vec<Contact> {
         let bodies: Vec<Collider<'_>> = colliders.iter().map(|c| (c.points, c.triangles)).collect();
         let mut params = self.params.collision;
+        params.self_collision = self.cloth_contacts_on();
+        self.detector.every_cloth_pair = self.params.collision.self_collision;
         let self_margin = self.self_margin_m();
         params.dhat_m += self_margin;
         self.detector.obstacle_extra_m = (self.obstacle_margin_m - self_margin).max(0.0);
         // Only fast mode without self-collision asks where bodies turn ([`slid_over_crease`]).
-        self.detector.surface_turns =
-            !self.params.newton_exact && !self.params.collision.self_collision;
+        self.detector.surface_turns = !self.params.newton_exact && !params.self_collision;
         let mut contacts = self.detector.find_contacts_since(
             x,
             since,

@@ -32,7 +32,7 @@ pub use state::{ColliderFrame, PhaseTimes, Pin, PinTarget, SimState, StepStats};
 
 use nalgebra::Vector3;
 
-use super::collide::{edge_triangle_crossings, CollisionDetector};
+use super::collide::{edge_triangle_crossings, ClothPairs, CollisionDetector};
 use super::model::ClothModel;
 use super::scatter::ColouredElements;
 use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg, TwoLevel};
@@ -187,12 +187,39 @@ impl Simulator {
             .max(self.params.detection_margin_m)
     }
 
-    /// Keeps cloth–cloth contacts within panels (`true`: pairs from two panels are not
-    /// detected), or detects them all again (`false`). Whether there are any is still
-    /// `params.collision.self_collision`.
-    pub fn set_contacts_within_panels(&mut self, within: bool) {
-        self.detector.within_panels =
-            within.then(|| self.model.mesh.panel_of_vertex.as_slice().into());
+    /// Which cloth–cloth pairs are detected besides self-collision's (every pair, when
+    /// `params.collision.self_collision` is on): those within one panel (`within_panels`),
+    /// those between two garments (`between_garments`), or both, among the garments `active`
+    /// (all when `None`; the others' vertices take part in no cloth–cloth contact, even with
+    /// self-collision). `None` as a whole: only self-collision's.
+    pub fn set_cloth_pairs(&mut self, pairs: Option<(bool, bool, Option<Vec<bool>>)>) {
+        self.detector.cloth_pairs = pairs.map(|(within_panels, between_garments, active)| {
+            let mut garment = vec![0u32; self.model.num_vertices()];
+            for (g, part) in self.model.parts.iter().enumerate() {
+                garment[part.vertices.clone()].fill(g as u32);
+            }
+            let garments = self.model.parts.len().max(1);
+            std::sync::Arc::new(ClothPairs {
+                panel: self.model.mesh.panel_of_vertex.clone(),
+                garment,
+                active: active
+                    .filter(|a| a.len() == garments)
+                    .unwrap_or_else(|| vec![true; garments]),
+                within_panels,
+                between_garments,
+            })
+        });
+    }
+
+    /// Whether cloth–cloth contacts are detected: self-collision, or some pairs named by
+    /// [`Self::set_cloth_pairs`].
+    pub fn cloth_contacts_on(&self) -> bool {
+        self.params.collision.self_collision || self.detector.cloth_pairs.is_some()
+    }
+
+    /// The pins ([`Self::set_pins`]).
+    pub fn pins(&self) -> &[Pin] {
+        &self.pins
     }
 
     /// Drops what steps carry from one to the next besides the state, the seam rest lengths
@@ -236,12 +263,14 @@ impl Simulator {
         })
     }
 
-    /// The widest gap between sewn vertex pairs in `x`, m (0 without seams).
+    /// The widest gap between sewn vertex pairs in `x`, m (0 without seams), over the pairs
+    /// with a free side (one pinned at both ends cannot close).
     pub fn max_seam_gap_m(&self, x: &[Vector3<f64>]) -> f64 {
         self.model
             .mesh
             .seam_pairs
             .iter()
+            .filter(|p| self.free[p[0] as usize] || self.free[p[1] as usize])
             .map(|p| (x[p[0] as usize] - x[p[1] as usize]).norm())
             .fold(0.0, f64::max)
     }

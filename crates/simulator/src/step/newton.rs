@@ -219,7 +219,7 @@ impl Simulator {
         let still: Vec<bool> = (motion.start.iter().zip(motion.end))
             .map(|(a, b)| a.points == b.points)
             .collect();
-        if self.params.collision.self_collision {
+        if self.cloth_contacts_on() {
             self.limit_inertial_start(state, h, &mut x);
         }
         for pin in &self.pins {
@@ -269,7 +269,7 @@ impl Simulator {
         // their two sides moves at most half of it. Pairs that were found close by at most 0.8
         // of their gap, and cloth approaches a body by at most max(d/2, ½ d̂) but slides
         // freely ([`ClosingPair`]).
-        let max_move = if self.params.collision.self_collision {
+        let max_move = if self.cloth_contacts_on() {
             0.5 * self.self_margin_m()
         } else {
             self.obstacle_margin_m.max(self.params.detection_margin_m)
@@ -283,9 +283,7 @@ impl Simulator {
         let max_move = max_move.min(cap);
         // With self-collision off every vertex moves up to the whole obstacle margin, as ever.
         let body_narrow = self
-            .params
-            .collision
-            .self_collision
+            .cloth_contacts_on()
             .then_some((0.5 * self.params.detection_margin_m).min(cap));
         Ok((max_move, body_narrow))
     }
@@ -406,7 +404,7 @@ impl Simulator {
             let clipped = accepted.clipped || alpha < 1.0;
             let fast_done = !self.params.newton_exact
                 && !clipped
-                && (self.params.collision.self_collision
+                && (self.cloth_contacts_on()
                     || !slid_over_crease(
                         &self.detector,
                         &contacts,
