@@ -528,3 +528,61 @@ impl ClothPairs {
             || (self.between_garments && ga != gb)
     }
 }
+
+#[cfg(test)]
+mod cloth_pairs_tests {
+    use super::ClothPairs;
+
+    /// Two garments: vertices 0–1 (panel 0) and 2 (panel 1) in garment 0, 3 (panel 2) in
+    /// garment 1.
+    fn pairs(within: bool, between: bool, active: [bool; 2]) -> ClothPairs {
+        ClothPairs {
+            panel: vec![0, 0, 1, 2],
+            garment: vec![0, 0, 0, 1],
+            active: active.to_vec(),
+            within_panels: within,
+            between_garments: between,
+        }
+    }
+
+    #[test]
+    fn pairs_are_kept_within_panels_between_garments_and_among_active_garments() {
+        // (same panel, two panels of one garment, two garments)
+        let kept = |p: &ClothPairs, every: bool| {
+            (
+                p.keep(0, 1, every),
+                p.keep(0, 2, every),
+                p.keep(0, 3, every),
+            )
+        };
+        // Sewing one garment: within panels only.
+        assert_eq!(
+            kept(&pairs(true, false, [true; 2]), false),
+            (true, false, false)
+        );
+        // An outfit's run: between garments only.
+        assert_eq!(
+            kept(&pairs(false, true, [true; 2]), false),
+            (false, false, true)
+        );
+        // Sewing an outfit's layer: both.
+        assert_eq!(
+            kept(&pairs(true, true, [true; 2]), false),
+            (true, false, true)
+        );
+        // Self-collision: every pair.
+        assert_eq!(
+            kept(&pairs(false, true, [true; 2]), true),
+            (true, true, true)
+        );
+        // A parked garment meets nothing, even with self-collision.
+        assert_eq!(
+            kept(&pairs(true, true, [true, false]), true),
+            (true, true, false)
+        );
+        assert_eq!(
+            kept(&pairs(true, true, [false, true]), true),
+            (false, false, false)
+        );
+    }
+}
