@@ -52,6 +52,27 @@ fn cloth_contacts(sim: &mut Simulator, sewing: bool, active: Option<Vec<bool>>) 
     sim.set_cloth_pairs(pairs);
 }
 
+/// Rolls the panels of `garments` (positions `x` of `mesh`) that face the body around it and
+/// `bodies` ([`wrap_panels_around_body`]) and says which, as `stage`.
+fn roll_panels(
+    mesh: &ClothMesh,
+    x: &mut [Vector3<f64>],
+    garments: &[std::ops::Range<usize>],
+    bodies: &[ColliderFrame<'_>],
+    stage: &str,
+) -> Vec<crate::arrange::WrappedPanel> {
+    let wrapped = wrap_panels_around_body(mesh, garments, x, bodies, &WrapOptions::default());
+    for w in &wrapped {
+        tracing::info!(
+            "{stage}: panel '{}' rolled around the body (radius {:.0} mm, {:.0}°)",
+            mesh.panel_names[w.panel],
+            w.radius_m * 1e3,
+            w.span_deg
+        );
+    }
+    wrapped
+}
+
 /// A scene ready to simulate (a clone carries the simulator's warm starts and caches, so a
 /// clone made before any step runs as a fresh simulation would).
 #[derive(Clone)]
@@ -361,21 +382,13 @@ impl Simulation {
         }
         let frames = collider_frames(&self.colliders, &held);
         let mut out = DressStats::default();
-        let wrapped = wrap_panels_around_body(
+        let wrapped = roll_panels(
             &self.sim.model.mesh,
-            &garments,
             &mut self.state.x,
+            &garments,
             &frames,
-            &WrapOptions::default(),
+            "dressing",
         );
-        for w in &wrapped {
-            tracing::info!(
-                "dressing: panel '{}' rolled around the body (radius {:.0} mm, {:.0}°)",
-                self.sim.model.mesh.panel_names[w.panel],
-                w.radius_m * 1e3,
-                w.span_deg
-            );
-        }
         out.wrapped_panels = wrapped.len();
         if !wrapped.is_empty() {
             // Seams start at rest at their new length (they shrink from there as they close):
@@ -423,22 +436,14 @@ impl Simulation {
                         triangles: &inner,
                     });
                 }
-                let wrapped = wrap_panels_around_body(
+                let stage = format!("dressing layer {}", k + 1);
+                let wrapped = roll_panels(
                     &self.sim.model.mesh,
-                    std::slice::from_ref(g),
                     &mut self.state.x,
+                    std::slice::from_ref(g),
                     &bodies,
-                    &WrapOptions::default(),
+                    &stage,
                 );
-                for w in &wrapped {
-                    tracing::info!(
-                        "dressing layer {}: panel '{}' rolled around the body (radius {:.0} mm, {:.0}°)",
-                        k + 1,
-                        self.sim.model.mesh.panel_names[w.panel],
-                        w.radius_m * 1e3,
-                        w.span_deg
-                    );
-                }
                 out.wrapped_panels += wrapped.len();
                 self.seams_at_rest_where_they_are()?;
                 // Every other garment is held where it is.
