@@ -45,7 +45,11 @@ fn collider_frames<'a>(
         .collect()
 }
 
-/// [`Simulation::set_cloth_contacts`] on `sim`.
+/// Sets which cloth–cloth contacts the simulator detects. Without self-collision, the
+/// garments of an outfit (two or more) still meet each other, so that no layer passes
+/// through another, and while `sewing` from the flat pattern each panel meets itself (a
+/// dresser's panels do not pass through themselves). `active`: the garments taking part
+/// (the others are parked while layers are dressed one by one); all when `None`.
 fn cloth_contacts(sim: &mut Simulator, sewing: bool, active: Option<Vec<bool>>) {
     let outfit = sim.model.parts.len() > 1;
     let pairs = (sewing || outfit || active.is_some()).then_some((sewing, outfit, active));
@@ -215,21 +219,12 @@ impl Simulation {
             preroll_s: scene.preroll_s,
             buffers: [Vec::new(), Vec::new()],
         };
-        out.set_cloth_contacts(false, None);
+        cloth_contacts(&mut out.sim, false, None);
         // Garments with seams are dressed (`dress`), which places them around the body.
         if out.sim.model.mesh.seam_pairs.is_empty() {
             out.start_outside_bodies();
         }
         Ok(out)
-    }
-
-    /// Sets which cloth–cloth contacts the simulator detects. Without self-collision, the
-    /// garments of an outfit (two or more) still meet each other, so that no layer passes
-    /// through another, and while `sewing` from the flat pattern each panel meets itself (a
-    /// dresser's panels do not pass through themselves). `active`: the garments taking part
-    /// (the others are parked while layers are dressed one by one); all when `None`.
-    fn set_cloth_contacts(&mut self, sewing: bool, active: Option<Vec<bool>>) {
-        cloth_contacts(&mut self.sim, sewing, active);
     }
 
     /// Moves the cloth out of the bodies it starts in (a garment placed slightly into the
@@ -459,8 +454,7 @@ impl Simulation {
                 }
                 self.sim.set_pins(layer_pins);
                 let active = (0..garments.len()).map(|j| j <= k).collect();
-                let layer = DressStats::default();
-                let sewn = self.sew_layer(held, layer, max_s, gap_m, active)?;
+                let sewn = self.sew_layer(held, max_s, gap_m, active)?;
                 tracing::info!(
                     "dressing layer {}: sewn in {} steps, widest seam gap {:.1} mm",
                     k + 1,
@@ -483,7 +477,7 @@ impl Simulation {
             Ok(out)
         })();
         self.sim.set_pins(pins);
-        self.set_cloth_contacts(false, None);
+        cloth_contacts(&mut self.sim, false, None);
         layered
     }
 
@@ -562,11 +556,11 @@ impl Simulation {
     fn sew_layer(
         &mut self,
         held: &[Vec<Vector3<f64>>],
-        out: DressStats,
         max_s: f64,
         gap_m: f64,
         active: Vec<bool>,
     ) -> Result<DressStats> {
+        let out = DressStats::default();
         self.sew_then(held, out, max_s, 0.0, gap_m, true, Some(active))
     }
 
