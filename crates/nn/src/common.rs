@@ -2,15 +2,44 @@
 //! model folders' JSON files.
 
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
 
-use burn::module::Module;
+use burn::module::{Module, ModuleVisitor, Param};
 use burn::store::ModuleRecord;
-use burn::tensor::{Bytes, Device};
+use burn::tensor::{Bytes, Device, Tensor};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use clothsr_geometry::error::{Error, Result};
 use clothsr_io::write_atomic;
+
+/// Held while a network is initialised. burn's CPU backend draws every random weight from one
+/// process-wide generator, so a seeded network is only reproducible if no other thread draws
+/// between the seed and the last weight.
+static INIT: Mutex<()> = Mutex::new(());
+
+/// Initialises a network with `init`, from `seed` when given, under the process-wide lock on
+/// burn's random generator. burn initialises parameters lazily, on first use: every one is
+/// drawn here, under the lock. Every network in this crate is made through it, weights to be
+/// loaded over included, so that a seeded initialisation is the same whatever other threads do.
+pub fn init_network<M: Module>(device: &Device, seed: Option<u64>, init: impl FnOnce() -> M) -> M {
+    let _draws = INIT.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(seed) = seed {
+        device.seed(seed);
+    }
+    let net = init();
+    net.visit(&mut DrawEveryParameter);
+    net
+}
+
+/// Draws every lazily initialised float parameter of a module.
+struct DrawEveryParameter;
+
+impl ModuleVisitor for DrawEveryParameter {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let _ = param.val();
+    }
+}
 
 /// Loads `module`'s weights from the burnpack file at `path`, read whole into memory first.
 /// burn's own `try_load_file` keeps the file open as the tensors' lazy source and reads each one

@@ -150,7 +150,8 @@ pub fn load_net(
         ));
     }
     let weights = dir.join(WEIGHTS_FILE);
-    let net = load_weights(config.model.init(device), &weights)?;
+    let net = crate::common::init_network(device, None, || config.model.init(device));
+    let net = load_weights(net, &weights)?;
     Ok((net, norm, config))
 }
 

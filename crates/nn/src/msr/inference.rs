@@ -257,7 +257,8 @@ impl Isr {
         }
         let device = crate::common::default_device()?;
         let weights = dir.join(WEIGHTS_FILE);
-        let net = crate::common::load_weights(cfg.model.init(&device), &weights)?;
+        let net = crate::common::init_network(&device, None, || cfg.model.init(&device));
+        let net = crate::common::load_weights(net, &weights)?;
         Ok(Isr { cfg, net, device })
     }
 

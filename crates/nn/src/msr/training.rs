@@ -279,8 +279,7 @@ pub fn train(
     let resume = open_run(cfg, out)?;
     let resuming = resume.is_some();
     let device = crate::common::default_device()?.autodiff();
-    device.seed(cfg.seed);
-    let mut net = cfg.model.init(&device);
+    let mut net = crate::common::init_network(&device, Some(cfg.seed), || cfg.model.init(&device));
     let mut optim = AdamConfig::new().init();
     let mut position = Position::default();
     if let Some(point) = resume {

@@ -48,7 +48,7 @@ use super::data::{vectors, Sequence};
 use super::inference::{read_json, CONFIG_FILE, NORMALISATION_FILE, WEIGHTS_FILE};
 use super::model::CorrectorNet;
 use super::normalise::{Normalisation, NormalisationBuilder};
-use crate::common::{default_device, read_resume_point, write_json, ResumePoint};
+use crate::common::{default_device, init_network, read_resume_point, write_json, ResumePoint};
 use checkpoint::{Position, BEST_FILE, CHECKPOINT_DIR};
 use clothsr_geometry::error::{Error, Result};
 use clothsr_sim::driver::Simulation;
@@ -207,7 +207,6 @@ pub fn train(
     let position = resume.as_ref().map(|r| r.position).unwrap_or_default();
     let norm_path = out.join(NORMALISATION_FILE);
     let device = default_device()?.autodiff();
-    device.seed(cfg.seed);
     let start = match starting_model(cfg, &device, resuming) {
         Ok(loaded) => loaded,
         Err(e) => {
@@ -232,7 +231,7 @@ pub fn train(
     let rms: f64 = sets.iter().map(|s| s.seq.rms_correction_m()).sum::<f64>() / sets.len() as f64;
     let net = match start {
         Some((net, _)) => net,
-        None => cfg.model.init(&device),
+        None => init_network(&device, Some(cfg.seed), || cfg.model.init(&device)),
     };
     let (net, optim) = if let Some(point) = &resume {
         resume_weights(net, point)?
@@ -243,7 +242,7 @@ pub fn train(
     let log = clothsr_io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
     let best = match position.best {
         Some(_) if resuming => Some(crate::common::load_weights(
-            cfg.model.init(&device),
+            init_network(&device, None, || cfg.model.init(&device)),
             &out.join(CHECKPOINT_DIR).join(BEST_FILE),
         )?),
         _ => None,
