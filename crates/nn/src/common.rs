@@ -32,6 +32,16 @@ pub fn init_network<M: Module>(device: &Device, seed: Option<u64>, init: impl Fn
     net
 }
 
+/// A network of the shape `init` makes ([`init_network`]), with the weights of the burnpack
+/// file at `path` ([`load_weights`]).
+pub fn load_network<M: Module>(
+    device: &Device,
+    path: &Path,
+    init: impl FnOnce() -> M,
+) -> Result<M> {
+    load_weights(init_network(device, None, init), path)
+}
+
 /// Draws every lazily initialised float parameter of a module.
 struct DrawEveryParameter;
 

@@ -17,7 +17,7 @@ use super::graph::{step_change, MeshGraph, ProximityCache, EDGE_FEATURES, NODE_F
 use super::model::{index_tensor, CorrectorConfig, CorrectorNet, GraphTensors};
 use super::normalise::Normalisation;
 use super::training::TrainingConfig;
-use crate::common::{default_device, load_weights};
+use crate::common::{default_device, load_network};
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::mesh::ClothMesh;
 use clothsr_io::data::flat32;
@@ -150,8 +150,7 @@ pub fn load_net(
         ));
     }
     let weights = dir.join(WEIGHTS_FILE);
-    let net = crate::common::init_network(device, None, || config.model.init(device));
-    let net = load_weights(net, &weights)?;
+    let net = load_network(device, &weights, || config.model.init(device))?;
     Ok((net, norm, config))
 }
 

@@ -257,8 +257,7 @@ impl Isr {
         }
         let device = crate::common::default_device()?;
         let weights = dir.join(WEIGHTS_FILE);
-        let net = crate::common::init_network(&device, None, || cfg.model.init(&device));
-        let net = crate::common::load_weights(net, &weights)?;
+        let net = crate::common::load_network(&device, &weights, || cfg.model.init(&device))?;
         Ok(Isr { cfg, net, device })
     }
 

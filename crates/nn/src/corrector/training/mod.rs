@@ -241,9 +241,10 @@ pub fn train(
     let log_path = out.join("log.csv");
     let log = clothsr_io::open_log(&log_path, resuming, "phase,step,lr,loss,seconds")?;
     let best = match position.best {
-        Some(_) if resuming => Some(crate::common::load_weights(
-            init_network(&device, None, || cfg.model.init(&device)),
+        Some(_) if resuming => Some(crate::common::load_network(
+            &device,
             &out.join(CHECKPOINT_DIR).join(BEST_FILE),
+            || cfg.model.init(&device),
         )?),
         _ => None,
     };
