@@ -7,7 +7,8 @@ use super::arrange::{wrap_panels_around_body, WrapOptions};
 use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
 use super::step::{
-    ColliderFrame, Pin, PinTarget, SimParams, SimState, Simulator, SolverMode, StepStats,
+    ColliderFrame, PhaseTimes, Pin, PinTarget, SimParams, SimState, Simulator, SolverMode,
+    StepStats,
 };
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::garment::Fabric;
@@ -146,6 +147,24 @@ pub struct DressStats {
     /// Times sewing doubled the seams' pull after their widest gap stopped closing short of
     /// welding distance.
     pub harder_pulls: u32,
+    /// Newton iterations over every dressing step (sewing, settling, pre-roll).
+    pub newton_iters: usize,
+    /// Where dressing's time went, summed over its steps.
+    pub times: PhaseTimes,
+}
+
+impl DressStats {
+    /// Counts one dressing step's iterations and time.
+    fn count(&mut self, stats: &StepStats) {
+        self.newton_iters += stats.newton_iters;
+        self.times.add(&stats.times);
+    }
+
+    /// Adds another stage's counts to these.
+    fn count_all(&mut self, other: &DressStats) {
+        self.newton_iters += other.newton_iters;
+        self.times.add(&other.times);
+    }
 }
 
 /// A mesh garment's mesh at `edge_m`: remeshed chart by chart like a pattern
@@ -323,7 +342,19 @@ impl Simulation {
     /// (gravity, friction, the run's contact settings) and settle `settle_s` there. Dressing
     /// runs in fast mode whatever the solver's mode (it is set-up, not the trajectory).
     pub fn dress(&mut self, max_s: f64, settle_s: f64, gap_m: f64) -> Result<DressStats> {
-        self.in_fast_mode(|sim| sim.dress_with_preroll(max_s, settle_s, gap_m))
+        let out = self.in_fast_mode(|sim| sim.dress_with_preroll(max_s, settle_s, gap_m))?;
+        let phases = PhaseTimes::NAMES
+            .iter()
+            .zip(out.times.seconds())
+            .map(|(name, s)| format!("{name} {s:.1} s"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        tracing::info!(
+            "dressing: {} Newton iterations over {} steps; {phases}",
+            out.newton_iters,
+            out.sew_steps + out.settle_steps + out.preroll_steps
+        );
+        Ok(out)
     }
 
     /// Runs `f` with the simulator's solver in fast mode, then puts its settings back.
@@ -351,7 +382,8 @@ impl Simulation {
         let mut out = self.dress_here(max_s, settle_s, gap_m)?;
         let steps = (self.preroll_s / self.sim.params.dt_s).round() as usize;
         for _ in 0..steps {
-            self.step()?;
+            let stats = self.step()?;
+            out.count(&stats);
         }
         tracing::info!(
             "dressing: worn through {:.2} s of the bodies' motion to the start ({steps} steps)",
@@ -362,6 +394,7 @@ impl Simulation {
         let settled =
             self.sew_and_settle(&held, DressStats::default(), 0.0, settle_s, gap_m, true)?;
         out.preroll_steps = steps;
+        out.count_all(&settled);
         out.settle_steps += settled.settle_steps;
         out.seam_gap_m = settled.seam_gap_m;
         out.max_penetration_m = settled.max_penetration_m;
@@ -462,6 +495,7 @@ impl Simulation {
                     sewn.seam_gap_m * 1e3
                 );
                 out.sew_steps += sewn.sew_steps;
+                out.count_all(&sewn);
                 out.harder_pulls += sewn.harder_pulls;
                 out.initial_seam_gap_m = out.initial_seam_gap_m.max(sewn.initial_seam_gap_m);
                 self.state.t_s = t_start;
@@ -470,6 +504,7 @@ impl Simulation {
             let settled =
                 self.sew_and_settle(held, DressStats::default(), 0.0, settle_s, gap_m, true)?;
             out.settle_steps = settled.settle_steps;
+            out.count_all(&settled);
             out.seam_gap_m = settled.seam_gap_m;
             out.max_penetration_m = settled.max_penetration_m;
             out.welded_pairs = settled.welded_pairs;
@@ -696,6 +731,7 @@ impl Simulation {
                 };
                 self.state = next;
                 out.sew_steps += 1;
+                out.count(&st);
                 if out.sew_steps.is_multiple_of(30) {
                     tracing::info!(
                         "dressing: sewing step {}: widest seam gap {:.1} mm, newton {}, cg {}, contacts {}, penetration {:.2} mm",
@@ -747,6 +783,7 @@ impl Simulation {
                 let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
                 self.state = next;
                 out.settle_steps += 1;
+                out.count(&stats);
                 out.max_penetration_m = stats.max_penetration_m;
                 // A fine mesh settles for minutes (its moves are capped at half its thin
                 // contact margin an iteration): say where it is, as sewing does.

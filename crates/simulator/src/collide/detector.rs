@@ -37,9 +37,33 @@ pub(super) struct CachedBvh {
     edge_faces: Option<Vec<([u32; 2], [u32; 2])>>,
     refits: u32,
     valid: bool,
+    /// The points the boxes were last taken from (colliders only: a body held still, as
+    /// while dressing or through a step's Newton iterations, is not refitted again).
+    points: Vec<Vector3<f64>>,
+    /// Whether the last [`CachedBvh::update_points`] found other points (or triangles) than
+    /// the call before.
+    moved: bool,
 }
 
 impl CachedBvh {
+    /// [`CachedBvh::update`] with the boxes of triangles `tris` on `pts`, unless these are the
+    /// points and triangles of the previous call: the refit would give the same hierarchy, so
+    /// only its count goes on (the rebuild schedule, and so the contacts, stay the same).
+    fn update_points(&mut self, pts: &[Vector3<f64>], tris: &[[u32; 3]], rebuild_every: u32) {
+        let key = tris.as_flattened();
+        let same = self.valid && self.key == key && self.points == pts;
+        self.moved = !same;
+        if same && self.refits < rebuild_every {
+            self.refits += 1;
+            return;
+        }
+        self.update(key, &triangle_boxes(pts, tris, 0.0), rebuild_every);
+        if !same {
+            self.points.clear();
+            self.points.extend_from_slice(pts);
+        }
+    }
+
     pub(super) fn update(&mut self, key: &[u32], boxes: &[Aabb], rebuild_every: u32) {
         if self.valid && self.refits < rebuild_every && self.key == key {
             self.bvh.refit(boxes);
@@ -108,13 +132,31 @@ pub struct CollisionDetector {
 pub const SURFACE_TURN_DEG: f64 = 10.0;
 
 /// A collider's edges where its surface turns, as found by one call, with a hierarchy over
-/// them.
+/// them; and its sharp edges for crease contacts. Kept while the collider's points and the
+/// settings they were found with stay the same.
 #[derive(Debug, Clone, Default)]
 struct Creases {
     /// End points of each such edge, m.
     segments: Vec<[Vector3<f64>; 2]>,
     /// Over the segments' boxes; `None` when there are none.
     bvh: Option<Bvh>,
+    /// The sharp edges, their faces' planes and a hierarchy over their boxes inflated by half
+    /// the obstacle contact distance it holds; `None` until crease contacts ask.
+    sharp: Option<SharpEdges>,
+    /// Whether `segments` were found with the surface turns asked for.
+    turns_found: bool,
+    /// Whether this is filled for the collider's present points.
+    filled: bool,
+}
+
+/// A collider's sharp edges ([`SHARP_EDGE_DEG`]) for crease contacts.
+#[derive(Debug, Clone)]
+struct SharpEdges {
+    edges: Vec<[u32; 2]>,
+    planes: Vec<Option<super::crease::CreasePlanes>>,
+    /// Over the edges' boxes inflated by `half_dhat_m`.
+    bvh: Option<Bvh>,
+    half_dhat_m: f64,
 }
 
 impl Default for CollisionDetector {
@@ -303,11 +345,7 @@ impl CollisionDetector {
         self.colliders
             .resize_with(colliders.len(), CachedBvh::default);
         for (cache, (pts, tris)) in self.colliders.iter_mut().zip(colliders) {
-            cache.update(
-                tris.as_flattened(),
-                &triangle_boxes(pts, tris, 0.0),
-                rebuild_every,
-            );
+            cache.update_points(pts, tris, rebuild_every);
         }
         self.track_travel(cloth_x, colliders, same_meshes);
         let caches = &self.colliders;
@@ -375,38 +413,63 @@ impl CollisionDetector {
         let mut cloth_edge_bvh: Option<Bvh> = None;
         for (k, (cache, (pts, tris))) in self.colliders.iter_mut().zip(colliders).enumerate() {
             let creases = &mut self.creases[k];
-            creases.segments.clear();
-            creases.bvh = None;
+            if cache.moved || !creases.filled || creases.turns_found != self.surface_turns {
+                *creases = Creases::default();
+            }
             if tris.is_empty() {
                 continue;
             }
             let faces = cache.edge_faces.get_or_insert_with(|| edge_faces(tris));
-            let turns = if self.surface_turns {
-                sharp_edges_of(pts, tris, faces, SURFACE_TURN_DEG)
-            } else {
-                Vec::new()
-            };
-            if !turns.is_empty() {
-                creases.segments.extend(
-                    turns
-                        .iter()
-                        .map(|e| [pts[e[0] as usize], pts[e[1] as usize]]),
-                );
-                creases.bvh = Some(Bvh::build(&edge_boxes(pts, &turns, 0.0)));
+            if !creases.filled {
+                if self.surface_turns {
+                    let turns = sharp_edges_of(pts, tris, faces, SURFACE_TURN_DEG);
+                    creases.segments.extend(
+                        turns
+                            .iter()
+                            .map(|e| [pts[e[0] as usize], pts[e[1] as usize]]),
+                    );
+                    if !turns.is_empty() {
+                        creases.bvh = Some(Bvh::build(&edge_boxes(pts, &turns, 0.0)));
+                    }
+                }
+                creases.turns_found = self.surface_turns;
+                creases.filled = true;
             }
             if !(self.crease_contacts && dhat > 0.0 && !cloth_edges.is_empty()) {
                 continue;
             }
-            let sharp = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
-            if sharp.is_empty() {
-                continue;
+            let half_dhat = 0.5 * obstacle_dhat;
+            if creases
+                .sharp
+                .as_ref()
+                .is_none_or(|s| s.half_dhat_m != half_dhat)
+            {
+                let edges = match creases.sharp.take() {
+                    Some(s) => s.edges,
+                    None => sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG),
+                };
+                let planes = crease_planes(pts, tris, faces, &edges);
+                let bvh =
+                    (!edges.is_empty()).then(|| Bvh::build(&edge_boxes(pts, &edges, half_dhat)));
+                creases.sharp = Some(SharpEdges {
+                    edges,
+                    planes,
+                    bvh,
+                    half_dhat_m: half_dhat,
+                });
             }
-            let body = Bvh::build(&edge_boxes(pts, &sharp, 0.5 * obstacle_dhat));
-            let planes = crease_planes(pts, tris, faces, &sharp);
-            let cloth_edge_bvh = cloth_edge_bvh.get_or_insert_with(|| {
-                Bvh::build(&edge_boxes(cloth_x, cloth_edges, 0.5 * obstacle_dhat))
-            });
-            contacts.extend(cloth_edge_bvh.pairs_with_filter_map(&body, |i, j| {
+            let Some(SharpEdges {
+                edges: sharp,
+                planes,
+                bvh: Some(body),
+                ..
+            }) = creases.sharp.as_ref()
+            else {
+                continue;
+            };
+            let cloth_edge_bvh = cloth_edge_bvh
+                .get_or_insert_with(|| Bvh::build(&edge_boxes(cloth_x, cloth_edges, half_dhat)));
+            contacts.extend(cloth_edge_bvh.pairs_with_filter_map(body, |i, j| {
                 let a = cloth_edges[i as usize];
                 let e = sharp[j as usize];
                 let (p0, p1) = (&pts[e[0] as usize], &pts[e[1] as usize]);

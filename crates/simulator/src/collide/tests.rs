@@ -613,3 +613,62 @@ fn detection_timing_80k_collider() {
     assert_eq!(c1, c2);
     assert!(c2.len() > 1000);
 }
+
+/// A detector keeps a collider's hierarchy and creases while its points stay where they were
+/// (dressing holds the body still; a step's Newton iterations see one collider frame): called
+/// again on the same cube it finds what a new detector finds, and once the cube has moved
+/// (with the cloth draped over its edge) it finds what a new detector finds there, crease
+/// contacts and surface turns included.
+#[test]
+fn a_collider_held_still_or_moved_gives_a_new_detectors_contacts() {
+    let (cube_pts, cube_tris) = cube();
+    // A sheet over the cube's top edge at x = 0.1: half on the top, half hanging past it.
+    let (sheet_x, sheet_tris) = sheet(12, 0.01, Vector3::new(0.04, -0.06, 0.1015));
+    let edges = edges_of(&sheet_tris);
+    let params = CollisionParams {
+        dhat_m: 0.003,
+        kappa: 1e3,
+        self_collision: false,
+    };
+    let fresh = |x: &[Vector3<f64>], pts: &[Vector3<f64>]| {
+        let mut det = CollisionDetector::new();
+        det.surface_turns = true;
+        let contacts = det.find_contacts(x, &sheet_tris, &edges, &[(pts, &cube_tris)], &params);
+        (format!("{contacts:?}"), det)
+    };
+    let mut kept = CollisionDetector::new();
+    kept.surface_turns = true;
+    let mut sheet_now = sheet_x.clone();
+    let mut cube_now = cube_pts.clone();
+    for call in 0..40 {
+        // Still for a while, then moving by 1 mm a call, then still again.
+        if (10..25).contains(&call) {
+            let d = Vector3::new(0.001, 0.0005, 0.0);
+            cube_now.iter_mut().for_each(|p| *p += d);
+            sheet_now.iter_mut().for_each(|p| *p += d);
+        }
+        let got = kept.find_contacts(
+            &sheet_now,
+            &sheet_tris,
+            &edges,
+            &[(&cube_now, &cube_tris)],
+            &params,
+        );
+        let (want, new_det) = fresh(&sheet_now, &cube_now);
+        assert!(
+            got.iter()
+                .any(|c| matches!(c, Contact::EdgeObstacle { .. })),
+            "call {call}: the sheet meets the cube's edge"
+        );
+        assert_eq!(format!("{got:?}"), want, "call {call}");
+        // Surface turns follow the cube: its top edge where it is now, not where it was.
+        let edge_mid = Vector3::new(0.1, 0.0, 0.1) + (cube_now[0] - cube_pts[0]);
+        assert!(kept.crease_within(0, &edge_mid, 1e-4), "call {call}");
+        let first_place = Vector3::new(0.1, 0.0, 0.1);
+        assert_eq!(
+            kept.crease_within(0, &first_place, 1e-4),
+            new_det.crease_within(0, &first_place, 1e-4),
+            "call {call}"
+        );
+    }
+}
