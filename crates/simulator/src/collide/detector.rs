@@ -37,9 +37,6 @@ pub(super) struct CachedBvh {
     edge_faces: Option<Vec<([u32; 2], [u32; 2])>>,
     refits: u32,
     valid: bool,
-    /// The points the boxes were last taken from (colliders only: a body held still, as
-    /// while dressing or through a step's Newton iterations, is not refitted again).
-    points: Vec<Vector3<f64>>,
     /// Whether the last [`CachedBvh::update_points`] found other points (or triangles) than
     /// the call before.
     moved: bool,
@@ -47,21 +44,25 @@ pub(super) struct CachedBvh {
 
 impl CachedBvh {
     /// [`CachedBvh::update`] with the boxes of triangles `tris` on `pts`, unless these are the
-    /// points and triangles of the previous call: the refit would give the same hierarchy, so
-    /// only its count goes on (the rebuild schedule, and so the contacts, stay the same).
-    fn update_points(&mut self, pts: &[Vector3<f64>], tris: &[[u32; 3]], rebuild_every: u32) {
+    /// triangles of the previous call on the same points (`still`; a body held still, as while
+    /// dressing or through a step's Newton iterations): the refit would give the same
+    /// hierarchy, so only its count goes on (the rebuild schedule, and so the contacts, stay
+    /// the same).
+    fn update_points(
+        &mut self,
+        pts: &[Vector3<f64>],
+        tris: &[[u32; 3]],
+        still: bool,
+        rebuild_every: u32,
+    ) {
         let key = tris.as_flattened();
-        let same = self.valid && self.key == key && self.points == pts;
+        let same = still && self.valid && self.key == key;
         self.moved = !same;
         if same && self.refits < rebuild_every {
             self.refits += 1;
             return;
         }
         self.update(key, &triangle_boxes(pts, tris, 0.0), rebuild_every);
-        if !same {
-            self.points.clear();
-            self.points.extend_from_slice(pts);
-        }
     }
 
     pub(super) fn update(&mut self, key: &[u32], boxes: &[Aabb], rebuild_every: u32) {
@@ -344,8 +345,13 @@ impl CollisionDetector {
                 .all(|(cache, (_, tris))| cache.valid && cache.key == tris.as_flattened());
         self.colliders
             .resize_with(colliders.len(), CachedBvh::default);
-        for (cache, (pts, tris)) in self.colliders.iter_mut().zip(colliders) {
-            cache.update_points(pts, tris, rebuild_every);
+        // The colliders' points at the last call are those `track_travel` keeps.
+        for (k, (cache, (pts, tris))) in self.colliders.iter_mut().zip(colliders).enumerate() {
+            let still = self
+                .clearance_bodies
+                .get(k)
+                .is_some_and(|last| last.as_slice() == *pts);
+            cache.update_points(pts, tris, still, rebuild_every);
         }
         self.track_travel(cloth_x, colliders, same_meshes);
         let caches = &self.colliders;
@@ -444,11 +450,15 @@ impl CollisionDetector {
                 .as_ref()
                 .is_none_or(|s| s.half_dhat_m != half_dhat)
             {
-                let edges = match creases.sharp.take() {
-                    Some(s) => s.edges,
-                    None => sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG),
+                // Only the hierarchy depends on the contact distance.
+                let (edges, planes) = match creases.sharp.take() {
+                    Some(s) => (s.edges, s.planes),
+                    None => {
+                        let edges = sharp_edges_of(pts, tris, faces, SHARP_EDGE_DEG);
+                        let planes = crease_planes(pts, tris, faces, &edges);
+                        (edges, planes)
+                    }
                 };
-                let planes = crease_planes(pts, tris, faces, &edges);
                 let bvh =
                     (!edges.is_empty()).then(|| Bvh::build(&edge_boxes(pts, &edges, half_dhat)));
                 creases.sharp = Some(SharpEdges {
