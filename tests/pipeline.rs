@@ -317,9 +317,10 @@ fn a_run_writes_valid_usd_and_rerun_files_and_resumes_exactly() {
     let bodies = Bodies::read_usd(&full.fine).expect("bodies");
     assert!(!bodies.is_empty());
     let x: Vec<Vector3<f64>> = fine[frames].iter().map(|p| p.cast()).collect();
-    assert_eq!(bodies.inside(&x, frames as f64), (0, 0.0));
+    assert_eq!(bodies.inside(&x, frames as f64).inside, 0);
     let sunk: Vec<Vector3<f64>> = x.iter().map(|p| p - Vector3::new(0.0, 0.05, 0.0)).collect();
-    let (n, depth) = bodies.inside(&sunk, frames as f64);
+    let got = bodies.inside(&sunk, frames as f64);
+    let (n, depth) = (got.inside, got.max_depth_m);
     let ball = &scene().colliders[0];
     let mut points = Vec::new();
     ball.positions_at(0.0, &mut points);

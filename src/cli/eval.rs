@@ -128,9 +128,11 @@ fn check(args: &Args) -> anyhow::Result<()> {
         println!("inside the bodies: no bodies in the file");
     } else {
         println!(
-            "inside the bodies: {} frames with any, {:.1} vertices a frame, deepest {:.2} mm",
+            "inside the bodies: {} frames with any, {:.1} vertices a frame ({:.1} where a body \
+             overlaps itself), deepest {:.2} mm",
             h.frames_inside,
             h.inside as f64 / h.frames.max(1) as f64,
+            h.in_overlap as f64 / h.frames.max(1) as f64,
             h.deepest_m * 1e3
         );
     }
@@ -258,10 +260,10 @@ fn print_inside(
             let Some(k) = a.frame_at(f.time_code) else {
                 continue;
             };
-            let (inside, depth) = bodies.inside(&a.frames[k], f.time_code);
-            sum += inside;
-            any += usize::from(inside > 0);
-            deepest = deepest.max(depth);
+            let r = bodies.inside(&a.frames[k], f.time_code);
+            sum += r.inside;
+            any += usize::from(r.inside > 0);
+            deepest = deepest.max(r.max_depth_m);
             n += 1;
         }
         println!(

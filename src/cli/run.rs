@@ -513,9 +513,11 @@ fn show_progress(bar: &ProgressBar, g: &Progress) -> ControlFlow<()> {
     );
     if g.pushed.inside > 0 {
         message += &format!(
-            ", {} fine vertices pushed out of bodies (deepest {:.1} mm)",
+            ", {} fine vertices pushed out of bodies (deepest {:.1} mm; {} where a body overlaps \
+             itself)",
             g.pushed.inside,
-            g.pushed.max_depth_m * 1e3
+            g.pushed.max_depth_m * 1e3,
+            g.pushed.in_overlap
         );
     }
     if bar.is_hidden() {
@@ -545,9 +547,10 @@ fn log_report(output: &Path, report: &Report) {
     );
     if report.pushed.moved > 0 {
         tracing::info!(
-            "fine vertices pushed out of the colliders: {:.0} a frame inside one (deepest {:.1} mm), {:.0} more nearer than the clearance",
+            "fine vertices pushed out of the colliders: {:.0} a frame inside one (deepest {:.1} mm; {:.0} where a collider overlaps itself), {:.0} more nearer than the clearance",
             report.pushed.inside as f64 / n,
             report.pushed.max_depth_m * 1e3,
+            report.pushed.in_overlap as f64 / n,
             (report.pushed.moved - report.pushed.inside) as f64 / n
         );
     }

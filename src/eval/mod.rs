@@ -15,6 +15,7 @@ pub use crate::metrics::{
     bend_angles_deg, hinges, jitter_m, mean_distance_mm, mean_max_std, normal_angle_deg,
     vertex_errors, wasserstein1_sorted,
 };
+use crate::sim::collide::PushOut;
 
 /// The cloth of an animation file: every cloth mesh of the stage, concatenated in prim order.
 #[derive(Debug, Clone, PartialEq)]
@@ -214,10 +215,10 @@ impl Bodies {
     }
 
     /// How many of the points `x`, at time code `t`, lie inside a body (the simulator's sign
-    /// test, [`crate::sim::collide::count_inside`], up to [`INSIDE_SEARCH_M`] deep), and the
-    /// deepest, m. A body between two samples is interpolated linearly, as the simulator does
+    /// test, [`crate::sim::collide::count_inside`], up to [`INSIDE_SEARCH_M`] deep), how many
+    /// of those where the body overlaps itself, and the deepest. A body between two samples is interpolated linearly, as the simulator does
     /// (an avatar sampled every other frame moves centimetres in one).
-    pub fn inside(&self, x: &[Vector3<f64>], t: f64) -> (usize, f64) {
+    pub fn inside(&self, x: &[Vector3<f64>], t: f64) -> PushOut {
         let points: Vec<Vec<Vector3<f64>>> = self
             .bodies
             .iter()
@@ -232,8 +233,7 @@ impl Bodies {
             .zip(&self.bodies)
             .map(|(p, b)| (p.as_slice(), b.triangles.as_slice()))
             .collect();
-        let r = crate::sim::collide::count_inside(x, &colliders, INSIDE_SEARCH_M);
-        (r.inside, r.max_depth_m)
+        crate::sim::collide::count_inside(x, &colliders, INSIDE_SEARCH_M)
     }
 }
 
@@ -250,6 +250,9 @@ pub struct Health {
     pub frames_inside: usize,
     /// Vertices inside a body, summed over the frames.
     pub inside: usize,
+    /// Of those, vertices where the body overlaps itself (inside two of its parts at once, as
+    /// where a walking avatar's thighs pass into each other): no place outside is near them.
+    pub in_overlap: usize,
     /// The deepest vertex inside a body, m.
     pub deepest_m: f64,
     /// The largest distance a vertex moved between two consecutive frames, m.
@@ -303,10 +306,11 @@ pub fn health(anim: &Animation, bodies: &Bodies) -> Health {
             .map(|p| p.iter().filter(|c| !c.is_finite()).count())
             .sum::<usize>();
         if !bodies.is_empty() {
-            let (inside, depth) = bodies.inside(x, t);
-            h.inside += inside;
-            h.frames_inside += usize::from(inside > 0);
-            h.deepest_m = h.deepest_m.max(depth);
+            let r = bodies.inside(x, t);
+            h.inside += r.inside;
+            h.in_overlap += r.in_overlap;
+            h.frames_inside += usize::from(r.inside > 0);
+            h.deepest_m = h.deepest_m.max(r.max_depth_m);
         }
         if !anim.triangles.is_empty() {
             let (all, between) = crossings(anim, x);
@@ -662,12 +666,13 @@ mod tests {
             }],
         };
         let near_top = Vector3::new(0.1, 0.095, 0.0);
-        let (n, depth) = bodies.inside(&[near_top, Vector3::new(0.1, 0.0, 0.0)], 1.0);
-        assert_eq!(n, 1);
+        let r = bodies.inside(&[near_top, Vector3::new(0.1, 0.0, 0.0)], 1.0);
+        let depth = r.max_depth_m;
+        assert_eq!((r.inside, r.in_overlap), (1, 0));
         // The icosphere's faces lie a little inside the sphere: 5 mm less that.
         assert!(depth > 0.004 && depth < 0.005, "{depth}");
-        assert_eq!(bodies.inside(&[near_top], 0.0), (0, 0.0));
-        assert_eq!(bodies.inside(&[near_top], 2.0), (0, 0.0));
+        assert_eq!(bodies.inside(&[near_top], 0.0), PushOut::default());
+        assert_eq!(bodies.inside(&[near_top], 2.0), PushOut::default());
     }
 
     /// Three frames of two points over a still ball: one point dips 5 mm into it in the second

@@ -468,6 +468,7 @@ fn add_frame(totals: &mut FrameTimes, pushed: &mut PushOut, p: &Pipeline<'_>) {
     totals.corrector_s += p.times.corrector_s;
     totals.msr_s += p.times.msr_s;
     pushed.inside += p.pushed.inside;
+    pushed.in_overlap += p.pushed.in_overlap;
     pushed.moved += p.pushed.moved;
     pushed.max_depth_m = pushed.max_depth_m.max(p.pushed.max_depth_m);
 }

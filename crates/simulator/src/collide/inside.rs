@@ -20,6 +20,10 @@ pub struct PushOut {
     pub moved: usize,
     /// How deep the deepest point was inside a collider, m (0 when none was).
     pub max_depth_m: f64,
+    /// Of the points inside, those where a closed collider overlaps itself: inside two of its
+    /// parts at once (winding number two or more, [`winding_number`]), as where a skinned
+    /// body's thighs pass into each other. No place outside the body is near such a point.
+    pub in_overlap: usize,
 }
 
 /// Moves every point of `x` that lies inside a collider, or outside it but nearer than
@@ -43,6 +47,7 @@ pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m:
                 let Some((to, depth)) = solid.push(p, cands) else {
                     return PushOut::default();
                 };
+                let overlap = depth.is_some() && solid.in_overlap(p);
                 *p = to;
                 // A point on the medial axis (equally near two faces) goes out from the
                 // closest point of one along their pseudo-normal and may end nearer the
@@ -53,7 +58,7 @@ pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m:
                         None => break,
                     }
                 }
-                PushOut::of(depth)
+                PushOut::of(depth, overlap)
             })
             .reduce(PushOut::default, PushOut::add);
         total = total.add(r);
@@ -74,7 +79,9 @@ pub fn count_inside(x: &[Vector3<f64>], colliders: &[Collider<'_>], search_m: f6
             .map_init(Vec::new, |cands, p| {
                 solid
                     .push(p, cands)
-                    .map_or_else(PushOut::default, |(_, depth)| PushOut::of(depth))
+                    .map_or_else(PushOut::default, |(_, depth)| {
+                        PushOut::of(depth, depth.is_some() && solid.in_overlap(p))
+                    })
             })
             .reduce(PushOut::default, PushOut::add);
         total = total.add(r);
@@ -84,12 +91,13 @@ pub fn count_inside(x: &[Vector3<f64>], colliders: &[Collider<'_>], search_m: f6
 
 impl PushOut {
     /// One point moved, from `depth` inside (`None`: it was outside, nearer than the
-    /// clearance).
-    fn of(depth: Option<f64>) -> PushOut {
+    /// clearance), `overlap`: where the collider overlaps itself.
+    fn of(depth: Option<f64>, overlap: bool) -> PushOut {
         PushOut {
             inside: usize::from(depth.is_some()),
             moved: 1,
             max_depth_m: depth.unwrap_or(0.0),
+            in_overlap: usize::from(overlap),
         }
     }
 
@@ -99,6 +107,7 @@ impl PushOut {
             inside: self.inside + o.inside,
             moved: self.moved + o.moved,
             max_depth_m: self.max_depth_m.max(o.max_depth_m),
+            in_overlap: self.in_overlap + o.in_overlap,
         }
     }
 }
@@ -110,6 +119,8 @@ pub(super) struct Solid<'a> {
     bvh: Bvh,
     /// Only a point in here can be inside the body or nearer than the clearance.
     reach: Aabb,
+    /// Whether every edge is shared by two triangles (a winding number is defined).
+    closed: bool,
     clearance_m: f64,
     search_m: f64,
 }
@@ -127,7 +138,8 @@ impl<'a> Solid<'a> {
         }
         // A closed body's points' box grown by the clearance holds every point inside or
         // near it; an open one (a floor, a wall) has an inside as deep as the search behind.
-        let grow = if is_closed(tris) {
+        let closed = is_closed(tris);
+        let grow = if closed {
             clearance_m
         } else {
             clearance_m.max(search_m)
@@ -137,6 +149,7 @@ impl<'a> Solid<'a> {
             tris,
             bvh: Bvh::build(&triangle_boxes(pts, tris, 0.0)),
             reach: Aabb::from_points(pts.iter()).inflate(grow),
+            closed,
             clearance_m,
             search_m,
         })
@@ -179,6 +192,52 @@ impl<'a> Solid<'a> {
         };
         Some((q + dir * self.clearance_m, inside.then_some(umin)))
     }
+
+    /// Whether `at` lies where the collider overlaps itself (winding number two or more);
+    /// false for an open collider.
+    fn in_overlap(&self, at: &Vector3<f64>) -> bool {
+        self.closed && winding_number(self.pts, self.tris, &self.bvh, at) >= 2
+    }
+}
+
+/// The winding number of the closed surface `tris` (counter-clockwise seen from outside) about
+/// `at`: 0 outside, 1 inside, 2 inside two parts that pass into each other, and so on. Counted
+/// along rays from `at` in +x, +y and +z as the faces they leave through less those they enter
+/// through; the median of the three, so that one ray grazing an edge or a vertex (where the
+/// count is undefined) does not decide. `bvh` holds the faces' boxes.
+pub(super) fn winding_number(
+    pts: &[Vector3<f64>],
+    tris: &[[u32; 3]],
+    bvh: &Bvh,
+    at: &Vector3<f64>,
+) -> i32 {
+    let top = bvh.root_aabb().max;
+    let mut w = [0i32; 3];
+    for (k, wk) in w.iter_mut().enumerate() {
+        // The ray's axis k and the plane across it (i, j), cyclic so that the face normal's
+        // k-component is the projected triangle's signed area.
+        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+        let mut ray = Aabb::from_point(at);
+        ray.max[k] = ray.max[k].max(top[k]);
+        bvh.query(&ray, |t| {
+            let [a, b, c] = tri_points(pts, &tris[t as usize]);
+            let orient = |p: &Vector3<f64>, q: &Vector3<f64>| {
+                (p[i] - at[i]) * (q[j] - at[j]) - (p[j] - at[j]) * (q[i] - at[i])
+            };
+            let (wa, wb, wc) = (orient(&b, &c), orient(&c, &a), orient(&a, &b));
+            let area = wa + wb + wc;
+            let inside = (wa > 0.0 && wb > 0.0 && wc > 0.0) || (wa < 0.0 && wb < 0.0 && wc < 0.0);
+            if !inside {
+                return;
+            }
+            let hit = (wa * a[k] + wb * b[k] + wc * c[k]) / area;
+            if hit > at[k] {
+                *wk += if area > 0.0 { 1 } else { -1 };
+            }
+        });
+    }
+    w.sort_unstable();
+    w[1]
 }
 
 /// Whether every edge of `tris` is shared by exactly two of them (a closed surface).
@@ -221,4 +280,73 @@ pub fn max_penetration(cloth_x: &[Vector3<f64>], colliders: &[Collider<'_>]) -> 
                 .fold(0.0, f64::max)
         })
         .reduce(|| 0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two cubes [−0.1, 0.1]³, the second moved by `shift`, as one closed surface that passes
+    /// into itself (as a skinned body's thighs do).
+    fn two_cubes(shift: Vector3<f64>) -> (Vec<Vector3<f64>>, Vec<[u32; 3]>) {
+        let (mut pts, mut tris) = crate::collide::tests::cube();
+        let n = pts.len() as u32;
+        let moved: Vec<Vector3<f64>> = pts.iter().map(|p| p + shift).collect();
+        let second: Vec<[u32; 3]> = tris.iter().map(|t| t.map(|v| v + n)).collect();
+        pts.extend(moved);
+        tris.extend(second);
+        (pts, tris)
+    }
+
+    /// The winding number about points spread over both cubes and around them is the number
+    /// of cubes each lies in; and counting cloth inside tells the points where the body
+    /// overlaps itself from those inside one part only.
+    #[test]
+    fn the_winding_number_counts_the_parts_of_a_body_a_point_is_in() {
+        let shift = Vector3::new(0.15, 0.02, 0.03);
+        let (pts, tris) = two_cubes(shift);
+        assert!(is_closed(&tris));
+        let bvh = Bvh::build(&triangle_boxes(&pts, &tris, 0.0));
+        let in_cube = |p: Vector3<f64>| usize::from(p.iter().all(|v| v.abs() < 0.1));
+        // A lattice with irrational-looking steps, so that no ray runs along a face's edge.
+        let mut seen = [0usize; 3];
+        for a in 0..17 {
+            for b in 0..13 {
+                for c in 0..11 {
+                    let p = Vector3::new(
+                        -0.13 + a as f64 * 0.02617,
+                        -0.12 + b as f64 * 0.02131,
+                        -0.11 + c as f64 * 0.02293,
+                    );
+                    let want = in_cube(p) + in_cube(p - shift);
+                    assert_eq!(winding_number(&pts, &tris, &bvh, &p), want as i32, "{p:?}");
+                    seen[want] += 1;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&n| n > 100), "{seen:?}");
+        // A ray along the edge two faces share (where its count is undefined) is outvoted:
+        // inside the first cube only, the +x ray of a point with y = z runs along the x+
+        // face's diagonal, the +y ray of one with x = z along the y+ face's.
+        for p in [
+            Vector3::new(-0.05, 0.01, 0.01),
+            Vector3::new(-0.03, 0.01, -0.03),
+        ] {
+            assert_eq!(winding_number(&pts, &tris, &bvh, &p), 1, "{p:?}");
+        }
+        // Both under the first cube's top face, 3–5 mm deep: one also inside the second cube.
+        let x = [
+            Vector3::new(0.09, 0.095, 0.05),
+            Vector3::new(-0.05, 0.097, 0.01),
+        ];
+        let r = count_inside(&x, &[(&pts, &tris)], OBSTACLE_SEARCH_M);
+        assert_eq!((r.inside, r.in_overlap), (2, 1), "{r:?}");
+        let mut moved = x;
+        let pushed = push_out(&mut moved, &[(&pts, &tris)], 1e-3);
+        assert_eq!((pushed.inside, pushed.in_overlap), (2, 1), "{pushed:?}");
+        // An open surface (the first cube without its top) has no winding number.
+        let open = &tris[..6];
+        let r = count_inside(&x, &[(&pts, open)], OBSTACLE_SEARCH_M);
+        assert_eq!(r.in_overlap, 0, "{r:?}");
+    }
 }
