@@ -79,37 +79,11 @@ pub fn wrap_panels_around_body(
 ) -> Vec<WrappedPanel> {
     let mut out = Vec::new();
     for g in garments {
-        let (y_lo, y_hi) = x[g.clone()]
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p.y), hi.max(p.y))
-            });
-        // Triangle centroids in the garment's height range, weighted by area.
-        let mut cx: Vec<(f64, f64)> = Vec::new();
-        let mut cz: Vec<(f64, f64)> = Vec::new();
-        for b in body {
-            for t in b.triangles {
-                let [p, q, r] = t.map(|v| b.points[v as usize]);
-                let c = (p + q + r) / 3.0;
-                if c.y < y_lo || c.y > y_hi {
-                    continue;
-                }
-                let area = 0.5 * (q - p).cross(&(r - p)).norm();
-                if area.is_finite() && area > 0.0 {
-                    cx.push((c.x, area));
-                    cz.push((c.z, area));
-                }
-            }
-        }
-        let band: Vec<Vector3<f64>> = body
-            .iter()
-            .flat_map(|b| b.points.iter())
-            .filter(|p| p.y >= y_lo - opts.clearance_m && p.y <= y_hi + opts.clearance_m)
-            .copied()
-            .collect();
-        let (Some(ax), Some(az)) = (weighted_median(cx), weighted_median(cz)) else {
+        let (y_lo, y_hi) = height_range(g.clone().map(|i| &x[i]));
+        let Some(garment_axis) = axis_in(body, y_lo, y_hi) else {
             continue;
         };
+        let band = band_in(body, y_lo, y_hi, opts.clearance_m);
         let mut panels: Vec<usize> = mesh.panel_of_vertex[g.clone()]
             .iter()
             .map(|&p| p as usize)
@@ -121,21 +95,38 @@ pub fn wrap_panels_around_body(
                 .clone()
                 .filter(|&i| mesh.panel_of_vertex[i] as usize == panel)
                 .collect();
-            let axis = Axis {
-                point: Vector3::new(ax, 0.0, az),
-                up: Vector3::y(),
-            };
-            let wrapped = match wrap_panel(mesh, panel, &verts, x, axis, &band, opts) {
+            let wrapped = match wrap_panel(mesh, panel, &verts, x, garment_axis, &band, false, opts)
+            {
                 // A panel beside the torso (a sleeve in front of or behind an arm) rolls
                 // around the limb it covers instead.
                 Err(Error::Invalid(why)) if why == NOT_FACING => {
                     match limb_under(mesh, panel, &verts, x, body) {
-                        Some((limb, points)) => {
-                            wrap_panel(mesh, panel, &verts, x, limb, &points, opts).map_err(|w| {
-                                Error::Invalid(format!("{why}, and around the limb under it: {w}"))
-                            })
-                        }
+                        Some((limb, points)) => wrap_panel(
+                            mesh, panel, &verts, x, limb, &points, false, opts,
+                        )
+                        .map_err(|w| {
+                            Error::Invalid(format!("{why}, and around the limb under it: {w}"))
+                        }),
                         None => Err(Error::Invalid(format!("{why}, and covers no limb"))),
+                    }
+                }
+                // A panel above or below most of the garment (a hood beside the head, over the
+                // shoulders) rolls around the body at its own height, clear of the body points
+                // it covers: those under its outline, not of its whole height range.
+                Err(Error::Invalid(why)) if why.starts_with(CLEARING) => {
+                    let (lo, hi) = height_range(verts.iter().map(|&i| &x[i]));
+                    match axis_in(body, lo, hi) {
+                        Some(own) => {
+                            let near = band_in(body, lo, hi, opts.clearance_m);
+                            wrap_panel(mesh, panel, &verts, x, own, &near, true, opts).map_err(
+                                |w| {
+                                    Error::Invalid(format!(
+                                        "{why}, and around the body at its own height: {w}"
+                                    ))
+                                },
+                            )
+                        }
+                        None => Err(Error::Invalid(why)),
                     }
                 }
                 other => other,
@@ -149,6 +140,48 @@ pub fn wrap_panels_around_body(
         }
     }
     out
+}
+
+/// The lowest and highest `y` of `points`.
+fn height_range<'a>(points: impl Iterator<Item = &'a Vector3<f64>>) -> (f64, f64) {
+    points.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+        (lo.min(p.y), hi.max(p.y))
+    })
+}
+
+/// The vertical axis of the body between heights `lo` and `hi`: through the area-weighted
+/// median (x, z) of its triangles' centroids there, so that finely meshed hands do not pull it
+/// aside. `None` when no triangle lies there.
+fn axis_in(body: &[ColliderFrame<'_>], lo: f64, hi: f64) -> Option<Axis> {
+    let mut cx: Vec<(f64, f64)> = Vec::new();
+    let mut cz: Vec<(f64, f64)> = Vec::new();
+    for b in body {
+        for t in b.triangles {
+            let [p, q, r] = t.map(|v| b.points[v as usize]);
+            let c = (p + q + r) / 3.0;
+            if c.y < lo || c.y > hi {
+                continue;
+            }
+            let area = 0.5 * (q - p).cross(&(r - p)).norm();
+            if area.is_finite() && area > 0.0 {
+                cx.push((c.x, area));
+                cz.push((c.z, area));
+            }
+        }
+    }
+    Some(Axis {
+        point: Vector3::new(weighted_median(cx)?, 0.0, weighted_median(cz)?),
+        up: Vector3::y(),
+    })
+}
+
+/// The body points between heights `lo` and `hi`, `clearance_m` more each way.
+fn band_in(body: &[ColliderFrame<'_>], lo: f64, hi: f64, clearance_m: f64) -> Vec<Vector3<f64>> {
+    body.iter()
+        .flat_map(|b| b.points.iter())
+        .filter(|p| p.y >= lo - clearance_m && p.y <= hi + clearance_m)
+        .copied()
+        .collect()
 }
 
 /// The weighted median (None when empty): the value below which half the weight lies. When
@@ -177,6 +210,13 @@ fn weighted_median(mut v: Vec<(f64, f64)>) -> Option<f64> {
 
 /// Why a panel beside the body's axis is not rolled around it.
 const NOT_FACING: &str = "does not face the body's axis";
+
+/// Along the roll, how far from a body point's angle a panel's vertices count as over it when
+/// only the panel's outline is cleared, m (about two coarse edges).
+const OUTLINE_WINDOW_M: f64 = 0.04;
+
+/// How the reason begins when a panel would have to move too far out to clear the body.
+const CLEARING: &str = "clearing the body";
 
 /// How far from a panel's plane body points count as under it, m.
 const LIMB_REACH_M: f64 = 0.15;
@@ -305,7 +345,11 @@ impl Axis {
     }
 }
 
-/// Rolls one panel (its vertices `verts`) about `axis`, or says why it stays as placed.
+/// Rolls one panel (its vertices `verts`) about `axis`, or says why it stays as placed. It
+/// clears the body points of `band` in its sector at any of its heights, or with `outline`
+/// only those within the panel's own height span where they are (a hood's outline rises from
+/// the shoulders).
+#[allow(clippy::too_many_arguments)]
 fn wrap_panel(
     mesh: &ClothMesh,
     panel: usize,
@@ -313,6 +357,7 @@ fn wrap_panel(
     x: &mut [Vector3<f64>],
     axis: Axis,
     band: &[Vector3<f64>],
+    outline: bool,
     opts: &WrapOptions,
 ) -> Result<WrappedPanel> {
     let invalid = |why: &str| Error::Invalid(why.into());
@@ -363,15 +408,28 @@ fn wrap_panel(
             let y = axis.height(&x[i]);
             (lo.min(y), hi.max(y))
         });
+    // With `outline`, the panel's height span near a point's angle: that of its vertices
+    // within a window of it along the roll.
+    let window = OUTLINE_WINDOW_M + opts.clearance_m;
+    let span_at = |phi: f64| {
+        let at = phi * placed_r;
+        verts
+            .iter()
+            .zip(&u)
+            .filter(|(_, &ui)| (ui - at).abs() <= window)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (&i, _)| {
+                let y = axis.height(&x[i]);
+                (lo.min(y), hi.max(y))
+            })
+    };
     let near: Vec<(f64, f64)> = band
         .iter()
-        .filter(|p| {
+        .filter_map(|p| {
             let y = axis.height(p);
-            y >= y_lo - opts.clearance_m && y <= y_hi + opts.clearance_m
-        })
-        .map(|p| {
             let q = axis.across(*p) - a;
-            (q.dot(&t_hat).atan2(q.dot(&r_hat)), q.norm())
+            let phi = q.dot(&t_hat).atan2(q.dot(&r_hat));
+            let (lo, hi) = if outline { span_at(phi) } else { (y_lo, y_hi) };
+            (y >= lo - opts.clearance_m && y <= hi + opts.clearance_m).then_some((phi, q.norm()))
         })
         .collect();
     // Move out past every body point of the sector that lies within the clearance of the
@@ -393,7 +451,7 @@ fn wrap_panel(
     }
     if radius > placed_r + opts.max_push_m {
         return Err(Error::Invalid(format!(
-            "clearing the body would take it from {:.0} to {:.0} mm from the axis",
+            "{CLEARING} would take it from {:.0} to {:.0} mm from the axis",
             placed_r * 1e3,
             radius * 1e3
         )));
@@ -481,6 +539,77 @@ mod tests {
 
     fn horizontal_radius(p: &Vector3<f64>) -> f64 {
         p.x.hypot(p.z)
+    }
+
+    /// A hood's side: one upright panel 0.2 m wide and 0.3 m high, 0.1 m in front of the y
+    /// axis and facing it, whose lower edge rises from a low corner on its left (x ≤ −0.04)
+    /// to 0.12 m at its right; meshed at 2 cm.
+    fn hood_side() -> ClothMesh {
+        use clothsr_geometry::garment::{Curve, Garment, Panel, PanelEdge, Placement};
+        let vertices = [(0.0, 0.0), (0.06, 0.0), (0.2, 0.12), (0.2, 0.3), (0.0, 0.3)]
+            .map(|(u, v)| nalgebra::Vector2::new(u, v))
+            .to_vec();
+        let edges = (0..vertices.len())
+            .map(|k| PanelEdge {
+                start: k,
+                end: (k + 1) % vertices.len(),
+                curve: Curve::Straight,
+            })
+            .collect();
+        let g = Garment {
+            name: "hood".into(),
+            panels: vec![Panel {
+                name: "side".into(),
+                vertices,
+                edges,
+                placement: Placement {
+                    translation_m: Vector3::new(-0.1, 0.0, 0.1),
+                    rotation_xyz_deg: Vector3::zeros(),
+                },
+            }],
+            seams: Vec::new(),
+            fabric: Fabric::default(),
+        };
+        mesh_garment(&g, &MeshOptions::with_edge(0.02)).expect("mesh")
+    }
+
+    /// Rolled around the y axis, the hood's side clears every body point of its sector within
+    /// its height range, or with `outline` only those within its height span where they are: a
+    /// shoulder (points from 0.102 to 0.2 m out, 2 cm high, under its raised right side) keeps
+    /// it flat unless only its outline is cleared; a point under the outline, 0.105 m out,
+    /// moves it out to the clearance from that point either way.
+    #[test]
+    fn a_panel_clears_the_body_under_its_outline() {
+        let mesh = hood_side();
+        let verts: Vec<usize> = (0..mesh.num_vertices()).collect();
+        let opts = WrapOptions::default();
+        let axis = Axis {
+            point: Vector3::zeros(),
+            up: Vector3::y(),
+        };
+        let out = Vector3::new(0.09, 0.0, 0.1).normalize();
+        let mut band: Vec<Vector3<f64>> = (0..20)
+            .map(|k| out * (0.102 + 0.005 * k as f64) + Vector3::new(0.0, 0.02, 0.0))
+            .collect();
+        let under = Vector3::new(0.03, 0.2, (0.105f64.powi(2) - 0.03f64.powi(2)).sqrt());
+        band.push(under);
+        let mut x = mesh.positions.clone();
+        let whole = wrap_panel(&mesh, 0, &verts, &mut x, axis, &band, false, &opts);
+        match whole {
+            Err(Error::Invalid(why)) => assert!(why.starts_with(CLEARING), "{why}"),
+            other => panic!("rolled clear of the shoulder: {other:?}"),
+        }
+        assert_eq!(x, mesh.positions, "left as placed");
+        let w = wrap_panel(&mesh, 0, &verts, &mut x, axis, &band, true, &opts).expect("rolled");
+        assert!((w.radius_m - 0.115).abs() < 1e-9, "{w:?}");
+        for p in &x {
+            assert!((horizontal_radius(p) - 0.115).abs() < 1e-9, "{p}");
+        }
+        // Without the shoulder, the whole height range and the outline roll it alike.
+        band.drain(..20);
+        let mut y = mesh.positions.clone();
+        wrap_panel(&mesh, 0, &verts, &mut y, axis, &band, false, &opts).expect("rolled");
+        assert_eq!(x, y);
     }
 
     #[test]
