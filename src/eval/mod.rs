@@ -216,8 +216,9 @@ impl Bodies {
 
     /// How many of the points `x`, at time code `t`, lie inside a body (the simulator's sign
     /// test, [`crate::sim::collide::count_inside`], up to [`INSIDE_SEARCH_M`] deep), how many
-    /// of those where the body overlaps itself, and the deepest. A body between two samples is interpolated linearly, as the simulator does
-    /// (an avatar sampled every other frame moves centimetres in one).
+    /// of those where the body overlaps itself, and the deepest. A body between two samples is
+    /// interpolated linearly, as the simulator does (an avatar sampled every other frame moves
+    /// centimetres in one).
     pub fn inside(&self, x: &[Vector3<f64>], t: f64) -> PushOut {
         let points: Vec<Vec<Vector3<f64>>> = self
             .bodies

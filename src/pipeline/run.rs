@@ -467,10 +467,7 @@ fn add_frame(totals: &mut FrameTimes, pushed: &mut PushOut, p: &Pipeline<'_>) {
     totals.simulator_s += p.times.simulator_s;
     totals.corrector_s += p.times.corrector_s;
     totals.msr_s += p.times.msr_s;
-    pushed.inside += p.pushed.inside;
-    pushed.in_overlap += p.pushed.in_overlap;
-    pushed.moved += p.pushed.moved;
-    pushed.max_depth_m = pushed.max_depth_m.max(p.pushed.max_depth_m);
+    *pushed = *pushed + p.pushed;
 }
 
 /// Runs `frames` frames of `p` (set up on `scene`) into `out`, shown in `preview` when given.

@@ -60,8 +60,8 @@ pub fn push_out(x: &mut [Vector3<f64>], colliders: &[Collider<'_>], clearance_m:
                 }
                 PushOut::of(depth, overlap)
             })
-            .reduce(PushOut::default, PushOut::add);
-        total = total.add(r);
+            .reduce(PushOut::default, |a, b| a + b);
+        total = total + r;
     }
     total
 }
@@ -83,8 +83,8 @@ pub fn count_inside(x: &[Vector3<f64>], colliders: &[Collider<'_>], search_m: f6
                         PushOut::of(depth, depth.is_some() && solid.in_overlap(p))
                     })
             })
-            .reduce(PushOut::default, PushOut::add);
-        total = total.add(r);
+            .reduce(PushOut::default, |a, b| a + b);
+        total = total + r;
     }
     total
 }
@@ -100,8 +100,12 @@ impl PushOut {
             in_overlap: usize::from(overlap),
         }
     }
+}
 
-    /// Both counts together.
+impl std::ops::Add for PushOut {
+    type Output = PushOut;
+
+    /// Both counts together (two frames', or two colliders').
     fn add(self, o: PushOut) -> PushOut {
         PushOut {
             inside: self.inside + o.inside,
@@ -205,12 +209,7 @@ impl<'a> Solid<'a> {
 /// along rays from `at` in +x, +y and +z as the faces they leave through less those they enter
 /// through; the median of the three, so that one ray grazing an edge or a vertex (where the
 /// count is undefined) does not decide. `bvh` holds the faces' boxes.
-pub(super) fn winding_number(
-    pts: &[Vector3<f64>],
-    tris: &[[u32; 3]],
-    bvh: &Bvh,
-    at: &Vector3<f64>,
-) -> i32 {
+fn winding_number(pts: &[Vector3<f64>], tris: &[[u32; 3]], bvh: &Bvh, at: &Vector3<f64>) -> i32 {
     let top = bvh.root_aabb().max;
     let mut w = [0i32; 3];
     for (k, wk) in w.iter_mut().enumerate() {
