@@ -503,6 +503,8 @@ fn an_outfit_is_dressed_inside_out_and_its_layers_never_cross() {
     let d = sim.dress(max_s, settle_s, gap_m).expect("dressing");
     closed_and_outside(&d, dhat_m);
     assert_eq!(d.welded_pairs, sim.sim.model.mesh.seam_pairs.len(), "{d:?}");
+    // Each layer was sewn beside only the cloth within its reach.
+    assert_eq!(d.layers_alone, 2, "{d:?}");
     assert_eq!(layers_crossed(&sim), 0, "dressed");
     // The garments meet each other in the run too, self-collision off as asked.
     assert!(!sim.sim.params.collision.self_collision && sim.sim.cloth_contacts_on());

@@ -121,6 +121,22 @@ const WELD_MAX_DHAT: f64 = 3.0;
 /// (each time doubling the seam springs' stiffness and how far they may stretch).
 const SEWING_PULL_DOUBLINGS: u32 = 4;
 
+/// How far beyond the box around an outfit's layer, when its sewing starts, the garments
+/// under it are kept in the simulation that sews it ([`Simulation::sew_layer_alone`]), m.
+/// Sewn without gravity, a garment is drawn in around the body, not out of that box.
+const LAYER_REACH_M: f64 = 0.1;
+
+/// The smallest and largest coordinates of `points`.
+fn bounds(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
+    points.iter().fold(
+        (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        ),
+        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
+    )
+}
+
 /// What dressing did ([`Simulation::dress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DressStats {
@@ -147,6 +163,9 @@ pub struct DressStats {
     /// Times sewing doubled the seams' pull after their widest gap stopped closing short of
     /// welding distance.
     pub harder_pulls: u32,
+    /// Layers of an outfit sewn in a simulation of their own, with only the garments under
+    /// them within reach (the others sewn in the whole outfit's).
+    pub layers_alone: usize,
     /// Newton iterations over every dressing step (sewing, settling, pre-roll).
     pub newton_iters: usize,
     /// Where dressing's time went, summed over its steps.
@@ -474,20 +493,32 @@ impl Simulation {
                 );
                 out.wrapped_panels += wrapped.len();
                 self.seams_at_rest_where_they_are()?;
-                // Every other garment is held where it is.
-                let mut layer_pins = pins.clone();
-                let pinned: std::collections::HashSet<u32> = pins.iter().map(|p| p.v).collect();
-                for v in (0..self.state.x.len()).filter(|v| !g.contains(v)) {
-                    if !pinned.contains(&(v as u32)) {
-                        layer_pins.push(Pin {
-                            v: v as u32,
-                            target: PinTarget::Fixed(self.state.x[v]),
-                        });
+                let sewn = match self.sew_layer_alone(held, garments, k, max_s, gap_m)? {
+                    Some(sewn) => {
+                        out.layers_alone += 1;
+                        sewn
                     }
-                }
-                self.sim.set_pins(layer_pins);
-                let active = (0..garments.len()).map(|j| j <= k).collect();
-                let sewn = self.sew_layer(held, max_s, gap_m, active)?;
+                    None => {
+                        // Every other garment is held where it is, in the whole outfit's
+                        // simulation.
+                        let mut layer_pins = pins.clone();
+                        let pinned: std::collections::HashSet<u32> =
+                            pins.iter().map(|p| p.v).collect();
+                        for v in (0..self.state.x.len()).filter(|v| !g.contains(v)) {
+                            if !pinned.contains(&(v as u32)) {
+                                layer_pins.push(Pin {
+                                    v: v as u32,
+                                    target: PinTarget::Fixed(self.state.x[v]),
+                                });
+                            }
+                        }
+                        self.sim.set_pins(layer_pins);
+                        let active = (0..garments.len()).map(|j| j <= k).collect();
+                        let sewn = self.sew_layer(held, max_s, gap_m, active)?;
+                        self.sim.set_pins(pins.clone());
+                        sewn
+                    }
+                };
                 tracing::info!(
                     "dressing layer {}: sewn in {} steps, widest seam gap {:.1} mm",
                     k + 1,
@@ -514,6 +545,156 @@ impl Simulation {
         self.sim.set_pins(pins);
         cloth_contacts(&mut self.sim, false, None);
         layered
+    }
+
+    /// Sews layer `k` of an outfit ([`Self::dress_in_layers`]) in a simulation of its own:
+    /// garment `k`, and of the garments under it only the triangles within [`LAYER_REACH_M`]
+    /// of the box around it, held where they are; the later garments (parked) left out. In
+    /// the whole outfit's simulation the held garments took part in every detection, assembly
+    /// and linear solve of the layer's Newton iterations though only their contact with it
+    /// mattered. Its positions and seam rest lengths are then written back. `None` (nothing
+    /// changed) when the garment left the box on its way in, so that a dropped triangle
+    /// may have been within its reach: the caller sews it in the whole outfit instead.
+    fn sew_layer_alone(
+        &mut self,
+        held: &[Vec<Vector3<f64>>],
+        garments: &[std::ops::Range<usize>],
+        k: usize,
+        max_s: f64,
+        gap_m: f64,
+    ) -> Result<Option<DressStats>> {
+        let g = garments[k].clone();
+        let model = &self.sim.model;
+        let x = &self.state.x;
+        let (lo, hi) = bounds(&x[g.clone()]);
+        let reach = Vector3::repeat(LAYER_REACH_M);
+        let (lo, hi) = (lo - reach, hi + reach);
+        let within = |p: &Vector3<f64>| (0..3).all(|c| p[c] >= lo[c] && p[c] <= hi[c]);
+        // The garments under it, cropped to the box, then the garment itself; `map`: each
+        // vertex's index in the outfit.
+        let mut meshes: Vec<(String, ClothMesh, Fabric)> = Vec::new();
+        let mut map: Vec<usize> = Vec::new();
+        for j in 0..k {
+            let part = &model.parts[j];
+            let tris: Vec<[u32; 3]> = model.mesh.triangles[part.triangles.clone()]
+                .iter()
+                .filter(|t| t.iter().any(|&v| within(&x[v as usize])))
+                .copied()
+                .collect();
+            if tris.is_empty() {
+                continue;
+            }
+            let mut local = vec![u32::MAX; model.mesh.positions.len()];
+            let mut verts: Vec<usize> = Vec::new();
+            let tris: Vec<[u32; 3]> = tris
+                .iter()
+                .map(|t| {
+                    t.map(|v| {
+                        if local[v as usize] == u32::MAX {
+                            local[v as usize] = verts.len() as u32;
+                            verts.push(v as usize);
+                        }
+                        local[v as usize]
+                    })
+                })
+                .collect();
+            let mesh = ClothMesh {
+                material: verts.iter().map(|&v| model.mesh.material[v]).collect(),
+                positions: verts.iter().map(|&v| x[v]).collect(),
+                triangles: tris,
+                panel_of_vertex: verts
+                    .iter()
+                    .map(|&v| model.mesh.panel_of_vertex[v])
+                    .collect(),
+                panel_names: model.mesh.panel_names.clone(),
+                // Its seams are held closed where they are.
+                seam_pairs: Vec::new(),
+            };
+            meshes.push((part.name.clone(), mesh, part.fabric.clone()));
+            map.extend(verts);
+        }
+        let held_count = map.len();
+        let own = model.part_mesh(k);
+        let own = ClothMesh {
+            positions: x[g.clone()].to_vec(),
+            ..own
+        };
+        meshes.push((
+            model.parts[k].name.clone(),
+            own,
+            model.parts[k].fabric.clone(),
+        ));
+        map.extend(g.clone());
+        let pieces: Vec<(&str, &ClothMesh, &Fabric)> =
+            meshes.iter().map(|(n, m, f)| (n.as_str(), m, f)).collect();
+        let mut sim = Simulator::new(ClothModel::new(&pieces)?, self.sim.params.clone());
+        let mut index = vec![u32::MAX; x.len()];
+        for (s, &v) in map.iter().enumerate() {
+            index[v] = s as u32;
+        }
+        let mut layer_pins: Vec<Pin> = (0..held_count)
+            .map(|s| Pin {
+                v: s as u32,
+                target: PinTarget::Fixed(x[map[s]]),
+            })
+            .collect();
+        // The scene's own pins on the garment.
+        layer_pins.extend(
+            self.sim
+                .pins()
+                .iter()
+                .filter(|p| g.contains(&(p.v as usize)))
+                .map(|p| Pin {
+                    v: index[p.v as usize],
+                    ..*p
+                }),
+        );
+        sim.set_pins(layer_pins);
+        let own_seams: Vec<usize> = (0..model.mesh.seam_pairs.len())
+            .filter(|&p| g.contains(&(model.mesh.seam_pairs[p][0] as usize)))
+            .collect();
+        let rest: Vec<f64> = own_seams.iter().map(|&p| self.sim.seam_rest()[p]).collect();
+        sim.set_seam_rest(&rest)?;
+        let mut layer = Simulation {
+            sim,
+            state: SimState {
+                x: map.iter().map(|&v| x[v]).collect(),
+                v: vec![Vector3::zeros(); map.len()],
+                t_s: self.state.t_s,
+            },
+            colliders: self.colliders.clone(),
+            steps_per_frame: self.steps_per_frame,
+            fps: self.fps,
+            edge_m: self.edge_m,
+            preroll_s: 0.0,
+            buffers: [Vec::new(), Vec::new()],
+        };
+        let parts = layer.sim.model.parts.len();
+        let sewn = layer.sew_layer(held, max_s, gap_m, vec![true; parts])?;
+        // Within contact reach of the box's walls, it may have met a triangle left out.
+        let p = &layer.sim.params;
+        let wall = Vector3::repeat(p.detection_margin_m.max(p.collision.dhat_m));
+        let (lo_in, hi_in) = (lo + wall, hi - wall);
+        let inside = layer.state.x[held_count..]
+            .iter()
+            .all(|q| (0..3).all(|c| q[c] >= lo_in[c] && q[c] <= hi_in[c]));
+        if !inside {
+            tracing::info!(
+                "dressing layer {}: the garment left the box around it while sewn; sewing it \
+                 again beside the whole outfit",
+                k + 1
+            );
+            return Ok(None);
+        }
+        for (s, &v) in map.iter().enumerate().skip(held_count) {
+            self.state.x[v] = layer.state.x[s];
+        }
+        let mut all = self.sim.seam_rest().to_vec();
+        for (&p, &r) in own_seams.iter().zip(layer.sim.seam_rest()) {
+            all[p] = r;
+        }
+        self.sim.set_seam_rest(&all)?;
+        Ok(Some(sewn))
     }
 
     /// Dresses the garments from positions `x` where the garment is already nearly sewn and
