@@ -63,14 +63,16 @@ mkdir -p "$DATA/scenes" "$DATA/held_out_scenes"
   --avatar "$AVATAR" --fabric silk -o "$GARMENT_SCENE" > "$GARMENT_SCENE.log" 2>&1
 echo "$GARMENT_SCENE" >> "$DATA/held_out.txt"
 
+# Whether data set OUT holds at least FRAMES frames (training reads frames 1..=N only).
+complete() {
+  [ -f "$1/manifest.json" ] && [ "$(sed -n 's/.*"frames_done": \([0-9]*\),.*/\1/p' \
+    "$1/manifest.json")" -ge "$2" ] 2>/dev/null
+}
+
 dataset() { # SCENE OUT FRAMES [variation flags…]
   local scene=$1 out=$2 frames=$3
   shift 3
-  # Done when it holds at least the frames asked for (training reads frames 1..=N only).
-  if [ -f "$out/manifest.json" ] && [ "$(sed -n 's/.*"frames_done": \([0-9]*\),.*/\1/p' \
-    "$out/manifest.json")" -ge "$frames" ] 2>/dev/null; then
-    return 0
-  fi
+  complete "$out" "$frames" && return 0
   # shellcheck disable=SC2068
   "$BIN" lab dataset "$scene" "${COMMON[@]}" --frames "$frames" $@ -o "$out" \
     > "$out.log" 2>&1
@@ -171,6 +173,11 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
     name=$(basename "$scene" .usda)
     for k in 0 1 2; do
       [ -f "$EV/${name}_s$k.eval.csv" ] && continue
+      # A start whose data is still being made is evaluated on a later run.
+      if ! complete "$DATA/held_out/${name}_s$k" "$(frames_of "$name")"; then
+        echo "$(date +%T) ${name}_s$k: data not complete, not evaluated"
+        continue
+      fi
       evaluate_start "$scene" "$name" "$k" &
       running=$((running + 1))
       if [ "$running" -ge "$JOBS" ]; then
@@ -197,6 +204,7 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
       for k in 0 1 2; do
         e=$EV/${name}_s$k
         [ -f "$e.blind.csv" ] && continue
+        complete "$DATA/held_out/${name}_s$k" "$(frames_of "$name")" || continue
         "$BIN" lab sr --model "$DATA/isr_blind" --data "$DATA/held_out/${name}_s$k" \
           --csv "$e.blind.csv" > "$e.blind.txt"
       done
