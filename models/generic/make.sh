@@ -63,6 +63,12 @@ mkdir -p "$DATA/scenes" "$DATA/held_out_scenes"
   --avatar "$AVATAR" --fabric silk -o "$GARMENT_SCENE" > "$GARMENT_SCENE.log" 2>&1
 echo "$GARMENT_SCENE" >> "$DATA/held_out.txt"
 
+# Data set DIR's manifest as the models folder keeps it (in $OUT/data): paths relative to the
+# repository, or to the data folder.
+kept_manifest() {
+  sed "s|$(pwd)/||g; s|$(cd "$DATA" && pwd)/||g" "$1/manifest.json"
+}
+
 # Whether data set OUT holds at least FRAMES frames (training reads frames 1..=N only).
 complete() {
   [ -f "$1/manifest.json" ] && [ "$(sed -n 's/.*"frames_done": \([0-9]*\),.*/\1/p' \
@@ -118,7 +124,15 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
   # blocks), with the fabric and the coarse/fine ratio as inputs; beside it the coarse model
   # best over all training shots, on the settings that mattered on the sample scenes
   # (docs/experiments/three_balls.md), over each shot's first second.
-  trained() { [ -f "$1/model.bpk" ] && [ ! -d "$1/checkpoint" ]; }
+  # Models count as trained on this data only when the folder keeps the manifests of the
+  # same training data sets (written once both are trained): data remade (another simulator,
+  # another reference) trains them again.
+  same_data() {
+    for d in "$DATA"/train/*/; do
+      cmp -s <(kept_manifest "${d%/}") "$OUT/data/$(basename "$d").manifest.json" || return 1
+    done
+  }
+  trained() { [ -f "$1/model.bpk" ] && [ ! -d "$1/checkpoint" ] && same_data; }
   pids=()
   if ! trained "$OUT/isr"; then
     "$BIN" lab train isr "${train_data[@]}" -o "$OUT/isr" --steps 12000 --no-init \
@@ -126,7 +140,7 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
       --unshuffle 4 --depths 2,2,2 --condition > "$DATA/isr.log" 2>&1 &
     pids+=($!)
   fi
-  if [ ! -f "$OUT/coarse.json" ]; then
+  if [ ! -f "$OUT/coarse.json" ] || ! same_data; then
     "$BIN" lab calibrate "${train_data[@]}" -o "$OUT/coarse.json" \
       --csv "$DATA/calibration.csv" --frames "$((TRAIN_FRAMES - 1))" --compression 1,0.1,0.01 --friction scene,2.5 \
       --wrinkle-bending 0,1 > "$DATA/calibration.log" 2>&1 &
@@ -134,6 +148,10 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
   fi
   for p in "${pids[@]}"; do wait "$p"; done
   rm -rf "$OUT/isr/checkpoint"
+  mkdir -p "$OUT/data"
+  for d in "$DATA"/train/*/; do
+    kept_manifest "${d%/}" > "$OUT/data/$(basename "$d").manifest.json"
+  done
 fi
 
 if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
@@ -211,12 +229,9 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
     done < "$DATA/held_out.txt"
   fi
   python3 models/generic/summarise.py "$DATA" "$OUT" "$HELD_FRAMES" "$GARMENT_FRAMES"
-  # What the models came from and were measured on: paths relative to the repository, or to
-  # the data folder.
+  # What the models were measured on (the training sets' manifests are kept by `train`).
   mkdir -p "$OUT/data"
-  data_abs=$(cd "$DATA" && pwd)
-  for d in "$DATA"/train/*/ "$DATA"/held_out/*/; do
-    sed "s|$(pwd)/||g; s|$data_abs/||g" "${d%/}/manifest.json" \
-      > "$OUT/data/$(basename "$d").manifest.json"
+  for d in "$DATA"/held_out/*/; do
+    kept_manifest "${d%/}" > "$OUT/data/$(basename "$d").manifest.json"
   done
 fi
