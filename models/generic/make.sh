@@ -232,6 +232,8 @@ if [ "$STAGE" = eval ] || [ "$STAGE" = all ]; then
   # What the models were measured on (the training sets' manifests are kept by `train`).
   mkdir -p "$OUT/data"
   for d in "$DATA"/held_out/*/; do
-    kept_manifest "${d%/}" > "$OUT/data/$(basename "$d").manifest.json"
+    name=$(basename "$d")
+    complete "${d%/}" "$(frames_of "${name%_s[0-9]}")" || continue
+    kept_manifest "${d%/}" > "$OUT/data/$name.manifest.json"
   done
 fi
