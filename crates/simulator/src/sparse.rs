@@ -792,20 +792,39 @@ mod tests {
 #[derive(Clone)]
 pub struct CholeskyPreconditioner {
     symbolic: faer::sparse::SymbolicSparseColMat<usize>,
-    llt_symbolic: faer::sparse::linalg::solvers::SymbolicLlt<usize>,
+    llt_symbolic: std::sync::Arc<faer::sparse::linalg::cholesky::SymbolicCholesky<usize>>,
     /// Per pattern block k = (I, J) with I ≥ J: the value slot of each of its 9 scalars (row
     /// a, column b, column-major), or usize::MAX above the diagonal of a diagonal block.
     slots: Vec<(usize, [usize; 9])>,
     values: Vec<f64>,
-    factor: Option<faer::sparse::linalg::solvers::Llt<usize, f64>>,
+    /// The factor's values, kept between factorisations (a stiff cloth's factor is hundreds
+    /// of megabytes: allocated afresh each time, most of its cost was the pages' first touch).
+    factor: Vec<f64>,
+    factored: bool,
+    /// The factorisation's and the solve's scratch memory, kept likewise.
+    scratch: Scratch,
     work: Vec<f64>,
+}
+
+/// Scratch memory of faer's factorisation and solves, allocated on first use (a clone starts
+/// without).
+#[derive(Default)]
+struct Scratch {
+    factorize: Option<faer::dyn_stack::MemBuffer>,
+    solve: Option<faer::dyn_stack::MemBuffer>,
+}
+
+impl Clone for Scratch {
+    fn clone(&self) -> Self {
+        Scratch::default()
+    }
 }
 
 impl std::fmt::Debug for CholeskyPreconditioner {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("CholeskyPreconditioner")
             .field("nnz", &self.values.len())
-            .field("factored", &self.factor.is_some())
+            .field("factored", &self.factored)
             .finish()
     }
 }
@@ -848,29 +867,33 @@ impl CholeskyPreconditioner {
         let nnz = row_idx.len();
         let symbolic =
             faer::sparse::SymbolicSparseColMat::new_checked(3 * n, 3 * n, col_ptr, None, row_idx);
-        let llt_symbolic = faer::sparse::linalg::solvers::SymbolicLlt::try_new(
+        let llt_symbolic = faer::sparse::linalg::cholesky::factorize_symbolic_cholesky(
             symbolic.as_ref(),
             faer::Side::Lower,
+            Default::default(),
+            Default::default(),
         )
         .ok()?;
         Some(CholeskyPreconditioner {
             symbolic,
-            llt_symbolic,
+            llt_symbolic: std::sync::Arc::new(llt_symbolic),
             slots: slot_of,
             values: vec![0.0; nnz],
-            factor: None,
+            factor: Vec::new(),
+            factored: false,
+            scratch: Scratch::default(),
             work: vec![0.0; 3 * n],
         })
     }
 
     /// Drops the factor: the next solve factorises again, as a new preconditioner would.
     pub fn forget(&mut self) {
-        self.factor = None;
+        self.factored = false;
     }
 
     /// Whether a factor is available.
     pub fn is_factored(&self) -> bool {
-        self.factor.is_some()
+        self.factored
     }
 
     /// Factorises the current values of `a` (fixed vertices as identity). Returns false (and
@@ -901,30 +924,53 @@ impl CholeskyPreconditioner {
             }
         }
         let mat = faer::sparse::SparseColMatRef::new(self.symbolic.as_ref(), &self.values);
-        self.factor = faer::sparse::linalg::solvers::Llt::try_new_with_symbolic(
-            self.llt_symbolic.clone(),
-            mat,
-            faer::Side::Lower,
-        )
-        .ok();
-        self.factor.is_some()
+        // As faer's `Llt::try_new_with_symbolic` does, into the kept memory: the factor's
+        // values start from zero.
+        let symbolic = &self.llt_symbolic;
+        let par = faer::get_global_parallelism();
+        self.factor.clear();
+        self.factor.resize(symbolic.len_val(), 0.0);
+        let scratch = self.scratch.factorize.get_or_insert_with(|| {
+            faer::dyn_stack::MemBuffer::new(
+                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            )
+        });
+        self.factored = symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut self.factor,
+                mat,
+                faer::Side::Lower,
+                Default::default(),
+                par,
+                faer::dyn_stack::MemStack::new(scratch),
+                Default::default(),
+            )
+            .is_ok();
+        self.factored
     }
 
     /// z = L⁻ᵀL⁻¹ r (zero on fixed vertices).
     pub fn apply(&mut self, r: &[Vector3<f64>], z: &mut [Vector3<f64>], free: &[bool]) {
-        use faer::linalg::solvers::SolveCore;
-        let Some(factor) = &self.factor else {
+        if !self.factored {
             z.copy_from_slice(r);
             return;
-        };
+        }
         for (i, v) in r.iter().enumerate() {
             self.work[3 * i..3 * i + 3].copy_from_slice(v.as_slice());
         }
         let n = self.work.len();
-        factor.solve_in_place_with_conj(
-            faer::Conj::No,
-            faer::MatMut::from_column_major_slice_mut(&mut self.work, n, 1),
-        );
+        let symbolic = &self.llt_symbolic;
+        let par = faer::get_global_parallelism();
+        let scratch = self.scratch.solve.get_or_insert_with(|| {
+            faer::dyn_stack::MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, par))
+        });
+        faer::sparse::linalg::cholesky::LltRef::new(symbolic, &self.factor)
+            .solve_in_place_with_conj(
+                faer::Conj::No,
+                faer::MatMut::from_column_major_slice_mut(&mut self.work, n, 1),
+                par,
+                faer::dyn_stack::MemStack::new(scratch),
+            );
         for (i, zi) in z.iter_mut().enumerate() {
             *zi = if free[i] {
                 Vector3::new(self.work[3 * i], self.work[3 * i + 1], self.work[3 * i + 2])
