@@ -133,6 +133,12 @@ if [ "$STAGE" = train ] || [ "$STAGE" = all ]; then
     done
   }
   trained() { [ -f "$1/model.bpk" ] && [ ! -d "$1/checkpoint" ] && same_data; }
+  # Models trained again make every held-out figure of the old ones stale (the floors' fine
+  # simulations, which no model enters, stay).
+  if ! same_data && [ -d "$DATA/eval" ]; then
+    rm -rf "$DATA/isr_blind"
+    rm -f "$DATA"/eval/*.{eval,sr,blind}.{csv,txt}
+  fi
   pids=()
   if ! trained "$OUT/isr"; then
     "$BIN" lab train isr "${train_data[@]}" -o "$OUT/isr" --steps 12000 --no-init \

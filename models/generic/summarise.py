@@ -98,7 +98,8 @@ def main():
                 }
             )
     if not rows:
-        sys.exit("summarise.py: no held-out shot has all its starts evaluated yet")
+        print("summarise.py: no held-out shot has all its starts evaluated yet", file=sys.stderr)
+        return
     every = [r for rs in rows.values() for r in rs]
     def mean(key, rs=every):
         values = [r[key] for r in rs]

@@ -87,8 +87,8 @@ fn fingerprint(sim: &Simulation) -> u64 {
         }
     };
     // 2: seams that stall are pulled harder; 3: contact within panels while sewing; 4: outfits
-    // dressed one garment at a time.
-    eat(b"clothsr dressed 4");
+    // dressed one garment at a time; 5: each layer of an outfit sewn in a simulation of its own.
+    eat(b"clothsr dressed 5");
     let model = &sim.sim.model;
     for p in &sim.state.x {
         p.iter().for_each(|c| eat(&c.to_le_bytes()));

@@ -8,7 +8,7 @@ use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
 use super::step::{
     ColliderFrame, PhaseTimes, Pin, PinTarget, SimParams, SimState, Simulator, SolverMode,
-    StepStats,
+    StepStats, MAX_OBSTACLE_MARGIN_M,
 };
 use clothsr_geometry::error::{Error, Result};
 use clothsr_geometry::garment::Fabric;
@@ -548,13 +548,14 @@ impl Simulation {
     }
 
     /// Sews layer `k` of an outfit ([`Self::dress_in_layers`]) in a simulation of its own:
-    /// garment `k`, and of the garments under it only the triangles within [`LAYER_REACH_M`]
-    /// of the box around it, held where they are; the later garments (parked) left out. In
-    /// the whole outfit's simulation the held garments took part in every detection, assembly
-    /// and linear solve of the layer's Newton iterations though only their contact with it
-    /// mattered. Its positions and seam rest lengths are then written back. `None` (nothing
-    /// changed) when the garment left the box on its way in, so that a dropped triangle
-    /// may have been within its reach: the caller sews it in the whole outfit instead.
+    /// garment `k`, and of the garments under it only the triangles whose boxes come within
+    /// [`LAYER_REACH_M`] of the box around it, held where they are; the later garments
+    /// (parked) left out. In the whole outfit's simulation the held garments took part in every
+    /// detection, assembly and linear solve of the layer's Newton iterations though only their
+    /// contact with it mattered. Its positions and seam rest lengths are then written back.
+    /// `None` (nothing changed) when the sewn garment ends within contact reach of the box's
+    /// walls where cloth was left out beyond them, or when its simulation fails: the caller
+    /// sews it in the whole outfit instead.
     fn sew_layer_alone(
         &mut self,
         held: &[Vec<Vector3<f64>>],
@@ -569,22 +570,26 @@ impl Simulation {
         let (lo, hi) = bounds(&x[g.clone()]);
         let reach = Vector3::repeat(LAYER_REACH_M);
         let (lo, hi) = (lo - reach, hi + reach);
-        let within = |p: &Vector3<f64>| (0..3).all(|c| p[c] >= lo[c] && p[c] <= hi[c]);
+        // A triangle is kept when its box meets the layer's: every one left out lies wholly
+        // outside it.
+        let meets = |t: &[u32; 3]| {
+            let (a, b) = bounds(&t.map(|v| x[v as usize]));
+            (0..3).all(|c| a[c] <= hi[c] && b[c] >= lo[c])
+        };
         // The garments under it, cropped to the box, then the garment itself; `map`: each
         // vertex's index in the outfit.
         let mut meshes: Vec<(String, ClothMesh, Fabric)> = Vec::new();
         let mut map: Vec<usize> = Vec::new();
-        for j in 0..k {
-            let part = &model.parts[j];
-            let tris: Vec<[u32; 3]> = model.mesh.triangles[part.triangles.clone()]
-                .iter()
-                .filter(|t| t.iter().any(|&v| within(&x[v as usize])))
-                .copied()
-                .collect();
+        let mut held_seams: Vec<usize> = Vec::new();
+        let mut dropped = false;
+        let mut local = vec![u32::MAX; x.len()];
+        for part in &model.parts[..k] {
+            let all = &model.mesh.triangles[part.triangles.clone()];
+            let tris: Vec<[u32; 3]> = all.iter().filter(|t| meets(t)).copied().collect();
+            dropped |= tris.len() < all.len();
             if tris.is_empty() {
                 continue;
             }
-            let mut local = vec![u32::MAX; model.mesh.positions.len()];
             let mut verts: Vec<usize> = Vec::new();
             let tris: Vec<[u32; 3]> = tris
                 .iter()
@@ -598,6 +603,14 @@ impl Simulation {
                     })
                 })
                 .collect();
+            // Its seams between kept vertices (with self-collision, the cloth on either side
+            // of a seam is not a contact).
+            let seams: Vec<usize> = (0..model.mesh.seam_pairs.len())
+                .filter(|&p| {
+                    let [a, b] = model.mesh.seam_pairs[p].map(|v| v as usize);
+                    part.vertices.contains(&a) && local[a] != u32::MAX && local[b] != u32::MAX
+                })
+                .collect();
             let mesh = ClothMesh {
                 material: verts.iter().map(|&v| model.mesh.material[v]).collect(),
                 positions: verts.iter().map(|&v| x[v]).collect(),
@@ -607,17 +620,19 @@ impl Simulation {
                     .map(|&v| model.mesh.panel_of_vertex[v])
                     .collect(),
                 panel_names: model.mesh.panel_names.clone(),
-                // Its seams are held closed where they are.
-                seam_pairs: Vec::new(),
+                seam_pairs: seams
+                    .iter()
+                    .map(|&p| model.mesh.seam_pairs[p].map(|v| local[v as usize]))
+                    .collect(),
             };
+            held_seams.extend(seams);
             meshes.push((part.name.clone(), mesh, part.fabric.clone()));
             map.extend(verts);
         }
         let held_count = map.len();
-        let own = model.part_mesh(k);
         let own = ClothMesh {
             positions: x[g.clone()].to_vec(),
-            ..own
+            ..model.part_mesh(k)
         };
         meshes.push((
             model.parts[k].name.clone(),
@@ -625,9 +640,19 @@ impl Simulation {
             model.parts[k].fabric.clone(),
         ));
         map.extend(g.clone());
+        let own_seams: Vec<usize> = (0..model.mesh.seam_pairs.len())
+            .filter(|&p| g.contains(&(model.mesh.seam_pairs[p][0] as usize)))
+            .collect();
         let pieces: Vec<(&str, &ClothMesh, &Fabric)> =
             meshes.iter().map(|(n, m, f)| (n.as_str(), m, f)).collect();
-        let mut sim = Simulator::new(ClothModel::new(&pieces)?, self.sim.params.clone());
+        let layer_model = match ClothModel::new(&pieces) {
+            Ok(m) => m,
+            Err(e) => {
+                tracing::warn!("dressing layer {}: not sewn alone ({e})", k + 1);
+                return Ok(None);
+            }
+        };
+        let mut sim = Simulator::new(layer_model, self.sim.params.clone());
         let mut index = vec![u32::MAX; x.len()];
         for (s, &v) in map.iter().enumerate() {
             index[v] = s as u32;
@@ -650,10 +675,11 @@ impl Simulation {
                 }),
         );
         sim.set_pins(layer_pins);
-        let own_seams: Vec<usize> = (0..model.mesh.seam_pairs.len())
-            .filter(|&p| g.contains(&(model.mesh.seam_pairs[p][0] as usize)))
+        let rest: Vec<f64> = held_seams
+            .iter()
+            .chain(&own_seams)
+            .map(|&p| self.sim.seam_rest()[p])
             .collect();
-        let rest: Vec<f64> = own_seams.iter().map(|&p| self.sim.seam_rest()[p]).collect();
         sim.set_seam_rest(&rest)?;
         let mut layer = Simulation {
             sim,
@@ -670,27 +696,45 @@ impl Simulation {
             buffers: [Vec::new(), Vec::new()],
         };
         let parts = layer.sim.model.parts.len();
-        let sewn = layer.sew_layer(held, max_s, gap_m, vec![true; parts])?;
-        // Within contact reach of the box's walls, it may have met a triangle left out.
-        let p = &layer.sim.params;
-        let wall = Vector3::repeat(p.detection_margin_m.max(p.collision.dhat_m));
-        let (lo_in, hi_in) = (lo + wall, hi - wall);
-        let inside = layer.state.x[held_count..]
-            .iter()
-            .all(|q| (0..3).all(|c| q[c] >= lo_in[c] && q[c] <= hi_in[c]));
-        if !inside {
-            tracing::info!(
-                "dressing layer {}: the garment left the box around it while sewn; sewing it \
-                 again beside the whole outfit",
-                k + 1
+        let sewn = match layer.sew_layer(held, max_s, gap_m, vec![true; parts]) {
+            Ok(sewn) => sewn,
+            Err(e) => {
+                tracing::warn!("dressing layer {}: sewing it alone failed ({e})", k + 1);
+                return Ok(None);
+            }
+        };
+        if dropped {
+            // Within reach of the box's walls, it may have met cloth left out beyond them:
+            // sewing's contact thickness (the mesh's own) and the largest margin contacts are
+            // looked for within.
+            let p = &self.sim.params;
+            let thickness = SimParams::for_edge(self.edge_m)
+                .collision
+                .dhat_m
+                .max(p.collision.dhat_m);
+            let wall = Vector3::repeat(
+                2.0 * thickness + p.detection_margin_m.max(thickness) + MAX_OBSTACLE_MARGIN_M,
             );
-            return Ok(None);
+            let (lo_in, hi_in) = (lo + wall, hi - wall);
+            let inside = layer.state.x[held_count..]
+                .iter()
+                .all(|q| (0..3).all(|c| q[c] >= lo_in[c] && q[c] <= hi_in[c]));
+            if !inside {
+                tracing::info!(
+                    "dressing layer {}: the garment came near cloth left out of its sewing; \
+                     sewing it again beside the whole outfit",
+                    k + 1
+                );
+                return Ok(None);
+            }
         }
         for (s, &v) in map.iter().enumerate().skip(held_count) {
             self.state.x[v] = layer.state.x[s];
         }
+        self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
         let mut all = self.sim.seam_rest().to_vec();
-        for (&p, &r) in own_seams.iter().zip(layer.sim.seam_rest()) {
+        let layer_rest = &layer.sim.seam_rest()[held_seams.len()..];
+        for (&p, &r) in own_seams.iter().zip(layer_rest) {
             all[p] = r;
         }
         self.sim.set_seam_rest(&all)?;

@@ -806,12 +806,25 @@ pub struct CholeskyPreconditioner {
     work: Vec<f64>,
 }
 
-/// Scratch memory of faer's factorisation and solves, allocated on first use (a clone starts
-/// without).
+/// Scratch memory of faer's factorisation and solves, allocated on first use for the
+/// parallelism then in force (a clone starts without).
 #[derive(Default)]
 struct Scratch {
-    factorize: Option<faer::dyn_stack::MemBuffer>,
-    solve: Option<faer::dyn_stack::MemBuffer>,
+    factorize: Option<(faer::Par, faer::dyn_stack::MemBuffer)>,
+    solve: Option<(faer::Par, faer::dyn_stack::MemBuffer)>,
+}
+
+/// `slot`'s buffer when it was made for `par`, else a new one of `req(par)` (`None`: out of
+/// memory).
+fn scratch_for(
+    slot: &mut Option<(faer::Par, faer::dyn_stack::MemBuffer)>,
+    par: faer::Par,
+    req: impl FnOnce(faer::Par) -> faer::dyn_stack::StackReq,
+) -> Option<&mut faer::dyn_stack::MemBuffer> {
+    if slot.as_ref().is_none_or(|(p, _)| *p != par) {
+        *slot = Some((par, faer::dyn_stack::MemBuffer::try_new(req(par)).ok()?));
+    }
+    slot.as_mut().map(|(_, b)| b)
 }
 
 impl Clone for Scratch {
@@ -928,13 +941,18 @@ impl CholeskyPreconditioner {
         // values start from zero.
         let symbolic = &self.llt_symbolic;
         let par = faer::get_global_parallelism();
+        self.factored = false;
         self.factor.clear();
-        self.factor.resize(symbolic.len_val(), 0.0);
-        let scratch = self.scratch.factorize.get_or_insert_with(|| {
-            faer::dyn_stack::MemBuffer::new(
-                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            )
-        });
+        let len = symbolic.len_val();
+        if self.factor.try_reserve_exact(len).is_err() {
+            return false;
+        }
+        self.factor.resize(len, 0.0);
+        let Some(scratch) = scratch_for(&mut self.scratch.factorize, par, |par| {
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default())
+        }) else {
+            return false;
+        };
         self.factored = symbolic
             .factorize_numeric_llt::<f64>(
                 &mut self.factor,
@@ -961,9 +979,13 @@ impl CholeskyPreconditioner {
         let n = self.work.len();
         let symbolic = &self.llt_symbolic;
         let par = faer::get_global_parallelism();
-        let scratch = self.scratch.solve.get_or_insert_with(|| {
-            faer::dyn_stack::MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, par))
-        });
+        let Some(scratch) = scratch_for(&mut self.scratch.solve, par, |par| {
+            symbolic.solve_in_place_scratch::<f64>(1, par)
+        }) else {
+            // Out of memory for the solve: no preconditioning this time.
+            z.copy_from_slice(r);
+            return;
+        };
         faer::sparse::linalg::cholesky::LltRef::new(symbolic, &self.factor)
             .solve_in_place_with_conj(
                 faer::Conj::No,

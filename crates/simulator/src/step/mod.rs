@@ -97,7 +97,7 @@ pub struct Welded {
 }
 
 /// Upper bound of the adaptive cloth–collider detection margin, m.
-const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
+pub(crate) const MAX_OBSTACLE_MARGIN_M: f64 = 0.01;
 impl Simulator {
     /// A simulator for `model` with `params`.
     pub fn new(model: ClothModel, params: SimParams) -> Simulator {
