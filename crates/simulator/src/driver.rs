@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 
 use super::arrange::{wrap_panels_around_body, WrapOptions};
+use super::collide::bvh::Aabb;
 use super::collide::{push_out, Collider as BodyMesh, PushOut};
 use super::model::ClothModel;
 use super::step::{
@@ -125,17 +126,6 @@ const SEWING_PULL_DOUBLINGS: u32 = 4;
 /// under it are kept in the simulation that sews it ([`Simulation::sew_layer_alone`]), m.
 /// Sewn without gravity, a garment is drawn in around the body, not out of that box.
 const LAYER_REACH_M: f64 = 0.1;
-
-/// The smallest and largest coordinates of `points`.
-fn bounds(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
-    points.iter().fold(
-        (
-            Vector3::repeat(f64::INFINITY),
-            Vector3::repeat(f64::NEG_INFINITY),
-        ),
-        |(lo, hi), p| (lo.inf(p), hi.sup(p)),
-    )
-}
 
 /// What dressing did ([`Simulation::dress`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -567,15 +557,10 @@ impl Simulation {
         let g = garments[k].clone();
         let model = &self.sim.model;
         let x = &self.state.x;
-        let (lo, hi) = bounds(&x[g.clone()]);
-        let reach = Vector3::repeat(LAYER_REACH_M);
-        let (lo, hi) = (lo - reach, hi + reach);
+        let reach = Aabb::from_points(&x[g.clone()]).inflate(LAYER_REACH_M);
         // A triangle is kept when its box meets the layer's: every one left out lies wholly
         // outside it.
-        let meets = |t: &[u32; 3]| {
-            let (a, b) = bounds(&t.map(|v| x[v as usize]));
-            (0..3).all(|c| a[c] <= hi[c] && b[c] >= lo[c])
-        };
+        let meets = |t: &[u32; 3]| reach.overlaps(&Aabb::from_points(t.map(|v| &x[v as usize])));
         // The garments under it, cropped to the box, then the garment itself; `map`: each
         // vertex's index in the outfit.
         let mut meshes: Vec<(String, ClothMesh, Fabric)> = Vec::new();
@@ -712,13 +697,12 @@ impl Simulation {
                 .collision
                 .dhat_m
                 .max(p.collision.dhat_m);
-            let wall = Vector3::repeat(
-                2.0 * thickness + p.detection_margin_m.max(thickness) + MAX_OBSTACLE_MARGIN_M,
-            );
-            let (lo_in, hi_in) = (lo + wall, hi - wall);
+            let wall =
+                2.0 * thickness + p.detection_margin_m.max(thickness) + MAX_OBSTACLE_MARGIN_M;
+            let within = reach.inflate(-wall);
             let inside = layer.state.x[held_count..]
                 .iter()
-                .all(|q| (0..3).all(|c| q[c] >= lo_in[c] && q[c] <= hi_in[c]));
+                .all(|q| within.distance_sq(q) == 0.0);
             if !inside {
                 tracing::info!(
                     "dressing layer {}: the garment came near cloth left out of its sewing; \
