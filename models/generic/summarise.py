@@ -180,8 +180,8 @@ def main():
 
     manifest = {
         "format_version": 1,
-        "scene": "the held-out shots of `clothsr lab scenes --set held-out` and a T-shirt on the "
-        "walk: " + ", ".join(s for s in shots if s not in pending),
+        "scene": "the held-out shots evaluated (of `clothsr lab scenes --set held-out`, and a "
+        "T-shirt on the walk): " + ", ".join(s for s in shots if s not in pending),
         "held_out": "data/<shot>_s<k>.manifest.json",
         "protocol": f"Whole pipeline on each held-out shot from three starts, {frames} frames "
         f"({garment_frames} for the T-shirt on the walk; `clothsr lab run` with the start's "
