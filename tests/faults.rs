@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -41,9 +41,11 @@ fn frames(path: &Path) -> Vec<Vec<nalgebra::Vector3<f32>>> {
     cloth.frames.clone()
 }
 
-/// Kills `command(out)` with SIGKILL ten times, at points spread over an uninterrupted run's
-/// wall time (a fixed pseudo-random sequence), running it again on the same output each time.
-/// A run that ends before its kill closes a chain of killed and resumed runs, and
+/// Kills `command(out)` with SIGKILL ten times, at points spread (a fixed pseudo-random
+/// sequence) over the wall time an uninterrupted run would have left, running it again on the
+/// same output each time: a resumed run, with less to do, is killed sooner, so that kills hit
+/// resumed runs however loaded the machine is. A run that ends before its kill closes a chain
+/// of killed and resumed runs, and
 /// `same_as_straight(out)` checks its output against the uninterrupted one's (made first,
 /// into `straight`); `clear(out)` then starts a new chain. Returns the kills that hit a run
 /// that had itself resumed.
@@ -61,11 +63,14 @@ fn kill_ten_times(
     let killed = dir.join(format!("killed{ext}"));
     let mut seed = 0x2545_f491_u64;
     let (mut kills, mut resumed_kills, mut chains) = (0, 0, 0);
+    // Wall time the current chain's killed runs ran: an estimate of the work already done.
+    let mut ran = Duration::ZERO;
     while kills < 10 {
         seed ^= seed << 13;
         seed ^= seed >> 7;
         seed ^= seed << 17;
-        let at = full.mul_f64(0.2 + 0.5 * (seed % 1000) as f64 / 1000.0);
+        let left = full.saturating_sub(ran).max(full.mul_f64(0.2));
+        let at = left.mul_f64(0.2 + 0.5 * (seed % 1000) as f64 / 1000.0);
         let resuming = killed.exists();
         let mut child = command(&killed).spawn().expect("spawn");
         std::thread::sleep(at);
@@ -74,10 +79,12 @@ fn kill_ten_times(
             same_as_straight(&straight, &killed);
             clear(&killed);
             chains += 1;
+            ran = Duration::ZERO;
             continue;
         }
         child.kill().expect("SIGKILL");
         child.wait().expect("reap");
+        ran += at;
         kills += 1;
         resumed_kills += usize::from(resuming);
     }
