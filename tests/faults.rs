@@ -45,10 +45,9 @@ fn frames(path: &Path) -> Vec<Vec<nalgebra::Vector3<f32>>> {
 /// sequence) over the wall time an uninterrupted run would have left, running it again on the
 /// same output each time: a resumed run, with less to do, is killed sooner, so that kills hit
 /// resumed runs however loaded the machine is. A run that ends before its kill closes a chain
-/// of killed and resumed runs, and
-/// `same_as_straight(out)` checks its output against the uninterrupted one's (made first,
-/// into `straight`); `clear(out)` then starts a new chain. Returns the kills that hit a run
-/// that had itself resumed.
+/// of killed and resumed runs, and `same_as_straight(out)` checks its output against the
+/// uninterrupted one's (made first, into `straight`); `clear(out)` then starts a new chain.
+/// Returns the kills that hit a run that had itself resumed.
 fn kill_ten_times(
     dir: &Path,
     ext: &str,
