@@ -301,6 +301,52 @@ fn welded_seams_stay_closed_and_move_as_the_sewn_garment_does() {
 }
 
 #[test]
+fn seams_welded_in_two_calls_end_in_one_set_of_groups() {
+    // A fine mesh dressed from a coarse one welds the seams that arrive closed, and later
+    // those that sewing closed: the second call adds to the first's groups.
+    let g = clothsr::scene::samples::two_panel_tube(0.2, 0.2, 0.03, Fabric::default());
+    let scene = Scene {
+        garments: vec![g],
+        ..Scene::default()
+    };
+    let mut sim = Simulation::new(&scene, 0.02, |_| {}).expect("setup");
+    let pairs = sim.sim.model.mesh.seam_pairs.clone();
+    assert!(pairs.len() >= 8, "{} seam pairs", pairs.len());
+    let gap = |x: &[Vector3<f64>], p: &[u32; 2]| (x[p[0] as usize] - x[p[1] as usize]).norm();
+    let apart = pairs
+        .iter()
+        .map(|p| gap(&sim.state.x, p))
+        .fold(f64::MAX, f64::min);
+    assert!(apart > 1e-2, "the panels start {apart} m apart");
+    assert_eq!(sim.sim.weld_seams(&mut sim.state, 1e-3).pairs, 0);
+    assert!(!sim.sim.welded());
+    // Half the pairs closed (each side moved onto the other), welded; then the rest.
+    let (first, rest) = pairs.split_at(pairs.len() / 2);
+    for p in first {
+        sim.state.x[p[1] as usize] = sim.state.x[p[0] as usize] + Vector3::new(2e-4, 0.0, 0.0);
+    }
+    let w1 = sim.sim.weld_seams(&mut sim.state, 1e-3);
+    assert_eq!(w1.pairs, first.len());
+    assert!((w1.widest_gap_m - 2e-4).abs() < 1e-9, "{w1:?}");
+    assert!(first.iter().all(|p| gap(&sim.state.x, p) == 0.0));
+    assert!(rest.iter().all(|p| gap(&sim.state.x, p) > 1e-2));
+    // The same call again welds nothing new.
+    assert_eq!(sim.sim.weld_seams(&mut sim.state, 1e-3).pairs, 0);
+    for p in rest {
+        sim.state.x[p[1] as usize] = sim.state.x[p[0] as usize];
+    }
+    let w2 = sim.sim.weld_seams(&mut sim.state, 1e-3);
+    assert_eq!(w2.pairs, rest.len());
+    // Every pair moves as one point through a frame under gravity.
+    sim.advance_frame(|_| {}).expect("frame");
+    let widest = pairs
+        .iter()
+        .map(|p| gap(&sim.state.x, p))
+        .fold(0.0, f64::max);
+    assert_eq!(widest, 0.0, "a welded pair came apart");
+}
+
+#[test]
 fn simulate_command_writes_a_valid_time_sampled_usd() {
     use clothsr::io::usd::{read_usd, validate_usd, MeshRole};
     let dir = tempfile::tempdir().expect("tempdir");

@@ -727,7 +727,8 @@ impl Simulation {
 
     /// Dresses the garments from positions `x` where the garment is already nearly sewn and
     /// draped (a coarser simulation's dressed state carried onto this mesh): no rolling;
-    /// seams start at rest where they are, close to within `gap_m` (at most `max_s` of
+    /// seams within welding distance are welded at once, the others start at rest where
+    /// they are and close to within `gap_m` (at most `max_s` of
     /// simulated time, gravity off), then `settle_s` of draping, as in [`Self::dress`]. A fine
     /// mesh dressed from its flat pattern spends most of its time on seams tens of
     /// centimetres open, where the move limits hold every vertex back and steps are halved;
@@ -751,11 +752,29 @@ impl Simulation {
         }
         self.state.x = x;
         self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
-        self.seams_at_rest_where_they_are()?;
+        // Seams the coarser dressing closed are welded as they arrive: left on their springs
+        // while the fine membrane relaxes from the coarse shape, the corners where several
+        // panels meet (a hood's nape) were pulled apart and never closed again.
+        let own_dhat = SimParams::for_edge(self.edge_m)
+            .collision
+            .dhat_m
+            .max(self.sim.params.collision.dhat_m);
+        let carried = self
+            .sim
+            .weld_seams(&mut self.state, WELD_MAX_DHAT * own_dhat);
         let held = self.collider_points();
-        self.in_fast_mode(|sim| {
+        if carried.pairs > 0 {
+            // A welded point halfway across a gap may lie in the body.
+            let clearance = 0.5 * self.sim.params.collision.dhat_m;
+            push_out_of(&self.colliders, &held, &mut self.state.x, clearance);
+        }
+        self.seams_at_rest_where_they_are()?;
+        let mut out = self.in_fast_mode(|sim| {
             sim.sew_and_settle(&held, DressStats::default(), max_s, settle_s, gap_m, false)
-        })
+        })?;
+        out.welded_pairs += carried.pairs;
+        out.welded_gap_m = out.welded_gap_m.max(carried.widest_gap_m);
+        Ok(out)
     }
 
     /// The colliders' points at the state's time (dressing holds them there).

@@ -330,22 +330,26 @@ impl Simulator {
     /// and where a body blocks them (an armpit, a waistband on the hips) they stay open by the
     /// contact thickness. Welded, the two sides are one unknown of each Newton system (their
     /// gradients and matrix rows summed) and every step moves them together; wider pairs stay
-    /// on their springs. Once only (a no-op when welded, or without seams); `max_gap_m` 0
-    /// finds the welds of a state saved from a welded run (their sides coincide exactly).
-    /// Returns how many pairs were welded, from how far apart.
+    /// on their springs. Called again, it welds the pairs that have closed since into the
+    /// groups already welded (a no-op without seams); `max_gap_m` 0 finds the welds of a
+    /// state saved from a welded run (their sides coincide exactly). Returns how many pairs
+    /// were welded by this call, from how far apart.
     pub fn weld_seams(&mut self, state: &mut SimState, max_gap_m: f64) -> Welded {
         let n = self.model.num_vertices();
         let mut welded = Welded::default();
-        if self.model.mesh.seam_pairs.is_empty() || self.welded() || state.x.len() != n {
+        if self.model.mesh.seam_pairs.is_empty() || state.x.len() != n {
             return welded;
         }
         let gap = |p: &[u32; 2]| (state.x[p[0] as usize] - state.x[p[1] as usize]).norm();
+        let apart_now = |p: &[u32; 2]| {
+            self.weld.is_empty() || self.weld[p[0] as usize] != self.weld[p[1] as usize]
+        };
         let close: Vec<[u32; 2]> = self
             .model
             .mesh
             .seam_pairs
             .iter()
-            .filter(|p| gap(p) <= max_gap_m)
+            .filter(|p| apart_now(p) && gap(p) <= max_gap_m)
             .copied()
             .collect();
         if close.is_empty() {
@@ -353,7 +357,12 @@ impl Simulator {
         }
         welded.pairs = close.len();
         welded.widest_gap_m = close.iter().map(gap).fold(0.0, f64::max);
-        let mut parent: Vec<u32> = (0..n as u32).collect();
+        // Each vertex's group lead is its parent: groups welded before stay whole.
+        let mut parent: Vec<u32> = if self.weld.is_empty() {
+            (0..n as u32).collect()
+        } else {
+            self.weld.clone()
+        };
         fn root(parent: &mut [u32], i: u32) -> u32 {
             let mut r = i;
             while parent[r as usize] != r {
