@@ -313,7 +313,7 @@ pub fn dress_fine_from_coarse(
     );
     closed("coarse", c.seam_gap_m)?;
     let clock = std::time::Instant::now();
-    let f = fine.dress_from(x, FINE_SEWING_S, 0.3, 1e-3)?;
+    let f = fine.dress_from(x, coarse.weld_distance_m(), FINE_SEWING_S, 0.3, 1e-3)?;
     tracing::info!(
         "dressed the fine mesh in {:.1} s ({} sewing, {} settling steps, seams {:.1} mm)",
         clock.elapsed().as_secs_f64(),

@@ -364,10 +364,13 @@ fn a_finer_skirt_dresses_from_the_coarse_dressing() {
         .expect("transfer");
     let x = transfer.upsample_phong(&coarse.state.x, &coarse.sim.model.mesh.triangles, 0.75);
     assert!(
-        fine.dress_from(x[1..].to_vec(), 0.1, 0.1, 1e-3).is_err(),
+        fine.dress_from(x[1..].to_vec(), coarse.weld_distance_m(), 0.1, 0.1, 1e-3)
+            .is_err(),
         "a position per vertex"
     );
-    let d = fine.dress_from(x, 0.1, 0.1, 1e-3).expect("fine dressing");
+    let d = fine
+        .dress_from(x, coarse.weld_distance_m(), 0.1, 0.1, 1e-3)
+        .expect("fine dressing");
     eprintln!("coarse {c:?}\nfine {d:?}");
     assert_eq!(d.wrapped_panels, 0);
     assert!(c.sew_steps > 100, "{c:?}");

@@ -725,10 +725,18 @@ impl Simulation {
         Ok(Some(sewn))
     }
 
+    /// How far apart dressing's sewing leaves seam pairs that it then welds, m: a few of the
+    /// mesh's own contact thicknesses (or the run's, where thicker).
+    pub fn weld_distance_m(&self) -> f64 {
+        let own_dhat = SimParams::for_edge(self.edge_m).collision.dhat_m;
+        WELD_MAX_DHAT * own_dhat.max(self.sim.params.collision.dhat_m)
+    }
+
     /// Dresses the garments from positions `x` where the garment is already nearly sewn and
     /// draped (a coarser simulation's dressed state carried onto this mesh): no rolling;
-    /// seams within welding distance are welded at once, the others start at rest where
-    /// they are and close to within `gap_m` (at most `max_s` of
+    /// seams within `weld_m` are welded at once (the coarser mesh's
+    /// [`Self::weld_distance_m`]: it closed them), the others start at rest where they are
+    /// and close to within `gap_m` (at most `max_s` of
     /// simulated time, gravity off), then `settle_s` of draping, as in [`Self::dress`]. A fine
     /// mesh dressed from its flat pattern spends most of its time on seams tens of
     /// centimetres open, where the move limits hold every vertex back and steps are halved;
@@ -739,6 +747,7 @@ impl Simulation {
     pub fn dress_from(
         &mut self,
         x: Vec<Vector3<f64>>,
+        weld_m: f64,
         max_s: f64,
         settle_s: f64,
         gap_m: f64,
@@ -754,14 +763,10 @@ impl Simulation {
         self.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
         // Seams the coarser dressing closed are welded as they arrive: left on their springs
         // while the fine membrane relaxes from the coarse shape, the corners where several
-        // panels meet (a hood's nape) were pulled apart and never closed again.
-        let own_dhat = SimParams::for_edge(self.edge_m)
-            .collision
-            .dhat_m
-            .max(self.sim.params.collision.dhat_m);
-        let carried = self
-            .sim
-            .weld_seams(&mut self.state, WELD_MAX_DHAT * own_dhat);
+        // panels meet (a hood's nape) were pulled apart and never closed again, and between
+        // the coarse vertices the two sides' patches bow apart by a millimetre or two, which
+        // springs do not close where a shoulder holds the seam.
+        let carried = self.sim.weld_seams(&mut self.state, weld_m);
         let held = self.collider_points();
         if carried.pairs > 0 {
             // A welded point halfway across a gap may lie in the body.
