@@ -171,6 +171,20 @@ fn sheet_dropped_on_a_sphere_stays_outside_and_finite() {
     assert!(low < top - 0.05, "the rim drapes: lowest {low}");
 }
 
+/// Two 0.2 m × 0.2 m panels facing each other 6 cm apart, to be sewn along both vertical
+/// sides.
+fn tube_scene() -> Scene {
+    Scene {
+        garments: vec![clothsr::scene::samples::two_panel_tube(
+            0.2,
+            0.2,
+            0.03,
+            Fabric::default(),
+        )],
+        ..Scene::default()
+    }
+}
+
 #[test]
 fn sewing_closes_a_two_panel_tube() {
     // Two 0.2 m × 0.2 m panels facing each other 6 cm apart, sewn along both vertical sides.
@@ -202,11 +216,7 @@ fn welded_seams_stay_closed_and_move_as_the_sewn_garment_does() {
     // front panel alone: the back panel hangs from the welded seams, whose two sides stay on
     // one point, and the tube moves as its twin held by closed sewing springs does (the weld
     // is those springs made rigid, not another garment).
-    let g = clothsr::scene::samples::two_panel_tube(0.2, 0.2, 0.03, Fabric::default());
-    let scene = Scene {
-        garments: vec![g],
-        ..Scene::default()
-    };
+    let scene = tube_scene();
     let mut welded = Simulation::new(&scene, 0.02, |_| {}).expect("setup");
     let dressed = welded.dress(2.0, 0.0, 1e-3).expect("dress");
     assert!(welded.sim.welded(), "dressing welds the seams");
@@ -304,11 +314,7 @@ fn welded_seams_stay_closed_and_move_as_the_sewn_garment_does() {
 fn seams_welded_in_two_calls_end_in_one_set_of_groups() {
     // A fine mesh dressed from a coarse one welds the seams that arrive closed, and later
     // those that sewing closed: the second call adds to the first's groups.
-    let g = clothsr::scene::samples::two_panel_tube(0.2, 0.2, 0.03, Fabric::default());
-    let scene = Scene {
-        garments: vec![g],
-        ..Scene::default()
-    };
+    let scene = tube_scene();
     let mut sim = Simulation::new(&scene, 0.02, |_| {}).expect("setup");
     let pairs = sim.sim.model.mesh.seam_pairs.clone();
     assert!(pairs.len() >= 8, "{} seam pairs", pairs.len());
