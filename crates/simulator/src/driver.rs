@@ -890,7 +890,7 @@ impl Simulation {
         // when the widest gap, within a few thicknesses, has stopped closing; then the seams
         // are welded, those within a few thicknesses.
         let weld_gap = gap_m.max(own_dhat);
-        let weld_max = WELD_MAX_DHAT * own_dhat;
+        let weld_max = self.weld_distance_m();
         let stall_steps = ((SEWING_STALL_S / dt).ceil() as usize).max(1);
         let mut progress = (f64::INFINITY, 0usize);
         // A seam that stops closing further out is held by the cloth around it (a hood's
