@@ -313,12 +313,20 @@ pub fn dress_fine_from_coarse(
     );
     closed("coarse", c.seam_gap_m)?;
     let clock = std::time::Instant::now();
-    let f = fine.dress_from(x, coarse.weld_distance_m(), FINE_SEWING_S, 0.3, 1e-3)?;
+    let f = fine.dress_from(
+        x,
+        coarse.weld_distance_m(),
+        FINE_SEWING_S,
+        FINE_SETTLING_S,
+        gap_m,
+    )?;
     tracing::info!(
-        "dressed the fine mesh in {:.1} s ({} sewing, {} settling steps, seams {:.1} mm)",
+        "dressed the fine mesh in {:.1} s ({} sewing, {} settling steps; {} sub-steps solved; \
+         seams {:.1} mm)",
         clock.elapsed().as_secs_f64(),
         f.sew_steps,
         f.settle_steps,
+        f.substeps,
         f.seam_gap_m * 1e3
     );
     closed("fine", f.seam_gap_m)
@@ -630,6 +638,13 @@ fn fork_into(
 /// tenth of a millimetre per 0.1 s at 10 mm, and every step of a 100K-vertex skirt costs
 /// seconds.
 const FINE_SEWING_S: f64 = 0.1;
+
+/// How long the fine mesh settles after its seams close, s. The coarse dressing did the
+/// draping; from its shape the fine membrane relaxes within the first few steps, and past
+/// them the fine mesh does not come to rest: a few percent of its vertices keep moving at a
+/// fast-mode step's jitter where the cloth presses on the body, and the garment wanders as far
+/// in any later stretch of settling as it settles in all of it. Every step costs seconds.
+const FINE_SETTLING_S: f64 = 0.1;
 
 /// Phong blend of the coarse dressed garment carried onto the fine mesh (¾, Phong
 /// tessellation's usual choice).

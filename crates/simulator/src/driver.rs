@@ -118,6 +118,13 @@ const SEWING_STALL_S: f64 = 0.2;
 /// within it (a garment's widest gap may pause for a while as panels slide around a body).
 const WELD_MAX_DHAT: f64 = 3.0;
 
+/// Sub-steps of the first settling step of a garment dressed from a coarser mesh's dressing
+/// ([`Simulation::dress_from`]): carried from the coarse shape, the fine membrane relaxes by a
+/// millimetre or more in that step, and at the full step the move limits held it back until
+/// the step failed and was halved, again and again; taken in sub-steps from the start, each
+/// has less to move and none fails.
+pub const CARRIED_FIRST_SUBSTEPS: u32 = 8;
+
 /// How often sewing pulls harder on seams that stopped closing short of welding distance
 /// (each time doubling the seam springs' stiffness and how far they may stretch).
 const SEWING_PULL_DOUBLINGS: u32 = 4;
@@ -158,6 +165,9 @@ pub struct DressStats {
     pub layers_alone: usize,
     /// Newton iterations over every dressing step (sewing, settling, pre-roll).
     pub newton_iters: usize,
+    /// (Sub-)steps solved over every dressing step, halvings included: one a step where
+    /// none was halved or sub-stepped.
+    pub substeps: usize,
     /// Where dressing's time went, summed over its steps.
     pub times: PhaseTimes,
 }
@@ -166,12 +176,14 @@ impl DressStats {
     /// Counts one dressing step's iterations and time.
     fn count(&mut self, stats: &StepStats) {
         self.newton_iters += stats.newton_iters;
+        self.substeps += stats.substeps;
         self.times.add(&stats.times);
     }
 
     /// Adds another stage's counts to these.
     fn count_all(&mut self, other: &DressStats) {
         self.newton_iters += other.newton_iters;
+        self.substeps += other.substeps;
         self.times.add(&other.times);
     }
 }
@@ -737,7 +749,8 @@ impl Simulation {
     /// seams within `weld_m` are welded at once (the coarser mesh's
     /// [`Self::weld_distance_m`]: it closed them), the others start at rest where they are
     /// and close to within `gap_m` (at most `max_s` of
-    /// simulated time, gravity off), then `settle_s` of draping, as in [`Self::dress`]. A fine
+    /// simulated time, gravity off), then `settle_s` of draping, as in [`Self::dress`], its
+    /// first step in sub-steps (the membrane relaxing from the coarser shape). A fine
     /// mesh dressed from its flat pattern spends most of its time on seams tens of
     /// centimetres open, where the move limits hold every vertex back and steps are halved;
     /// from a coarse dressing it only settles the detail the coarse mesh could not hold, at
@@ -1013,7 +1026,14 @@ impl Simulation {
                     self.sim.params.detection_margin_m = run_contact.1;
                     self.sim.params.move_cap_m = capped(run_contact.0);
                 }
-                let (next, stats) = self.sim.step(&self.state, &frames, &frames)?;
+                // Only dressing from a coarser mesh's dressing moves at the run's limits.
+                let substeps = self.sim.params.substeps;
+                if k == 0 && !slow {
+                    self.sim.params.substeps = substeps * CARRIED_FIRST_SUBSTEPS;
+                }
+                let stepped = self.sim.step(&self.state, &frames, &frames);
+                self.sim.params.substeps = substeps;
+                let (next, stats) = stepped?;
                 self.state = next;
                 out.settle_steps += 1;
                 out.count(&stats);
