@@ -1026,7 +1026,9 @@ impl Simulation {
                     self.sim.params.detection_margin_m = run_contact.1;
                     self.sim.params.move_cap_m = capped(run_contact.0);
                 }
-                // Only dressing from a coarser mesh's dressing moves at the run's limits.
+                // Only a garment carried from a coarser mesh's dressing is dressed at the
+                // run's move limits (not `slow`): its first step relaxes the membrane from the
+                // coarser shape.
                 let substeps = self.sim.params.substeps;
                 if k == 0 && !slow {
                     self.sim.params.substeps = substeps * CARRIED_FIRST_SUBSTEPS;
