@@ -821,6 +821,27 @@ fn dataset_train_rollout_sr_and_run_chain_on_a_sample() {
     assert!(table.contains("prediction / floor"), "{table}");
     // Over the prediction's frames only (the fork has one more).
     assert_eq!(cell("floor ", 0), cell("prediction ", 0), "{table}");
+    // Cloth through cloth, of the ground truth beside every series, over the same frames.
+    let (_, through) = table
+        .split_once("cloth through cloth")
+        .unwrap_or_else(|| panic!("no cloth through cloth in {table}"));
+    for row in ["ground truth ", "prediction ", "upsampled ", "floor "] {
+        let cells: Vec<f64> = through
+            .lines()
+            .find_map(|l| l.strip_prefix(row))
+            .map(|l| {
+                l.split_whitespace()
+                    .filter_map(|v| v.parse().ok())
+                    .collect()
+            })
+            .unwrap_or_default();
+        assert_eq!(cells.len(), 4, "{row}in {through}");
+        assert_eq!(cells[0], cell("prediction ", 0), "{row}in {through}");
+        assert!(
+            cells[1] >= cells[2] && cells[1].is_finite(),
+            "{row}in {through}"
+        );
+    }
     // Half the floor is the least any prediction averages over the two ground truths; the
     // prediction's two errors average above it, and the bound is set beside the baseline.
     let number_after = |prefix: &str| -> f64 {

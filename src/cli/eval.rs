@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clothsr::eval::{
-    floor_bound, health, plot, summarise, vertex_errors, write_csv, Animation, Bodies, FloorBound,
-    FrameMetrics, Series,
+    crossings, floor_bound, health, plot, summarise, vertex_errors, write_csv, Animation, Bodies,
+    FloorBound, FrameMetrics, Series,
 };
 use clothsr::viz::{colours, Recorder};
 
@@ -87,6 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !bodies.is_empty() {
         print_inside(&bodies, &gt, &inputs, &anims, &series[0].1);
     }
+    print_crossings(&gt, &inputs, &anims, &series[0].1);
     if let Some(twin_path) = &args.floor {
         let twin = anims.last().context("the twin was read")?;
         let b = floor_bound(&gt, twin, twin_path, &anims[0], &args.pred)?;
@@ -273,6 +274,49 @@ fn print_inside(
             sum as f64 / n.max(1) as f64,
             any,
             deepest * 1e3
+        );
+    }
+}
+
+/// Prints how many fine edges pass through the cloth ([`crossings`]) in the ground truth and in
+/// each series, over the prediction's frames `times`: whether an output's cloth through cloth
+/// is its own or the fine simulation's too. Garments are told apart by the prediction's meshes
+/// (a data set's fine frames are one mesh; every series has the ground truth's triangles).
+fn print_crossings(
+    gt: &Animation,
+    inputs: &[(String, PathBuf)],
+    anims: &[Animation],
+    times: &[FrameMetrics],
+) {
+    let Some(pred) = anims.first() else {
+        return;
+    };
+    println!(
+        "{:<24} {:>6} {:>16} {:>16} {:>14}",
+        "cloth through cloth", "frames", "edges a frame", "between garments", "most a frame"
+    );
+    let all = std::iter::once(("ground truth", gt))
+        .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(anims));
+    for (name, a) in all {
+        let (mut sum, mut between, mut most, mut n) = (0usize, 0usize, 0usize, 0usize);
+        for f in times {
+            let Some(k) = a.frame_at(f.time_code) else {
+                continue;
+            };
+            let (c, b) = crossings(pred, &a.frames[k]);
+            sum += c;
+            between += b;
+            most = most.max(c);
+            n += 1;
+        }
+        let per = |v: usize| v as f64 / n.max(1) as f64;
+        println!(
+            "{:<24} {:>6} {:>16.1} {:>16.1} {:>14}",
+            name,
+            n,
+            per(sum),
+            per(between),
+            most
         );
     }
 }
