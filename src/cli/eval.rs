@@ -240,6 +240,26 @@ fn print_errors(series: &[Series]) -> f64 {
     pred_mean
 }
 
+/// The ground truth and each series, named, with their frames at the prediction's time codes
+/// `times` (time code, index into the series' frames).
+fn at_prediction_frames<'a>(
+    gt: &'a Animation,
+    inputs: &'a [(String, PathBuf)],
+    anims: &'a [Animation],
+    times: &[FrameMetrics],
+) -> Vec<(&'a str, &'a Animation, Vec<(f64, usize)>)> {
+    std::iter::once(("ground truth", gt))
+        .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(anims))
+        .map(|(name, a)| {
+            let frames = times
+                .iter()
+                .filter_map(|f| Some((f.time_code, a.frame_at(f.time_code)?)))
+                .collect();
+            (name, a, frames)
+        })
+        .collect()
+}
+
 /// Prints how many vertices of the ground truth and of each series lie inside the bodies, over
 /// the prediction's frames `times`.
 fn print_inside(
@@ -253,25 +273,19 @@ fn print_inside(
         "{:<24} {:>6} {:>16} {:>14} {:>11}",
         "inside the bodies", "frames", "vertices a frame", "frames with any", "deepest mm"
     );
-    let all = std::iter::once(("ground truth", gt))
-        .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(anims));
-    for (name, a) in all {
-        let (mut sum, mut any, mut deepest, mut n) = (0usize, 0usize, 0.0f64, 0usize);
-        for f in times {
-            let Some(k) = a.frame_at(f.time_code) else {
-                continue;
-            };
-            let r = bodies.inside(&a.frames[k], f.time_code);
+    for (name, a, frames) in at_prediction_frames(gt, inputs, anims, times) {
+        let (mut sum, mut any, mut deepest) = (0usize, 0usize, 0.0f64);
+        for &(t, k) in &frames {
+            let r = bodies.inside(&a.frames[k], t);
             sum += r.inside;
             any += usize::from(r.inside > 0);
             deepest = deepest.max(r.max_depth_m);
-            n += 1;
         }
         println!(
             "{:<24} {:>6} {:>16.1} {:>14} {:>11.2}",
             name,
-            n,
-            sum as f64 / n.max(1) as f64,
+            frames.len(),
+            sum as f64 / frames.len().max(1) as f64,
             any,
             deepest * 1e3
         );
@@ -295,25 +309,19 @@ fn print_crossings(
         "{:<24} {:>6} {:>16} {:>16} {:>14}",
         "cloth through cloth", "frames", "edges a frame", "between garments", "most a frame"
     );
-    let all = std::iter::once(("ground truth", gt))
-        .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(anims));
-    for (name, a) in all {
-        let (mut sum, mut between, mut most, mut n) = (0usize, 0usize, 0usize, 0usize);
-        for f in times {
-            let Some(k) = a.frame_at(f.time_code) else {
-                continue;
-            };
+    for (name, a, frames) in at_prediction_frames(gt, inputs, anims, times) {
+        let (mut sum, mut between, mut most) = (0usize, 0usize, 0usize);
+        for &(_, k) in &frames {
             let (c, b) = crossings(pred, &a.frames[k]);
             sum += c;
             between += b;
             most = most.max(c);
-            n += 1;
         }
-        let per = |v: usize| v as f64 / n.max(1) as f64;
+        let per = |v: usize| v as f64 / frames.len().max(1) as f64;
         println!(
             "{:<24} {:>6} {:>16.1} {:>16.1} {:>14}",
             name,
-            n,
+            frames.len(),
             per(sum),
             per(between),
             most
