@@ -240,14 +240,17 @@ fn print_errors(series: &[Series]) -> f64 {
     pred_mean
 }
 
-/// The ground truth and each series, named, with their frames at the prediction's time codes
-/// `times` (time code, index into the series' frames).
+/// A series named, with its frames at the prediction's time codes (time code, index into the
+/// series' frames).
+type AtFrames<'a> = (&'a str, &'a Animation, Vec<(f64, usize)>);
+
+/// The ground truth and each series at the prediction's frames `times`.
 fn at_prediction_frames<'a>(
     gt: &'a Animation,
     inputs: &'a [(String, PathBuf)],
     anims: &'a [Animation],
     times: &[FrameMetrics],
-) -> Vec<(&'a str, &'a Animation, Vec<(f64, usize)>)> {
+) -> Vec<AtFrames<'a>> {
     std::iter::once(("ground truth", gt))
         .chain(inputs.iter().map(|(n, _)| n.as_str()).zip(anims))
         .map(|(name, a)| {
