@@ -125,11 +125,11 @@ const WELD_MAX_DHAT: f64 = 3.0;
 /// has less to move and none fails.
 pub const CARRIED_FIRST_SUBSTEPS: u32 = 8;
 
-/// Relative tolerance of the linear solves while a garment dressed from a coarser mesh's
-/// dressing settles ([`Simulation::dress_from`]), looser than fast mode's. A fine mesh's
-/// settling is set-up, judged by its seams, its contact and its rest, not by its path; its
-/// solves are nearly all of its time. Not used for sewing from the flat pattern, whose seams
-/// close later with looser solves.
+/// Relative tolerance of the linear solves of a garment dressed from a coarser mesh's dressing
+/// ([`Simulation::dress_from`]: its seams arrive closed, and it mostly settles), looser than
+/// fast mode's. A fine mesh's settling is set-up, judged by its seams, its contact and its
+/// rest, not by its path, and its solves are most of its time. Not used for sewing from the
+/// flat pattern, whose seams close later with looser solves.
 pub const CARRIED_CG_REL_TOL: f64 = 1e-2;
 
 /// How often sewing pulls harder on seams that stopped closing short of welding distance
