@@ -11,7 +11,9 @@
 //! block-Jacobi PCG linear solve and a backtracking line search; contacts are re-detected every iteration within
 //! d̂ + margin (a margin that widens with the cloth's speed) and each iteration moves no vertex
 //! more than margin / 2, so no contact can appear unseen; pairs already found close by at most
-//! 0.8 of their gap (see `ClosingPair`), so cloth never passes through cloth. A step that
+//! 0.8 of their gap (see `ClosingPair`), so cloth never passes through cloth. Cloth caught
+//! where a body overlaps itself keeps its body contacts through the step's iterations
+//! (`PinchHold`), which otherwise flip between the overlapping parts. A step that
 //! yields NaN, cannot decrease the energy or still has moves cut short after the iteration cap
 //! is retried as two half steps.
 

@@ -3,6 +3,7 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
+use super::contacts::PinchHold;
 use super::damping::DampingRows;
 use super::line_search::{limit_pair_closing, slid_over_crease, Accepted, ClosingPair};
 use super::state::BodyMotion;
@@ -304,13 +305,19 @@ impl Simulator {
         let tol = self.params.newton_tol_m / f64::from(self.params.substeps.max(1));
         // Whether the iterations stopped on the tolerance (or, in fast mode, on a full step).
         let mut converged = false;
+        let mut hold = PinchHold::new(n);
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
             let since = StepStart {
                 x: inc.x_n,
                 still: inc.still,
             };
-            contacts = self.contacts(&x, since, inc.colliders);
+            let mut found = self.contacts(&x, since, inc.colliders);
+            let held = hold.apply(&x, &contacts, &mut found);
+            if held > 0 {
+                tracing::trace!(it, held, "pinched vertices hold their body contacts");
+            }
+            contacts = found;
             if it == 0 {
                 damping.friction = self.friction_points(inc.x_n, &contacts, inc.motion);
             }
