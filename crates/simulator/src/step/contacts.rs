@@ -145,13 +145,14 @@ impl Simulator {
 /// A vertex whose contacts reverse (summed normals opposed to the iteration before's), or that
 /// lost a face it is still behind, keeps every body contact it has had since the iteration
 /// before, for the rest of the step: held between both surfaces, it settles where their
-/// repulsions balance, as cloth pinched between thighs does. Elsewhere a vertex's contacts do
-/// neither within a step, and the contact set is the detector's.
+/// repulsions balance, as cloth pinched between thighs does. Where a vertex's contacts do
+/// neither within a step (sheets on balls and tables do not), the contact set is the
+/// detector's.
 #[derive(Debug, Default)]
 pub(super) struct PinchHold {
     /// Summed unit normals of each vertex's body contacts at the last iteration (zero: none).
     last_normal: Vec<Vector3<f64>>,
-    /// Held vertices and their contacts (one a face).
+    /// Held vertices and their contacts, one per face.
     held: std::collections::BTreeMap<u32, Vec<Contact>>,
 }
 
