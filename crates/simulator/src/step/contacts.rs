@@ -148,10 +148,12 @@ impl Simulator {
 /// repulsions balance, as cloth pinched between thighs does. Where a vertex's contacts do
 /// neither within a step (sheets on balls and tables do not), the contact set is the
 /// detector's.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub(super) struct PinchHold {
     /// Summed unit normals of each vertex's body contacts at the last iteration (zero: none).
     last_normal: Vec<Vector3<f64>>,
+    /// The same at this iteration (a buffer kept between iterations and steps).
+    normal: Vec<Vector3<f64>>,
     /// Held vertices and their contacts, one per face.
     held: std::collections::BTreeMap<u32, Vec<Contact>>,
 }
@@ -176,12 +178,11 @@ fn vertex_face(c: &Contact) -> Option<(u32, [u32; 2])> {
 }
 
 impl PinchHold {
-    /// A hold for a cloth of `n` vertices, empty (the start of a step).
-    pub(super) fn new(n: usize) -> PinchHold {
-        PinchHold {
-            last_normal: vec![Vector3::zeros(); n],
-            held: std::collections::BTreeMap::new(),
-        }
+    /// Empties the hold for a step of a cloth of `n` vertices, keeping its buffers.
+    pub(super) fn start(&mut self, n: usize) {
+        self.last_normal.clear();
+        self.last_normal.resize(n, Vector3::zeros());
+        self.held.clear();
     }
 
     /// Takes the detector's `contacts` at `x`, `last` the contacts of the iteration before (as
@@ -196,7 +197,9 @@ impl PinchHold {
     ) -> usize {
         use std::collections::HashSet;
         let n = self.last_normal.len();
-        let mut normal = vec![Vector3::zeros(); n];
+        let mut normal = std::mem::take(&mut self.normal);
+        normal.clear();
+        normal.resize(n, Vector3::zeros());
         for (v, nrm) in contacts.iter().filter_map(obstacle_normal) {
             if let Some(s) = normal.get_mut(v as usize) {
                 *s += nrm;
@@ -229,7 +232,7 @@ impl PinchHold {
         for v in marked {
             self.held.entry(v).or_default();
         }
-        self.last_normal = normal;
+        self.normal = std::mem::replace(&mut self.last_normal, normal);
         if self.held.is_empty() {
             return 0;
         }
@@ -309,7 +312,8 @@ mod tests {
             floor(2, 4, 0.0, true),
             floor(3, 5, 0.0, true),
         ];
-        let mut hold = PinchHold::new(4);
+        let mut hold = PinchHold::default();
+        hold.start(4);
         let mut found = first.clone();
         assert_eq!(hold.apply(&x, &[], &mut found), 0);
         assert_eq!(found, first);
@@ -333,7 +337,8 @@ mod tests {
 
         // A new step starts with nothing held.
         let mut found = vec![floor(3, 5, 0.0, true)];
-        assert_eq!(PinchHold::new(4).apply(&x, &[], &mut found), 0);
+        hold.start(4);
+        assert_eq!(hold.apply(&x, &[], &mut found), 0);
         assert_eq!(found.len(), 1);
     }
 }

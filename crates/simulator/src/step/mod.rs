@@ -39,7 +39,7 @@ use super::model::ClothModel;
 use super::scatter::ColouredElements;
 use super::sparse::{BlockCsr, CholeskyPreconditioner, Pcg, TwoLevel};
 use clothsr_geometry::error::{Error, Result};
-use contacts::{seam_rings, self_margin_cap};
+use contacts::{seam_rings, self_margin_cap, PinchHold};
 use linear::SERIAL_BELOW_VERTICES;
 use state::BodyMotion;
 
@@ -73,6 +73,8 @@ pub struct Simulator {
     detector: CollisionDetector,
     /// For sewn vertices: the vertices sewn to them (sorted; see [`seam_rings`]).
     seam_ring: std::collections::HashMap<u32, Vec<u32>>,
+    /// Body contacts held through a step's Newton iterations ([`PinchHold`]).
+    pinch: PinchHold,
     cholesky: Option<CholeskyPreconditioner>,
     two_level: Option<TwoLevel>,
     last_cg_iters: usize,
@@ -116,6 +118,7 @@ impl Simulator {
             hinge_set: HingeSet::new(model.hinges.iter().map(|h| h.v).collect(), &matrix),
             detector: CollisionDetector::new(),
             seam_ring: seam_rings(&model),
+            pinch: PinchHold::default(),
             cholesky: None,
             two_level: None,
             last_cg_iters: usize::MAX,

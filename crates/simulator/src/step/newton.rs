@@ -3,7 +3,6 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use super::contacts::PinchHold;
 use super::damping::DampingRows;
 use super::line_search::{limit_pair_closing, slid_over_crease, Accepted, ClosingPair};
 use super::state::BodyMotion;
@@ -305,7 +304,9 @@ impl Simulator {
         let tol = self.params.newton_tol_m / f64::from(self.params.substeps.max(1));
         // Whether the iterations stopped on the tolerance (or, in fast mode, on a full step).
         let mut converged = false;
-        let mut hold = PinchHold::new(n);
+        // Kept between steps for its buffers; a step that fails leaves a new one behind.
+        let mut hold = std::mem::take(&mut self.pinch);
+        hold.start(n);
         for it in 0..self.params.newton_max_iters {
             let t_detect = std::time::Instant::now();
             let since = StepStart {
@@ -468,6 +469,7 @@ impl Simulator {
             }
             stats.unconverged_steps += 1;
         }
+        self.pinch = hold;
         Ok((x, energy, contacts))
     }
 
