@@ -30,6 +30,7 @@ fn spec(mode: &str) -> RunSpec {
         mode: ModeSpec::parse(mode).expect("mode"),
         twin_offset_m: 0.0,
         dhat_m: None,
+        self_collision: true,
     }
 }
 

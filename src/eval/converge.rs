@@ -80,6 +80,8 @@ pub struct RunSpec {
     /// Contact thickness d̂ (and detection margin), m; `None`: the mesh's own default (15 %
     /// of its edge).
     pub dhat_m: Option<f64>,
+    /// Cloth self-collision (`lab dataset --self-collision off` and `run` simulate without it).
+    pub self_collision: bool,
 }
 
 impl RunSpec {
@@ -94,7 +96,12 @@ impl RunSpec {
         let dhat = self.dhat_m.map_or(String::new(), |d| {
             format!(" dhat{}mm", (d * 1e5).round() / 100.0)
         });
-        format!("{mm}mm {}{twin}{dhat}", self.mode)
+        let sc = if self.self_collision {
+            ""
+        } else {
+            " no-self-collision"
+        };
+        format!("{mm}mm {}{twin}{dhat}{sc}", self.mode)
     }
 
     /// The label as a file name.
@@ -125,6 +132,8 @@ pub struct Plan {
     /// The ladder's runs also with the fine mesh's contact thickness (as the pipeline's coarse
     /// simulation runs), beside their own.
     pub ladder_matched_thickness: bool,
+    /// Every run with cloth self-collision.
+    pub self_collision: bool,
 }
 
 impl Plan {
@@ -135,6 +144,7 @@ impl Plan {
             mode,
             twin_offset_m: 0.0,
             dhat_m: None,
+            self_collision: self.self_collision,
         };
         let mut runs = vec![fine(self.reference)];
         runs.extend(self.check.map(fine));
@@ -250,10 +260,11 @@ fn fine_dhat_m(edge_m: f64) -> f64 {
 
 /// The simulation of `scene` at `spec`'s resolution and solver settings.
 pub fn simulation(scene: &Scene, spec: &RunSpec) -> Result<Simulation> {
-    let (mode, dhat) = (spec.mode, spec.dhat_m);
+    let (mode, dhat, self_collision) = (spec.mode, spec.dhat_m, spec.self_collision);
     Simulation::new(scene, spec.edge_m, |p| {
         mode.mode.apply(p);
         p.substeps *= mode.dt_divisor;
+        p.collision.self_collision = self_collision;
         if let Some(d) = dhat {
             p.collision.dhat_m = d;
             p.detection_margin_m = d;
@@ -262,10 +273,11 @@ pub fn simulation(scene: &Scene, spec: &RunSpec) -> Result<Simulation> {
 }
 
 /// The start of every run at one resolution: dressed (when the garments have seams) once, in
-/// data mode, and reused by every mode.
+/// data mode, and reused by every mode with the same self-collision setting.
 fn start_state(
     scene: &Scene,
     edge_m: f64,
+    self_collision: bool,
     dir: &Path,
     coarse_edge_m: f64,
 ) -> Result<(Vec<Vector3<f64>>, Vec<f64>)> {
@@ -277,14 +289,20 @@ fn start_state(
         },
         twin_offset_m: 0.0,
         dhat_m: None,
+        self_collision,
     };
     let mut sim = simulation(scene, &spec)?;
     if sim.sim.model.mesh.seam_pairs.is_empty() {
         return Ok((sim.state.x.clone(), sim.sim.seam_rest().to_vec()));
     }
     let path = dir.join(format!(
-        "start_{}mm.safetensors",
-        (edge_m * 1e4).round() / 10.0
+        "start_{}mm{}.safetensors",
+        (edge_m * 1e4).round() / 10.0,
+        if self_collision {
+            ""
+        } else {
+            "_no-self-collision"
+        }
     ));
     if path.exists() {
         let r = TensorReader::open(&path)?;
@@ -367,7 +385,8 @@ pub fn run(
             (x, records)
         }
         _ => {
-            let (x0, rest) = start_state(scene, spec.edge_m, dir, coarse_edge_m)?;
+            let (x0, rest) =
+                start_state(scene, spec.edge_m, spec.self_collision, dir, coarse_edge_m)?;
             sim.state.x = x0;
             sim.state.v.iter_mut().for_each(|v| *v = Vector3::zeros());
             sim.sim.set_seam_rest(&rest)?;
@@ -684,6 +703,7 @@ mod tests {
                 dt_divisor: 1,
             },
             ladder_matched_thickness: true,
+            self_collision: true,
         };
         let labels: Vec<String> = plan.runs().iter().map(|r| r.label()).collect();
         assert_eq!(
@@ -696,5 +716,17 @@ mod tests {
                 "20mm data dhat0.39mm"
             ]
         );
+        // Runs without self-collision are other runs: their files are not the ones above.
+        let off = Plan {
+            self_collision: false,
+            ..plan
+        };
+        let stems: Vec<String> = off.runs().iter().map(|r| r.file_stem()).collect();
+        assert_eq!(stems[0], "2.5mm_tight_4_no-self-collision");
+        assert!(off.runs().iter().all(|r| !r.self_collision));
+        assert!(stems
+            .iter()
+            .zip(&labels)
+            .all(|(s, l)| *s != l.replace([' ', '/'], "_")));
     }
 }

@@ -45,6 +45,9 @@ pub struct Args {
     /// also with the fine mesh's (as the pipeline's coarse simulation runs).
     #[arg(long)]
     ladder_own_thickness_only: bool,
+    /// Cloth self-collision in every run, `on` or `off` (as `lab dataset --self-collision`).
+    #[arg(long, default_value = "on", value_name = "on|off", value_parser = crate::cli::values::on_off(), action = clap::ArgAction::Set)]
+    self_collision: bool,
     /// Coarse edge length for dressing garments with seams, millimetres.
     #[arg(value_parser = crate::cli::values::positive(crate::cli::values::MAX_MM), long, default_value_t = crate::cli::COARSE_MM)]
     coarse_mm: f64,
@@ -96,6 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ladder_m: ladder_mm.iter().map(|l| l * 1e-3).collect(),
         ladder_mode: args.ladder_mode,
         ladder_matched_thickness: !args.ladder_own_thickness_only,
+        self_collision: args.self_collision,
     };
     std::fs::create_dir_all(&args.output)?;
     let mut tables = String::new();
