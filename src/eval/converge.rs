@@ -68,6 +68,15 @@ impl std::fmt::Display for ModeSpec {
     }
 }
 
+/// What names a run without self-collision, after `sep` (nothing for a run with it).
+fn self_collision_tag(self_collision: bool, sep: &str) -> String {
+    if self_collision {
+        String::new()
+    } else {
+        format!("{sep}no-self-collision")
+    }
+}
+
 /// One simulation of the harness.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RunSpec {
@@ -96,11 +105,7 @@ impl RunSpec {
         let dhat = self.dhat_m.map_or(String::new(), |d| {
             format!(" dhat{}mm", (d * 1e5).round() / 100.0)
         });
-        let sc = if self.self_collision {
-            ""
-        } else {
-            " no-self-collision"
-        };
+        let sc = self_collision_tag(self.self_collision, " ");
         format!("{mm}mm {}{twin}{dhat}{sc}", self.mode)
     }
 
@@ -298,11 +303,7 @@ fn start_state(
     let path = dir.join(format!(
         "start_{}mm{}.safetensors",
         (edge_m * 1e4).round() / 10.0,
-        if self_collision {
-            ""
-        } else {
-            "_no-self-collision"
-        }
+        self_collision_tag(self_collision, "_")
     ));
     if path.exists() {
         let r = TensorReader::open(&path)?;
